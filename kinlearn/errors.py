@@ -1,0 +1,42 @@
+"""Typed exceptions. Every public error says what was wrong and what is allowed."""
+
+from __future__ import annotations
+
+
+class KinlearnError(Exception):
+    """Base class of every error raised on purpose by kinlearn."""
+
+
+class UnknownRobotError(KinlearnError, KeyError):
+    """A robot name that is neither bundled nor a path to a URDF file."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class RobotDescriptionError(KinlearnError, ValueError):
+    """A URDF that cannot be turned into a serial chain (missing frame, bad joint, ...)."""
+
+
+class ShapeError(KinlearnError, ValueError):
+    """A tensor or array of the wrong shape."""
+
+
+class NonFiniteError(KinlearnError, ValueError):
+    """An input holding NaN or infinity."""
+
+
+class JointLimitError(KinlearnError, ValueError):
+    """Joint values outside the robot's position limits."""
+
+
+class CheckpointError(KinlearnError):
+    """A checkpoint that is corrupt, of another format version, or of another robot."""
+
+
+class DatasetError(KinlearnError):
+    """A dataset file that is corrupt, of another format version, or of another robot."""
+
+
+class ConfigError(KinlearnError, ValueError):
+    """A configuration value outside what is allowed."""
