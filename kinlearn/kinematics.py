@@ -221,6 +221,17 @@ class FastKinematics(Kinematics):
     def _pose_flat(self, q: torch.Tensor) -> torch.Tensor:
         return self._frames(q)[2]
 
+    def link_positions(self, q: torch.Tensor) -> torch.Tensor:
+        """Origins of the base, of every joint frame and of the end effector: ``(..., dof + 2, 3)``.
+
+        For drawing the arm as a polyline.
+        """
+        flat, batch = self._prepare(q, True)
+        _, ps, T = self._frames(flat)
+        base = torch.zeros_like(T[:, :3, 3])
+        pts = torch.stack([base, *ps, T[:, :3, 3]], dim=1)
+        return pts.reshape(*batch, self.dof + 2, 3)
+
     def _jacobian_flat(self, q: torch.Tensor) -> torch.Tensor:
         Rs, ps, T = self._frames(q)
         p_ee = T[:, :3, 3]
