@@ -1,0 +1,63 @@
+"""Shared helpers of the benchmark scripts: a header naming hardware and versions, timing, tables."""
+
+from __future__ import annotations
+
+import os
+import platform
+import statistics
+import time
+from collections.abc import Callable
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import torch
+
+
+def cpu_name() -> str:
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def header(title: str, threads: int) -> str:
+    import numpy
+
+    import kinlearn
+
+    parts = [
+        f"# {title}",
+        f"CPU: {cpu_name()} ({os.cpu_count()} logical cores), torch threads: {threads}",
+        f"Python {platform.python_version()}, torch {torch.__version__}, numpy {numpy.__version__}, "
+        f"kinlearn {kinlearn.__version__}",
+    ]
+    from importlib.metadata import PackageNotFoundError, version
+
+    for dist in ("pytorch-kinematics", "pin"):
+        try:
+            parts[-1] += f", {dist} {version(dist)}"
+        except PackageNotFoundError:
+            pass
+    return "\n".join(parts)
+
+
+def time_call(fn: Callable[[], object], repeats: int = 5, min_time: float = 0.0) -> float:
+    """Median wall time of ``fn()`` in seconds over ``repeats`` runs (after one warm-up run)."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+        if min_time and sum(times) > min_time and len(times) >= 1:
+            break
+    return statistics.median(times)
+
+
+def markdown_table(columns: list[str], rows: list[list[object]]) -> str:
+    out = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(out)

@@ -1,0 +1,102 @@
+"""Robots by name or path: joints, limits, sampling and errors."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from conftest import ALL_ROBOTS
+
+from kinlearn import (
+    ROBOTS,
+    JointLimitError,
+    NonFiniteError,
+    RobotDescriptionError,
+    ShapeError,
+    UnknownRobotError,
+    available_robots,
+    load_robot,
+)
+
+
+def test_iiwa14_published_numbers():
+    r = load_robot("iiwa14")
+    assert r.dof == 7 and r.state_dim == 10
+    assert r.joint_names == tuple(f"iiwa_joint_{i}" for i in range(1, 8))
+    np.testing.assert_allclose(r.upper, [2.96706, 2.09440, 2.96706, 2.09440, 2.96706, 2.09440, 3.05433])
+    np.testing.assert_allclose(r.lower, -r.upper)
+    np.testing.assert_allclose(r.velocity_limits, [1.4835, 1.4835, 1.7453, 1.3090, 2.2689, 2.3562, 2.3562])
+    assert r.ee_frame == "iiwa_link_ee"
+    assert all(np.array_equal(j.axis, [0.0, 0.0, 1.0]) for j in r.joints)
+
+
+@pytest.mark.parametrize("name", ALL_ROBOTS)
+def test_named_robots_load(name):
+    r = load_robot(name)
+    assert r.dof in (6, 7)
+    assert len(r.joint_names) == r.dof == len(r.lower)
+    assert np.all(r.lower < r.upper)
+    assert load_robot(name) is r  # cached
+
+
+def test_registry_lists_at_least_four_arms():
+    assert {"iiwa14", "panda", "ur5"} <= set(available_robots())
+    assert len(ROBOTS) >= 4
+
+
+def test_sample_within_limits_and_reproducible():
+    r = load_robot("panda")
+    a = r.sample((50, 4), torch.Generator().manual_seed(3), dtype=torch.float64)
+    b = r.sample((50, 4), torch.Generator().manual_seed(3), dtype=torch.float64)
+    assert a.shape == (50, 4, 7)
+    assert torch.equal(a, b)
+    lo, hi = r.limits(torch.float64)
+    assert bool(((a >= lo) & (a <= hi)).all())
+    m = r.sample(100, torch.Generator().manual_seed(3), margin=0.1)
+    assert bool(((m >= lo.float() + 0.1 - 1e-6) & (m <= hi.float() - 0.1 + 1e-6)).all())
+
+
+def test_load_from_path(tmp_path):
+    src = load_robot("iiwa14").urdf_path
+    dst = tmp_path / "my_arm.urdf"
+    dst.write_bytes(src.read_bytes())
+    r = load_robot(str(dst), ee_frame="iiwa_link_7")
+    assert r.dof == 7 and r.name == "my_arm"
+    with pytest.raises(RobotDescriptionError, match="ee_frame"):
+        load_robot(dst)
+
+
+def test_unknown_robot_lists_valid_names():
+    with pytest.raises(UnknownRobotError, match="iiwa14") as info:
+        load_robot("r2d2")
+    assert "panda" in str(info.value)
+    with pytest.raises(UnknownRobotError, match="no URDF file"):
+        load_robot("/nonexistent/arm.urdf", ee_frame="x")
+
+
+def test_missing_end_effector_frame_lists_links():
+    with pytest.raises(RobotDescriptionError, match="iiwa_link_ee"):
+        load_robot("iiwa14", ee_frame="gripper_tip")
+
+
+def test_malformed_urdf(tmp_path):
+    p = tmp_path / "broken.urdf"
+    p.write_text("<robot><link name='a'/>")
+    with pytest.raises(RobotDescriptionError, match="XML"):
+        load_robot(p, ee_frame="a")
+    p.write_text("<robot name='x'><link name='a'/></robot>")
+    with pytest.raises(RobotDescriptionError, match="no movable joint"):
+        load_robot(p, ee_frame="a")
+
+
+def test_check_joints():
+    r = load_robot("iiwa14")
+    r.check_joints(torch.zeros(5, 7))
+    q = torch.zeros(7)
+    q[3] = 2.5
+    with pytest.raises(JointLimitError, match="iiwa_joint_4"):
+        r.check_joints(q)
+    with pytest.raises(ShapeError):
+        r.check_joints(torch.zeros(6))
+    with pytest.raises(NonFiniteError):
+        r.check_joints(torch.full((7,), math.nan))
