@@ -40,3 +40,11 @@ class DatasetError(KinlearnError):
 
 class ConfigError(KinlearnError, ValueError):
     """A configuration value outside what is allowed."""
+
+
+class StateError(KinlearnError, ValueError):
+    """A state s = [θ, ef] whose end-effector part does not match the forward kinematics of its joints."""
+
+
+class MissingDependencyError(KinlearnError, ImportError):
+    """An optional dependency (an extra such as ``ompl`` or ``ray``) that is not installed."""

@@ -73,6 +73,15 @@ class Kinematics(ABC):
         flat, batch = self._prepare(q, validate)
         return self._jacobian_flat(flat).reshape(*batch, 3, self.dof)
 
+    def position_and_jacobian(self, q: torch.Tensor, validate: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(position (..., 3), jacobian (..., 3, dof))``, in one pass where the backend allows."""
+        flat, batch = self._prepare(q, validate)
+        p, J = self._position_and_jacobian_flat(flat)
+        return p.reshape(*batch, 3), J.reshape(*batch, 3, self.dof)
+
+    def _position_and_jacobian_flat(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self._position_flat(q), self._jacobian_flat(q)
+
     @abstractmethod
     def _position_flat(self, q: torch.Tensor) -> torch.Tensor: ...
 
@@ -233,13 +242,16 @@ class FastKinematics(Kinematics):
         return pts.reshape(*batch, self.dof + 2, 3)
 
     def _jacobian_flat(self, q: torch.Tensor) -> torch.Tensor:
+        return self._position_and_jacobian_flat(q)[1]
+
+    def _position_and_jacobian_flat(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         Rs, ps, T = self._frames(q)
         p_ee = T[:, :3, 3]
         cols = []
         for i in range(self.dof):
             z = Rs[i][..., 2]
             cols.append(z if self.prismatic[i] else torch.linalg.cross(z, p_ee - ps[i], dim=-1))
-        return torch.stack(cols, dim=-1)
+        return p_ee, torch.stack(cols, dim=-1)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -393,8 +405,8 @@ def dls_step(
     lo, hi = kin.robot.limits(q.dtype, q.device)
     eye = torch.eye(3, dtype=q.dtype, device=q.device)
     for _ in range(iterations):
-        err = target - kin.position(q, validate=False)
-        J = kin.jacobian(q, validate=False)
+        p, J = kin.position_and_jacobian(q, validate=False)
+        err = target - p
         JJt = J @ J.transpose(-1, -2) + (damping**2) * eye
         dq = (J.transpose(-1, -2) @ torch.linalg.solve(JJt, err.unsqueeze(-1))).squeeze(-1)
         q = q + dq

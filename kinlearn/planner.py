@@ -1,0 +1,140 @@
+"""Planning with a trained trajectory model: ``plan(s0, sT)`` and :class:`Planner`.
+
+A plan is computed in three batched passes: the TM predicts the end-effector waypoints, the IM and
+FM roll out from the start through them to the goal (Algorithm 1; the actions are paper Eq. 2's
+action sequence over consecutive states), and the joint path θ(0) + cumulative actions is checked
+against the analytic FK, which gives the end-effector positions that executing the plan reaches.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import torch
+
+from .errors import ConfigError, ShapeError, StateError
+from .kinematics import kinematics
+from .plan import Plan
+from .rectify import rectify
+from .robot import Robot, check_finite, load_robot
+from .state import StateLayout
+from .train_tm import TMTrainConfig, build_fm_im, load_tm
+from .trajectory import TrajectoryModel
+
+__all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan"]
+
+#: Checkpoints shipped inside the package, produced by ``kinlearn make-default`` (see docs/usage.md).
+DEFAULT_CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
+
+#: A full state's end effector may differ from FK of its joints by at most this much (m).
+STATE_EF_TOLERANCE = 1e-3
+
+
+class Planner:
+    """A trajectory model with its frozen FM and IM, for one robot."""
+
+    def __init__(self, robot: Robot, tm: TrajectoryModel, fm: torch.nn.Module, im: torch.nn.Module):
+        for what, m in (("TM", tm), ("FM", fm), ("IM", im)):
+            if getattr(m, "robot_name", robot.name) != robot.name:
+                raise ConfigError(
+                    f"the {what} was trained for {m.robot_name!r}, the planner is for {robot.name!r}"
+                )
+        self.robot = robot
+        self.layout = StateLayout(robot.dof)
+        self.tm, self.fm, self.im = tm.eval(), fm.eval(), im.eval()
+        for m in (self.tm, self.fm, self.im):
+            m.requires_grad_(False)
+        self.kin = kinematics(robot)
+
+    @classmethod
+    def load(cls, run_dir: str | Path, robot: str | None = None) -> Planner:
+        """Load a trained run: ``run_dir/tm.pt``, with ``fm.pt``/``im.pt`` from ``run_dir`` if present,
+        else from the run's ``models_dir``; analytic FM/IM where the run used them."""
+        run_dir = Path(run_dir)
+        if not (run_dir / "tm.pt").is_file():
+            raise ConfigError(
+                f"{run_dir} holds no tm.pt; train one with `kinlearn train-tm --run-dir {run_dir}`"
+            )
+        tm, config = load_tm(run_dir / "tm.pt", robot=robot)
+        if (run_dir / "fm.pt").is_file() or (run_dir / "im.pt").is_file():
+            config = TMTrainConfig.from_dict({**config.to_dict(), "models_dir": str(run_dir)})
+        fm, im = build_fm_im(config)
+        return cls(load_robot(config.robot), tm, fm, im)
+
+    @classmethod
+    def default(cls, robot: str = "iiwa14") -> Planner:
+        """The small planner shipped with kinlearn (learned FM, IM and TM)."""
+        return _default_planner(robot)
+
+    def _state(self, x, what: str) -> torch.Tensor:
+        x = torch.as_tensor(x)
+        if not x.is_floating_point():
+            x = x.to(torch.get_default_dtype())
+        dof, S = self.robot.dof, self.layout.size
+        if x.ndim == 0 or x.shape[-1] not in (dof, S):
+            raise ShapeError(
+                f"{what} must have shape (..., {S}) (a state [θ, ef]) or (..., {dof}) (joint values) for "
+                f"{self.robot.name}; got {tuple(x.shape)}"
+            )
+        check_finite(x, what)
+        theta = x[..., self.layout.joints]
+        self.robot.check_joints(theta, what=f"{what} joints")
+        ef = self.kin.position(theta)
+        if x.shape[-1] == S:
+            err = (x[..., self.layout.ef] - ef).norm(dim=-1)
+            if bool((err > STATE_EF_TOLERANCE).any()):
+                raise StateError(
+                    f"{what}: its end-effector part differs from FK of its joints by up to {float(err.max()):.4g} m "
+                    f"(allowed {STATE_EF_TOLERANCE} m); pass joint values alone to have ef computed"
+                )
+        return self.layout.join(theta, ef)
+
+    @torch.no_grad()
+    def plan(self, start, goal) -> Plan:
+        """Plan from ``start`` to ``goal``: states ``(..., dof + 3)`` or joint values ``(..., dof)``.
+
+        Leading batch dimensions broadcast. Deterministic: the same input gives the same plan bit for
+        bit. Raises :class:`ShapeError`, :class:`NonFiniteError`, :class:`JointLimitError` or
+        :class:`StateError` for bad input. Outputs have the input's dtype.
+        """
+        s0, sT = self._state(start, "start"), self._state(goal, "goal")
+        dtype = torch.promote_types(s0.dtype, sT.dtype)
+        s0, sT = torch.broadcast_tensors(s0.to(dtype), sT.to(dtype))
+        batch = s0.shape[:-1]
+        S = self.layout.size
+        net_dtype = next(self.tm.parameters()).dtype
+        a0, aT = s0.reshape(-1, S).to(net_dtype), sT.reshape(-1, S).to(net_dtype)
+        waypoints = self.tm(a0, aT)
+        _, actions = rectify(waypoints, a0, aT, self.fm, self.im, self.layout)
+        actions = actions.to(dtype)
+        theta0 = s0.reshape(-1, S)[:, self.layout.joints]
+        joints = torch.cat((theta0[:, None], theta0[:, None] + torch.cumsum(actions, dim=1)), dim=1)
+        ef = self.kin.position(joints, validate=False)
+        T = actions.shape[1]
+        return Plan(
+            start=s0,
+            goal=sT,
+            waypoints=waypoints.to(dtype).reshape(*batch, T - 1, 3),
+            actions=actions.reshape(*batch, T, self.robot.dof),
+            joints=joints.reshape(*batch, T + 1, self.robot.dof),
+            ef=ef.reshape(*batch, T + 1, 3),
+        )
+
+    __call__ = plan
+
+
+@lru_cache(maxsize=8)
+def _default_planner(robot: str) -> Planner:
+    path = DEFAULT_CHECKPOINTS / robot
+    if not (path / "tm.pt").is_file():
+        raise ConfigError(
+            f"kinlearn ships a default planner for iiwa14 only (none at {path}); train one for {robot!r} "
+            "with `kinlearn reproduce` or `kinlearn train-tm` and load it with Planner.load(run_dir)"
+        )
+    return Planner.load(path, robot=robot)
+
+
+def plan(start, goal, robot: str = "iiwa14") -> Plan:
+    """Plan with the default planner shipped for ``robot`` (see :meth:`Planner.plan`)."""
+    return Planner.default(robot).plan(start, goal)
