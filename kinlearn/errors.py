@@ -48,3 +48,7 @@ class StateError(KinlearnError, ValueError):
 
 class MissingDependencyError(KinlearnError, ImportError):
     """An optional dependency (an extra such as ``ompl`` or ``ray``) that is not installed."""
+
+
+class PlanningError(KinlearnError, RuntimeError):
+    """A planner found no solution for a query."""
