@@ -1,40 +1,121 @@
-"""kinlearn: learn robot kinematics and trajectory planning from the robot's own motor babbling."""
+"""kinlearn: learn robot kinematics and trajectory planning from the robot's own motor babbling.
 
+Quick start::
+
+    import kinlearn
+    plan = kinlearn.plan(start_joints, goal_joints)   # the shipped iiwa14 planner
+    plan.waypoints, plan.joints, plan.ef
+"""
+
+from .babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
+from .baselines import cartesian_dls, joint_interpolation, rrt_connect
+from .endpoints import EndpointConfig, EndpointPairs, load_endpoints, make_endpoints, save_endpoints
 from .errors import (
     CheckpointError,
     ConfigError,
     DatasetError,
     JointLimitError,
     KinlearnError,
+    MissingDependencyError,
     NonFiniteError,
+    PlanningError,
     RobotDescriptionError,
     ShapeError,
+    StateError,
     UnknownRobotError,
 )
 from .kinematics import BACKENDS, Kinematics, dls_step, kinematics
+from .metrics import plan_metrics, summarize, trajectory_metrics
+from .models import (
+    AnalyticFM,
+    AnalyticIM,
+    FMConfig,
+    ForwardModel,
+    IMConfig,
+    InverseModel,
+    LearnedFM,
+    LearnedIM,
+    load_fm,
+    load_im,
+    save_model,
+)
+from .plan import Plan
+from .planner import Planner, plan
+from .rectify import LossConfig, rectify, tm_loss
 from .robot import ROBOTS, Robot, available_robots, load_robot
 from .state import StateLayout
+from .train import OptimConfig, TrainConfig, train_config, train_fm, train_im, validate_models
+from .train_tm import TMTrainConfig, load_tm, tm_preset, train_tm
+from .trajectory import TMConfig, TrajectoryModel
 
 __version__ = "0.1.0"
 
 __all__ = [
     "BACKENDS",
     "ROBOTS",
+    "AnalyticFM",
+    "AnalyticIM",
+    "BabblingConfig",
     "CheckpointError",
     "ConfigError",
     "DatasetError",
+    "EndpointConfig",
+    "EndpointPairs",
+    "FMConfig",
+    "ForwardModel",
+    "IMConfig",
+    "InverseModel",
     "JointLimitError",
     "Kinematics",
     "KinlearnError",
+    "LearnedFM",
+    "LearnedIM",
+    "LossConfig",
+    "MissingDependencyError",
     "NonFiniteError",
+    "OptimConfig",
+    "Plan",
+    "Planner",
+    "PlanningError",
     "Robot",
     "RobotDescriptionError",
     "ShapeError",
+    "StateError",
     "StateLayout",
+    "TMConfig",
+    "TMTrainConfig",
+    "TrainConfig",
+    "TrajectoryModel",
+    "Transitions",
     "UnknownRobotError",
     "__version__",
     "available_robots",
+    "babble",
+    "cartesian_dls",
     "dls_step",
+    "joint_interpolation",
     "kinematics",
+    "load_endpoints",
+    "load_fm",
+    "load_im",
     "load_robot",
+    "load_tm",
+    "load_transitions",
+    "make_endpoints",
+    "plan",
+    "plan_metrics",
+    "rectify",
+    "rrt_connect",
+    "save_endpoints",
+    "save_model",
+    "save_transitions",
+    "summarize",
+    "tm_loss",
+    "tm_preset",
+    "train_config",
+    "train_fm",
+    "train_im",
+    "train_tm",
+    "trajectory_metrics",
+    "validate_models",
 ]

@@ -1,0 +1,391 @@
+"""``kinlearn reproduce``: the whole pipeline, side by side with the paper.
+
+babble → FM/IM → endpoint pairs → TM for the paper's six optimiser configurations (Table 1) over
+several seeds → evaluation on held-out pairs (Table 2) → the ablation (learned/analytic FM × IM) →
+the reference-parity row → the baselines → ``results.md``, ``results.json`` and the figures.
+
+The sweep runs as independent jobs on local worker processes, or as Ray tasks (``backend="ray"``).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import dataclasses
+import json
+import os
+import shutil
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Literal
+
+import torch
+from tqdm.auto import tqdm
+
+from .babbling import BabblingConfig, babble
+from .baselines import cartesian_dls, joint_interpolation
+from .endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
+from .errors import ConfigError, MissingDependencyError
+from .io import write_json
+from .metrics import PAPER_TABLE2, TABLE2_COLUMNS, format_table, plan_metrics, summarize
+from .models import fm_config, im_config
+from .planner import Planner
+from .robot import load_robot
+from .train import train_config, train_fm, train_im, validate_models
+from .train_tm import TMTrainConfig, tm_preset, train_tm
+
+__all__ = ["OPTIMIZER_SWEEP", "REPRODUCE_PRESETS", "ReproduceConfig", "evaluate_plans", "reproduce"]
+
+#: The paper's Table 1: optimiser configurations and their reported final L_TM.
+OPTIMIZER_SWEEP: dict[int, dict] = {
+    1: {"optim": {"name": "adam", "lr": 1e-3}, "paper_l_tm": 0.084},
+    2: {"optim": {"name": "adam", "lr": 1e-4}, "paper_l_tm": 0.170},
+    3: {"optim": {"name": "rmsprop", "lr": 1e-2, "alpha": 0.99}, "paper_l_tm": 0.040},
+    4: {"optim": {"name": "rmsprop", "lr": 1e-3, "alpha": 0.99}, "paper_l_tm": 0.017},
+    5: {"optim": {"name": "sgd", "lr": 0.5}, "paper_l_tm": 0.034},
+    6: {"optim": {"name": "sgd", "lr": 1.0}, "paper_l_tm": 0.048},
+}
+
+
+@dataclass
+class ReproduceConfig:
+    """Sizes of every stage. See :data:`REPRODUCE_PRESETS` for ``smoke``, ``quick`` and ``full``."""
+
+    robot: str = "iiwa14"
+    transitions: int = 500_000
+    model_preset: str = "improved"  # FM/IM architecture and training preset
+    model_epochs: int | None = None  # override the preset's epochs
+    train_pairs: int = 12_000
+    heldout_pairs: int = 2_000
+    tm_epochs: int = 50
+    tm_batch_size: int = 64
+    seeds: tuple[int, ...] = tuple(range(10))
+    sweep_loss: str = "paper"  # the loss of the Table 1 sweep
+    parity_pairs: int = 12_000
+    parity_epochs: int = 50
+    workers: int = 2
+    backend: Literal["local", "ray"] = "local"
+    seed: int = 0
+
+
+REPRODUCE_PRESETS: dict[str, dict] = {
+    "smoke": dict(
+        transitions=20_000,
+        model_preset="tiny",
+        train_pairs=96,
+        heldout_pairs=64,
+        tm_epochs=2,
+        tm_batch_size=32,
+        seeds=(0,),
+        parity_pairs=8,
+        parity_epochs=1,
+        workers=1,
+    ),
+    "quick": dict(
+        transitions=200_000,
+        model_epochs=12,
+        train_pairs=4_000,
+        heldout_pairs=1_000,
+        tm_epochs=20,
+        tm_batch_size=64,
+        seeds=(0, 1),
+        parity_pairs=500,
+        parity_epochs=5,
+    ),
+    "full": dict(),
+}
+
+
+def evaluate_plans(plan, robot) -> dict:
+    """Summary of :func:`kinlearn.metrics.plan_metrics` over a batch of plans."""
+    return summarize(plan_metrics(plan, robot))
+
+
+def _job(job: dict) -> dict:
+    """Train one TM and evaluate it on the held-out pairs (runs in a worker process)."""
+    torch.set_num_threads(1)
+    run_dir = Path(job["run_dir"])
+    cfg = TMTrainConfig.from_dict(job["config"])
+    train = load_endpoints(job["train"], robot=cfg.robot)
+    if job.get("limit"):
+        train = train.split(job["limit"])[0]
+    heldout = load_endpoints(job["heldout"], robot=cfg.robot)
+    t0 = time.perf_counter()
+    train_tm(cfg, run_dir, train, progress=False)
+    wall = time.perf_counter() - t0
+    with open(run_dir / "metrics.jsonl") as fh:
+        last = json.loads(fh.read().splitlines()[-1])
+    planner = Planner.load(run_dir)
+    summary = evaluate_plans(planner.plan(heldout.start, heldout.goal), planner.robot)
+    return {
+        "name": job["name"],
+        "final_l_tm": last["train/paper_l_tm"],
+        "final_loss": last["train/loss"],
+        "train_seconds": wall,
+        "heldout": summary,
+    }
+
+
+def _run_jobs(jobs: list[dict], workers: int, backend: str) -> list[dict]:
+    if backend == "ray":
+        try:
+            import ray
+        except ImportError as exc:
+            raise MissingDependencyError(
+                "backend 'ray' needs the ray extra: pip install 'kinlearn[ray]'"
+            ) from exc
+        if not ray.is_initialized():
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
+        remote = ray.remote(num_cpus=1)(_job)
+        refs = [remote.remote(j) for j in jobs]
+        return [ray.get(r) for r in tqdm(refs, desc="TM sweep (ray)")]
+    if backend != "local":
+        raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
+    if workers <= 1:
+        return [_job(j) for j in tqdm(jobs, desc="TM sweep")]
+    ctx = torch.multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = [pool.submit(_job, j) for j in jobs]
+        for _ in tqdm(cf.as_completed(futures), total=len(futures), desc="TM sweep"):
+            pass
+        return [f.result() for f in futures]
+
+
+def _mean_std(values: list[float]) -> dict:
+    t = torch.tensor(values, dtype=torch.float64)
+    return {"mean": float(t.mean()), "std": float(t.std(unbiased=False)) if len(values) > 1 else 0.0}
+
+
+def _merge(summaries: list[dict]) -> dict:
+    """Average per-seed summaries: the mean of each metric's mean, with its std across seeds."""
+    out = {}
+    for key, first in summaries[0].items():
+        if isinstance(first, dict) and "mean" in first:
+            out[key] = {
+                "mean": sum(s[key]["mean"] for s in summaries) / len(summaries),
+                "std": sum(s[key]["std"] for s in summaries) / len(summaries),
+            }
+        else:
+            out[key] = first
+    return out
+
+
+def reproduce(config: ReproduceConfig, out: str | Path, progress: bool = True) -> dict:
+    """Run the whole pipeline into ``out``; returns the results written to ``out/results.json``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    robot = load_robot(config.robot)
+    write_json(out / "config.json", asdict(config))
+    timings: dict[str, float] = {}
+    t_all = time.perf_counter()
+
+    # 1. motor babbling and the learned FM/IM
+    t0 = time.perf_counter()
+    data = babble(
+        BabblingConfig(
+            robot=robot.name, walkers=1000, steps=max(1, config.transitions // 1000), seed=config.seed
+        )
+    )
+    models = out / "models"
+    fm_over = {} if config.model_epochs is None else {"epochs": config.model_epochs}
+    fm_res = train_fm(
+        data,
+        fm_config(robot.name, config.model_preset),
+        train_config("fm", config.model_preset, progress=progress, seed=config.seed, **fm_over),
+        run_dir=models / "fm",
+        resume=True,
+    )
+    im_res = train_im(
+        data,
+        im_config(robot.name, config.model_preset),
+        train_config("im", config.model_preset, progress=progress, seed=config.seed, **fm_over),
+        run_dir=models / "im",
+        resume=True,
+    )
+    shutil.copyfile(models / "fm" / "fm.pt", models / "fm.pt")
+    shutil.copyfile(models / "im" / "im.pt", models / "im.pt")
+    validation = validate_models(fm_res.model, im_res.model, robot, seed=config.seed + 1)
+    timings["babble + FM/IM"] = time.perf_counter() - t0
+
+    # 2. endpoint pairs: training and held-out sets are disjoint draws of one generator
+    pairs = make_endpoints(
+        EndpointConfig(robot=robot.name, n=config.train_pairs + config.heldout_pairs, seed=config.seed)
+    )
+    train, heldout = pairs.split(config.train_pairs)
+    save_endpoints(train, out / "endpoints_train.npz")
+    save_endpoints(heldout, out / "endpoints_heldout.npz")
+
+    # 3. the TM jobs: Table 1 sweep × seeds, kinlearn's default, the ablation, reference parity
+    common = {
+        "robot": robot.name,
+        "models_dir": str(models.resolve()),
+        "epochs": config.tm_epochs,
+        "batch_size": config.tm_batch_size,
+    }
+    jobs = []
+
+    def add(name: str, cfg: TMTrainConfig, limit: int | None = None) -> None:
+        jobs.append(
+            {
+                "name": name,
+                "config": cfg.to_dict(),
+                "run_dir": str(out / "tm" / name),
+                "train": str(out / "endpoints_train.npz"),
+                "heldout": str(out / "endpoints_heldout.npz"),
+                "limit": limit,
+            }
+        )
+
+    for k, row in OPTIMIZER_SWEEP.items():
+        for seed in config.seeds:
+            add(
+                f"table1-{k}-seed{seed}",
+                tm_preset("paper", loss=config.sweep_loss, seed=seed, optim=_optim(row["optim"]), **common),
+            )
+    for fm in ("learned", "analytic"):
+        for im in ("learned", "analytic"):
+            add(f"ablation-fm_{fm}-im_{im}", tm_preset("default", fm=fm, im=im, seed=config.seed, **common))
+    add(
+        "reference-parity",
+        tm_preset(
+            "reference-parity",
+            seed=config.seed,
+            **{**common, "epochs": config.parity_epochs, "batch_size": 1},
+        ),
+        limit=config.parity_pairs,
+    )
+    t0 = time.perf_counter()
+    results = {r["name"]: r for r in _run_jobs(jobs, config.workers, config.backend)}
+    timings["TM jobs"] = time.perf_counter() - t0
+
+    # 4. baselines on the same held-out pairs
+    t0 = time.perf_counter()
+    baselines = {
+        "joint interpolation": evaluate_plans(joint_interpolation(robot, heldout.start, heldout.goal), robot),
+        "Cartesian line + DLS IK": evaluate_plans(cartesian_dls(robot, heldout.start, heldout.goal), robot),
+    }
+    try:
+        from .baselines import rrt_connect
+
+        n_rrt = min(len(heldout), 500)
+        plan = rrt_connect(robot, heldout.start[:n_rrt], heldout.goal[:n_rrt], seed=config.seed)
+        baselines[f"RRT-Connect (OMPL, {n_rrt} pairs)"] = evaluate_plans(plan, robot)
+    except MissingDependencyError as exc:
+        baselines["RRT-Connect (OMPL)"] = {"skipped": str(exc)}
+    timings["baselines"] = time.perf_counter() - t0
+
+    # 5. tables, figures, results
+    table1 = {}
+    for k, row in OPTIMIZER_SWEEP.items():
+        runs = [results[f"table1-{k}-seed{s}"] for s in config.seeds]
+        table1[k] = {
+            "optimizer": row["optim"],
+            "paper_l_tm": row["paper_l_tm"],
+            "final_l_tm": _mean_std([r["final_l_tm"] for r in runs]),
+            "heldout": _merge([r["heldout"] for r in runs]),
+            "train_seconds": _mean_std([r["train_seconds"] for r in runs]),
+        }
+    best = min(table1, key=lambda k: table1[k]["final_l_tm"]["mean"])
+    ablation = {n: results[n] for n in results if n.startswith("ablation")}
+    figures = _figures(out, robot, heldout)
+    timings["total"] = time.perf_counter() - t_all
+    res = {
+        "config": asdict(config),
+        "validation": validation,
+        "table1": table1,
+        "best_table1": best,
+        "ablation": ablation,
+        "reference_parity": results["reference-parity"],
+        "baselines": baselines,
+        "figures": figures,
+        "timings_s": timings,
+    }
+    write_json(out / "results.json", res)
+    (out / "results.md").write_text(_markdown(res))
+    return res
+
+
+def _optim(d: dict):
+    from .train import OptimConfig
+
+    return OptimConfig(**d)
+
+
+def _figures(out: Path, robot, heldout) -> list[str]:
+    try:
+        from .plots import plot_good_bad, plot_histograms
+    except ImportError:
+        return []
+    try:
+        planner = Planner.load(out / "tm" / "ablation-fm_learned-im_learned")
+        plan = planner.plan(heldout.start, heldout.goal)
+        from .metrics import plan_metrics
+
+        per = plan_metrics(plan, robot)
+        paths = [
+            plot_good_bad(plan, robot, out / "fig3_trajectories.png"),
+            plot_histograms(per, out / "fig4_histograms.png"),
+        ]
+    except MissingDependencyError:
+        return []
+    return [str(Path(p).name) for p in paths]
+
+
+def _markdown(res: dict) -> str:
+    cfg = res["config"]
+    lines = [
+        f"# kinlearn reproduce — {cfg['robot']}",
+        "",
+        f"Held-out pairs: {cfg['heldout_pairs']}; training pairs: {cfg['train_pairs']}; TM epochs: "
+        f"{cfg['tm_epochs']}; seeds: {len(cfg['seeds'])}; babbling transitions: {cfg['transitions']}; "
+        f"FM/IM preset: {cfg['model_preset']}. Total wall time: {res['timings_s']['total']:.0f} s.",
+        "",
+        "## Learned FM/IM against the analytic robot",
+        "",
+        "```",
+        json.dumps(res["validation"], indent=1, sort_keys=True, default=str),
+        "```",
+        "",
+        "## Table 1 — final L_TM (paper Eq. 4, training set), mean ± std over seeds",
+        "",
+        "| # | optimiser | paper | kinlearn |",
+        "|---|---|---|---|",
+    ]
+    for k, row in res["table1"].items():
+        o = row["optimizer"]
+        name = f"{o['name']}(lr={o['lr']:g})"
+        lines.append(
+            f"| {k} | {name} | {row['paper_l_tm']:.3f} | {row['final_l_tm']['mean']:.4f} ± "
+            f"{row['final_l_tm']['std']:.4f} |"
+        )
+    rows = {}
+    for k, row in res["table1"].items():
+        rows[f"paper #{k}"] = PAPER_TABLE2[k]
+        rows[f"#{k} kinlearn, paper loss"] = row["heldout"]
+    rows.update({n.replace("ablation-", "default loss, "): r["heldout"] for n, r in res["ablation"].items()})
+    rows["reference parity (authors' defects)"] = res["reference_parity"]["heldout"]
+    rows.update({k: v for k, v in res["baselines"].items() if "skipped" not in v})
+    lines += [
+        "",
+        "## Table 2 — held-out trajectories (mean ± std over trajectories)",
+        "",
+        format_table(rows, columns=(*TABLE2_COLUMNS, "sharp_turn", "goal_error", "success")),
+        "",
+    ]
+    for k, v in res["baselines"].items():
+        if "skipped" in v:
+            lines.append(f"- {k}: skipped ({v['skipped']})")
+    if res["figures"]:
+        lines += ["", "## Figures", ""] + [f"![{f}]({f})" for f in res["figures"]]
+    return "\n".join(lines) + "\n"
+
+
+def preset_config(name: str, **overrides) -> ReproduceConfig:
+    if name not in REPRODUCE_PRESETS:
+        raise ConfigError(f"unknown reproduce preset {name!r}; choose one of {', '.join(REPRODUCE_PRESETS)}")
+    fields = {**REPRODUCE_PRESETS[name], **{k: v for k, v in overrides.items() if v is not None}}
+    return dataclasses.replace(ReproduceConfig(), **fields)
+
+
+def default_workers() -> int:
+    return max(1, min(2, os.cpu_count() or 1))

@@ -1,0 +1,139 @@
+"""Planner and plan(): determinism, input validation, the shipped checkpoint, another robot."""
+
+import pytest
+import torch
+
+import kinlearn
+from kinlearn import JointLimitError, NonFiniteError, ShapeError, kinematics, load_robot
+from kinlearn.babbling import BabblingConfig, babble
+from kinlearn.endpoints import EndpointConfig, make_endpoints
+from kinlearn.errors import CheckpointError, ConfigError, StateError
+from kinlearn.models import AnalyticFM, AnalyticIM, fm_config, im_config
+from kinlearn.planner import DEFAULT_CHECKPOINTS, Planner
+from kinlearn.train import train_config, train_fm, train_im
+from kinlearn.train_tm import tm_preset, train_tm
+from kinlearn.trajectory import TMConfig, TrajectoryModel
+
+
+@pytest.fixture(scope="module")
+def iiwa():
+    return load_robot("iiwa14")
+
+
+@pytest.fixture(scope="module")
+def pairs():
+    return make_endpoints(EndpointConfig(n=64, seed=5))
+
+
+@pytest.fixture(scope="module")
+def analytic_planner(iiwa, pairs, tmp_path_factory):
+    run = tmp_path_factory.mktemp("tm")
+    cfg = tm_preset("default", fm="analytic", im="analytic", epochs=2, batch_size=16)
+    train_tm(cfg, run, pairs, progress=False)
+    return Planner.load(run)
+
+
+def test_plan_shapes_and_joint_path(analytic_planner, pairs, iiwa):
+    plan = analytic_planner.plan(pairs.start[:5], pairs.goal[:5])
+    assert plan.waypoints.shape == (5, 10, 3)
+    assert plan.actions.shape == (5, 11, 7)
+    assert plan.joints.shape == (5, 12, 7) and plan.ef.shape == (5, 12, 3)
+    assert torch.equal(plan.joints[:, 0], pairs.start[:5, :7])
+    assert torch.allclose(plan.joints[:, 1:], plan.joints[:, :1] + plan.actions.cumsum(1), atol=1e-6)
+    assert torch.allclose(plan.ef, kinematics(iiwa).position(plan.joints), atol=1e-6)
+
+
+def test_plan_is_deterministic_bit_for_bit(analytic_planner, pairs):
+    a = analytic_planner.plan(pairs.start, pairs.goal)
+    b = analytic_planner.plan(pairs.start, pairs.goal)
+    for f in ("waypoints", "actions", "joints", "ef"):
+        assert torch.equal(getattr(a, f), getattr(b, f)), f
+
+
+def test_plan_accepts_joints_states_batches_and_float64(analytic_planner, pairs):
+    full = analytic_planner.plan(pairs.start[:3], pairs.goal[:3])
+    joints = analytic_planner.plan(pairs.start[:3, :7], pairs.goal[:3, :7])
+    assert torch.allclose(full.waypoints, joints.waypoints, atol=1e-5)
+    one = analytic_planner.plan(pairs.start[0, :7].double(), pairs.goal[0, :7].double())
+    assert one.waypoints.shape == (10, 3) and one.joints.dtype == torch.float64
+    grid = analytic_planner.plan(pairs.start[:6].reshape(2, 3, 10), pairs.goal[:6].reshape(2, 3, 10))
+    assert grid.joints.shape == (2, 3, 12, 7)
+    assert torch.allclose(
+        grid.waypoints.reshape(6, 10, 3), analytic_planner.plan(pairs.start[:6], pairs.goal[:6]).waypoints
+    )
+    assert analytic_planner.plan(pairs.start[:2].tolist(), pairs.goal[:2].numpy()).waypoints.shape == (
+        2,
+        10,
+        3,
+    )
+
+
+def test_plan_rejects_bad_input(analytic_planner, pairs):
+    s, g = pairs.start[:2].clone(), pairs.goal[:2].clone()
+    with pytest.raises(ShapeError, match=r"\(\.\.\., 10\).*\(\.\.\., 7\)"):
+        analytic_planner.plan(s[:, :6], g)
+    bad = s.clone()
+    bad[0, 3] = float("nan")
+    with pytest.raises(NonFiniteError):
+        analytic_planner.plan(bad, g)
+    out = s.clone()
+    out[1, 1] = 3.0  # joint 2 allows ±2.0944 rad
+    with pytest.raises(JointLimitError, match="iiwa_joint_2"):
+        analytic_planner.plan(out, g)
+    lying = g.clone()
+    lying[0, 7] += 0.05  # end effector 5 cm away from FK of its joints
+    with pytest.raises(StateError, match="FK"):
+        analytic_planner.plan(s, lying)
+
+
+def test_planner_refuses_models_of_another_robot(iiwa, pairs):
+    panda = load_robot("panda")
+    tm = TrajectoryModel(TMConfig())
+    with pytest.raises(ConfigError, match="panda"):
+        Planner(panda, tm, AnalyticFM(panda), AnalyticIM(panda))
+    with pytest.raises(ConfigError, match="iiwa14"):
+        Planner(iiwa, tm, AnalyticFM(iiwa), AnalyticIM(panda))
+
+
+def test_load_checks_robot(analytic_planner, tmp_path, pairs):
+    run = tmp_path / "run"
+    train_tm(tm_preset("default", fm="analytic", im="analytic", epochs=1), run, pairs, progress=False)
+    with pytest.raises(CheckpointError, match="panda"):
+        Planner.load(run, robot="panda")
+    with pytest.raises(ConfigError, match=r"no tm\.pt"):
+        Planner.load(tmp_path / "empty")
+
+
+def test_corrupt_checkpoint(tmp_path):
+    (tmp_path / "tm.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(CheckpointError, match="not a readable"):
+        Planner.load(tmp_path)
+
+
+def test_shipped_checkpoint_loads_and_plans(pairs, iiwa):
+    assert (DEFAULT_CHECKPOINTS / "iiwa14" / "tm.pt").is_file()
+    plan = kinlearn.plan(pairs.start[:8], pairs.goal[:8])
+    assert plan.waypoints.shape == (8, 10, 3)
+    assert torch.equal(plan.joints, kinlearn.plan(pairs.start[:8], pairs.goal[:8]).joints)
+    assert torch.isfinite(plan.ef).all()
+    # The shipped planner ends near the goal on most pairs (see docs/results.md for the figures).
+    err = (plan.ef[:, -1] - pairs.goal[:8, 7:]).norm(dim=-1)
+    assert float(err.median()) < 0.05
+    with pytest.raises(ConfigError, match="iiwa14 only"):
+        kinlearn.plan(torch.zeros(7), torch.zeros(7), robot="panda")
+
+
+def test_tiny_learned_pipeline_for_panda(tmp_path):
+    """babble → FM/IM → endpoints → TM → plan, all for a different 7-joint arm."""
+    data = babble(BabblingConfig(robot="panda", walkers=200, steps=50, seed=0))
+    models = tmp_path / "models"
+    train_fm(data, fm_config("panda", "tiny"), train_config("fm", "tiny", progress=False), run_dir=models)
+    train_im(data, im_config("panda", "tiny"), train_config("im", "tiny", progress=False), run_dir=models)
+    pairs = make_endpoints(EndpointConfig(robot="panda", n=48, seed=1))
+    run = tmp_path / "tm"
+    cfg = tm_preset("default", robot="panda", models_dir=str(models), epochs=2, batch_size=16)
+    train_tm(cfg, run, pairs, progress=False)
+    planner = Planner.load(run)
+    assert planner.robot.name == "panda"
+    plan = planner.plan(pairs.start[:4], pairs.goal[:4])
+    assert plan.joints.shape == (4, 12, 7) and torch.isfinite(plan.ef).all()

@@ -1,0 +1,81 @@
+"""The whole pipeline on a tiny preset, and the planning-stage CLI."""
+
+import json
+
+import pytest
+import torch
+
+from kinlearn.cli import main
+from kinlearn.errors import ConfigError, MissingDependencyError
+from kinlearn.reproduce import OPTIMIZER_SWEEP, _run_jobs, preset_config, reproduce
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reproduce")
+    cfg = preset_config("smoke", transitions=5_000, train_pairs=48, heldout_pairs=32)
+    return out, reproduce(cfg, out, progress=False)
+
+
+def test_reproduce_smoke_writes_tables_and_figures(smoke):
+    out, res = smoke
+    assert (out / "results.md").is_file() and (out / "results.json").is_file()
+    assert set(res["table1"]) == set(OPTIMIZER_SWEEP)
+    for row in res["table1"].values():
+        assert row["final_l_tm"]["mean"] >= 0.0
+        assert 0.0 <= row["heldout"]["mean_angle"]["mean"] <= 180.0
+    assert len(res["ablation"]) == 4
+    assert {"joint interpolation", "Cartesian line + DLS IK"} <= set(res["baselines"])
+    assert "reference_parity" in res
+    md = (out / "results.md").read_text()
+    assert "Table 1" in md and "Table 2" in md and "paper #4" in md
+    pytest.importorskip("matplotlib")
+    for fig in ("fig3_trajectories.png", "fig4_histograms.png"):
+        assert (out / fig).stat().st_size > 10_000
+    assert json.loads((out / "results.json").read_text())["best_table1"] in OPTIMIZER_SWEEP
+
+
+def test_reproduce_config_errors():
+    with pytest.raises(ConfigError, match="quick"):
+        preset_config("huge")
+    with pytest.raises(ConfigError, match="local"):
+        _run_jobs([], 1, "slurm")
+
+
+def test_ray_backend_runs_or_says_what_is_missing(smoke):
+    out, _ = smoke
+    job = {
+        "name": "ray-job",
+        "config": json.loads((out / "tm" / "ablation-fm_analytic-im_analytic" / "config.json").read_text()),
+        "run_dir": str(out / "tm" / "ray-job"),
+        "train": str(out / "endpoints_train.npz"),
+        "heldout": str(out / "endpoints_heldout.npz"),
+        "limit": 16,
+    }
+    job["config"]["epochs"] = 1
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        with pytest.raises(MissingDependencyError, match=r"kinlearn\[ray\]"):
+            _run_jobs([job], 1, "ray")
+        return
+    (result,) = _run_jobs([job], 1, "ray")
+    assert result["name"] == "ray-job" and result["heldout"]["mean_angle"]["mean"] > 0
+
+
+def test_cli_endpoints_train_tm_plan_export(tmp_path, capsys):
+    ep, tm, out = tmp_path / "ep", tmp_path / "tm", tmp_path / "export"
+    assert main(["make-endpoints", "--n", "64", "--heldout", "16", "--run-dir", str(ep)]) == 0
+    assert (ep / "endpoints_train.npz").is_file() and (ep / "config.json").is_file()
+    args = ["train-tm", "--endpoints", str(ep), "--fm", "analytic", "--im", "analytic", "--epochs", "1"]
+    assert main([*args, "--run-dir", str(tm), "--no-progress"]) == 0
+    assert "held-out" in capsys.readouterr().out
+    start, goal = "0.3,0.45,0,-1.35,0,1.05,0", "0.6,1.1,0,-0.7,0,0.9,0"
+    assert main(["plan", "--model", str(tm), "--start", start, "--goal", goal]) == 0
+    assert "goal error" in capsys.readouterr().out
+    assert main(["export", "--model", str(tm), "--out", str(out)]) == 0
+    payload = torch.load(out / "tm.pt", weights_only=True)
+    assert payload["extra"] == {}  # no optimiser state in an exported planner
+    # bad input: a joint outside its limits is a clear error with exit status 2
+    assert main(["plan", "--model", str(tm), "--start", "0,3,0,0,0,0,0", "--goal", goal]) == 2
+    assert "iiwa_joint_2" in capsys.readouterr().err
