@@ -73,7 +73,9 @@ class Kinematics(ABC):
         flat, batch = self._prepare(q, validate)
         return self._jacobian_flat(flat).reshape(*batch, 3, self.dof)
 
-    def position_and_jacobian(self, q: torch.Tensor, validate: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
+    def position_and_jacobian(
+        self, q: torch.Tensor, validate: bool = True
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """``(position (..., 3), jacobian (..., 3, dof))``, in one pass where the backend allows."""
         flat, batch = self._prepare(q, validate)
         p, J = self._position_and_jacobian_flat(flat)
