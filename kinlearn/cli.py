@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import platform
+import shutil
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -28,7 +29,15 @@ from .errors import KinlearnError
 from .io import read_json, write_json
 from .models import FM_PRESETS, AnalyticFM, AnalyticIM, fm_config, im_config, load_fm, load_im
 from .robot import available_robots
-from .train import format_validation_table, train_config, train_fm, train_im, validate_models
+from .train import (
+    TrainResult,
+    format_validation_table,
+    train_config,
+    train_fm,
+    train_im,
+    train_im_distal,
+    validate_models,
+)
 
 __all__ = ["add_command", "build_parser", "main", "register_subcommand"]
 
@@ -190,6 +199,16 @@ def _add_train(sub, kind: str) -> None:
     p.add_argument(
         "--validate", type=int, default=100_000, help="fresh transitions to validate on afterwards (0: skip)"
     )
+    if kind == "im":
+        p.add_argument(
+            "--through-fm",
+            type=Path,
+            default=None,
+            help="after supervised training, refine the IM through this frozen fm.pt so that its actions "
+            "reach their targets (see train_im_distal)",
+        )
+        p.add_argument("--through-fm-epochs", type=int, default=12, help="epochs of that refinement")
+        p.add_argument("--action-weight", type=float, default=0.01, help="pull toward the babbled action")
     p.set_defaults(kind=kind)
 
 
@@ -221,6 +240,21 @@ def _run_train(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     trainer = train_fm if kind == "fm" else train_im
     result = trainer(data, model_cfg, cfg, run_dir=run_dir, resume=args.resume)
+    if kind == "im" and args.through_fm is not None:
+        # Refine the IM through a frozen learned FM, in its own folder (so each stage resumes alone).
+        fm = load_fm(args.through_fm, robot=args.robot)
+        dcfg = train_config("im", args.preset, **{**overrides, "epochs": args.through_fm_epochs})
+        distal = train_im_distal(
+            data,
+            result.model,
+            fm,
+            dcfg,
+            run_dir=run_dir / "through-fm",
+            resume=args.resume,
+            action_weight=args.action_weight,
+        )
+        shutil.copyfile(distal.checkpoint, run_dir / "im.pt")
+        result = TrainResult(distal.model, result.history + distal.history, run_dir / "im.pt")
     dt = time.perf_counter() - t0
     last = result.history[-1] if result.history else {}
     print(f"trained {kind.upper()} ({args.preset}) in {dt:.1f} s; last epoch: {last}")

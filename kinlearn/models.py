@@ -188,6 +188,13 @@ class FMConfig:
         activation: of every hidden layer.
         normalize: standardise inputs and outputs with statistics fitted on the training data.
         predict_delta: predict s' − s (then add s) instead of s'.
+        ef_mode: ``"head"`` (the paper's: an ef head on the shared layers) or ``"difference"``: the
+            end-effector step is g(θ + a) − g(θ) for one learned function g of the joints alone (an
+            MLP of width ``fk_hidden`` on (sin θ, cos θ)). The end effector of a rigid arm is a
+            function of its joints, so g learns the forward kinematics up to a constant, and a
+            rollout telescopes to ef(0) + g(θ(t)) − g(θ(0)): its error stays bounded instead of
+            adding up over the steps. Needs ``predict_delta``.
+        fk_hidden: hidden widths of g.
     """
 
     robot: str = "iiwa14"
@@ -198,11 +205,18 @@ class FMConfig:
     activation: Activation = "tanh"
     normalize: bool = False
     predict_delta: bool = False
+    ef_mode: Literal["head", "difference"] = "head"
+    fk_hidden: tuple[int, ...] = (256, 256, 256)
 
     def __post_init__(self) -> None:
         _check_widths(self.shared, "shared", allow_empty=False)
         _check_widths(self.joints_head, "joints_head")
         _check_widths(self.ef_head, "ef_head")
+        _check_widths(self.fk_hidden, "fk_hidden", allow_empty=False)
+        if self.ef_mode not in ("head", "difference"):
+            raise ConfigError(f"ef_mode must be 'head' or 'difference', got {self.ef_mode!r}")
+        if self.ef_mode == "difference" and not self.predict_delta:
+            raise ConfigError("ef_mode='difference' predicts a step, so it needs predict_delta=True")
         _check_common(self)
 
     def to_dict(self) -> dict:
@@ -262,12 +276,15 @@ def _check_common(cfg) -> None:
 #: paper's widths (for quick tests).
 FM_PRESETS: dict[str, dict] = {
     "paper": {},
+    # Normalised, predicting the step; the end-effector step as a difference of a learned function
+    # of the joints (see FMConfig.ef_mode); the joints head needs little width (θ' ≈ θ + a).
     "improved": {
         "normalize": True,
         "predict_delta": True,
-        "shared": (256, 256),
-        "joints_head": (128,),
-        "ef_head": (128,),
+        "shared": (64,),
+        "joints_head": (64,),
+        "ef_mode": "difference",
+        "fk_hidden": (256, 256, 256),
     },
     "tiny": {"normalize": True, "predict_delta": True},
 }
@@ -325,7 +342,10 @@ class LearnedFM(ForwardModel):
         self.shared = _mlp((n_in, *config.shared), config.activation, None)
         width = config.shared[-1]
         self.joints_head = _mlp((width, *config.joints_head), config.activation, dof)
-        self.ef_head = _mlp((width, *config.ef_head), config.activation, 3)
+        if config.ef_mode == "difference":
+            self.fk = _mlp((2 * dof, *config.fk_hidden), config.activation, 3)
+        else:
+            self.ef_head = _mlp((width, *config.ef_head), config.activation, 3)
         if config.normalize:
             self.in_norm = _Normalizer(n_in)
             self.out_norm = _Normalizer(S)
@@ -337,10 +357,20 @@ class LearnedFM(ForwardModel):
         x = torch.cat((s, a), dim=-1)
         return self.in_norm.encode(x) if self.config.normalize else x
 
+    def _g(self, theta: torch.Tensor) -> torch.Tensor:
+        """The learned function of the joints whose differences are the end-effector steps (metres)."""
+        return self.fk(torch.cat((torch.sin(theta), torch.cos(theta)), dim=-1))
+
     def _raw(self, s: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         """Network output (normalised target space when ``normalize``) ``(..., S)``."""
         h = self.shared(self._inputs(s, a))
-        return torch.cat((self.joints_head(h), self.ef_head(h)), dim=-1)
+        if self.config.ef_mode == "head":
+            return torch.cat((self.joints_head(h), self.ef_head(h)), dim=-1)
+        theta = s[..., self.layout.joints]
+        step = self._g(theta + a) - self._g(theta)
+        if self.config.normalize:
+            step = (step - self.out_norm.mean[self.layout.ef]) / self.out_norm.std[self.layout.ef]
+        return torch.cat((self.joints_head(h), step), dim=-1)
 
     def _target(self, s: torch.Tensor, s_next: torch.Tensor) -> torch.Tensor:
         y = s_next - s if self.config.predict_delta else s_next

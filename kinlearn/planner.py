@@ -45,7 +45,11 @@ class Planner:
         self.tm, self.fm, self.im = tm.eval(), fm.eval(), im.eval()
         for m in (self.tm, self.fm, self.im):
             m.requires_grad_(False)
+        for m in (self.fm, self.im):  # the planner checks its inputs once; no per-call re-checks
+            m.validate_inputs = False
         self.kin = kinematics(robot)
+        self._core = self._rollout
+        self._lo, self._hi = robot.limits(torch.float64)
 
     @classmethod
     def load(cls, run_dir: str | Path, robot: str | None = None) -> Planner:
@@ -67,28 +71,59 @@ class Planner:
         """The small planner shipped with kinlearn (learned FM, IM and TM)."""
         return _default_planner(robot)
 
-    def _state(self, x, what: str) -> torch.Tensor:
-        x = torch.as_tensor(x)
-        if not x.is_floating_point():
-            x = x.to(torch.get_default_dtype())
+    def _states(self, start, goal) -> tuple[torch.Tensor, torch.Tensor]:
+        """Check start and goal (one pass over both) and return them as full states ``(..., S)``."""
         dof, S = self.robot.dof, self.layout.size
-        if x.ndim == 0 or x.shape[-1] not in (dof, S):
-            raise ShapeError(
-                f"{what} must have shape (..., {S}) (a state [θ, ef]) or (..., {dof}) (joint values) for "
-                f"{self.robot.name}; got {tuple(x.shape)}"
-            )
-        check_finite(x, what)
-        theta = x[..., self.layout.joints]
-        self.robot.check_joints(theta, what=f"{what} joints")
-        ef = self.kin.position(theta)
-        if x.shape[-1] == S:
-            err = (x[..., self.layout.ef] - ef).norm(dim=-1)
-            if bool((err > STATE_EF_TOLERANCE).any()):
-                raise StateError(
-                    f"{what}: its end-effector part differs from FK of its joints by up to {float(err.max()):.4g} m "
-                    f"(allowed {STATE_EF_TOLERANCE} m); pass joint values alone to have ef computed"
+        pair = []
+        for what, x in (("start", start), ("goal", goal)):
+            x = torch.as_tensor(x)
+            if not x.is_floating_point():
+                x = x.to(torch.get_default_dtype())
+            if x.ndim == 0 or x.shape[-1] not in (dof, S):
+                raise ShapeError(
+                    f"{what} must have shape (..., {S}) (a state [θ, ef]) or (..., {dof}) (joint values) "
+                    f"for {self.robot.name}; got {tuple(x.shape)}"
                 )
-        return self.layout.join(theta, ef)
+            pair.append(x)
+        (x0, xT), dtype = pair, torch.promote_types(pair[0].dtype, pair[1].dtype)
+        try:
+            batch = torch.broadcast_shapes(x0.shape[:-1], xT.shape[:-1])
+        except RuntimeError as exc:
+            raise ShapeError(f"start {tuple(x0.shape)} and goal {tuple(xT.shape)} do not broadcast") from exc
+        theta = torch.stack([x[..., self.layout.joints].to(dtype).expand(*batch, dof) for x in (x0, xT)])
+        lo, hi = self._lo.to(dtype), self._hi.to(dtype)
+        if not bool(((theta >= lo - 1e-6) & (theta <= hi + 1e-6)).all()):  # also false for NaN
+            for what, x in (("start", x0), ("goal", xT)):
+                check_finite(x, what)
+                self.robot.check_joints(x[..., self.layout.joints], what=f"{what} joints")
+        ef = self.kin.position(theta, validate=False)
+        out = []
+        for k, (what, x) in enumerate((("start", x0), ("goal", xT))):
+            if x.shape[-1] == S:
+                check_finite(x[..., self.layout.ef], what)
+                err = (x[..., self.layout.ef].to(dtype) - ef[k]).norm(dim=-1)
+                if bool((err > STATE_EF_TOLERANCE).any()):
+                    raise StateError(
+                        f"{what}: its end-effector part differs from FK of its joints by up to "
+                        f"{float(err.max()):.4g} m (allowed {STATE_EF_TOLERANCE} m); pass joint values alone "
+                        "to have ef computed"
+                    )
+            out.append(self.layout.join(theta[k], ef[k]))
+        return out[0], out[1]
+
+    def _rollout(self, s0: torch.Tensor, sT: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """TM waypoints and the IM/FM rollout's actions for flat ``(N, S)`` states (network dtype)."""
+        waypoints = self.tm(s0, sT)
+        _, actions = rectify(waypoints, s0, sT, self.fm, self.im, self.layout)
+        return waypoints, actions
+
+    def compile(self, **options) -> Planner:
+        """Compile the TM + rollout with ``torch.compile`` (first calls per input shape are slow).
+
+        Plans stay the same up to floating-point rounding; returns ``self``.
+        """
+        self._core = torch.compile(self._rollout, dynamic=False, **options)
+        return self
 
     @torch.no_grad()
     def plan(self, start, goal) -> Plan:
@@ -98,26 +133,22 @@ class Planner:
         bit. Raises :class:`ShapeError`, :class:`NonFiniteError`, :class:`JointLimitError` or
         :class:`StateError` for bad input. Outputs have the input's dtype.
         """
-        s0, sT = self._state(start, "start"), self._state(goal, "goal")
-        dtype = torch.promote_types(s0.dtype, sT.dtype)
-        s0, sT = torch.broadcast_tensors(s0.to(dtype), sT.to(dtype))
-        batch = s0.shape[:-1]
-        S = self.layout.size
-        net_dtype = next(self.tm.parameters()).dtype
-        a0, aT = s0.reshape(-1, S).to(net_dtype), sT.reshape(-1, S).to(net_dtype)
-        waypoints = self.tm(a0, aT)
-        _, actions = rectify(waypoints, a0, aT, self.fm, self.im, self.layout)
+        s0, sT = self._states(start, goal)
+        dtype, batch, S, dof = s0.dtype, s0.shape[:-1], self.layout.size, self.robot.dof
+        net_dtype = self.tm.in_mean.dtype
+        flat0, flatT = s0.reshape(-1, S), sT.reshape(-1, S)
+        waypoints, actions = self._core(flat0.to(net_dtype), flatT.to(net_dtype))
         actions = actions.to(dtype)
-        theta0 = s0.reshape(-1, S)[:, self.layout.joints]
-        joints = torch.cat((theta0[:, None], theta0[:, None] + torch.cumsum(actions, dim=1)), dim=1)
+        theta0 = flat0[:, None, self.layout.joints]
+        joints = torch.cat((theta0, theta0 + torch.cumsum(actions, dim=1)), dim=1)
         ef = self.kin.position(joints, validate=False)
         T = actions.shape[1]
         return Plan(
             start=s0,
             goal=sT,
             waypoints=waypoints.to(dtype).reshape(*batch, T - 1, 3),
-            actions=actions.reshape(*batch, T, self.robot.dof),
-            joints=joints.reshape(*batch, T + 1, self.robot.dof),
+            actions=actions.reshape(*batch, T, dof),
+            joints=joints.reshape(*batch, T + 1, dof),
             ef=ef.reshape(*batch, T + 1, 3),
         )
 

@@ -26,12 +26,13 @@ from .babbling import BabblingConfig, babble
 from .baselines import cartesian_dls, joint_interpolation
 from .endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
 from .errors import ConfigError, MissingDependencyError
+from .imitation import train_imitation
 from .io import write_json
 from .metrics import PAPER_TABLE2, TABLE2_COLUMNS, format_table, plan_metrics, summarize
 from .models import fm_config, im_config
 from .planner import Planner
 from .robot import load_robot
-from .train import train_config, train_fm, train_im, validate_models
+from .train import train_config, train_fm, train_im, train_im_distal, validate_models
 from .train_tm import TMTrainConfig, tm_preset, train_tm
 
 __all__ = ["OPTIMIZER_SWEEP", "REPRODUCE_PRESETS", "ReproduceConfig", "evaluate_plans", "reproduce"]
@@ -55,6 +56,7 @@ class ReproduceConfig:
     transitions: int = 500_000
     model_preset: str = "improved"  # FM/IM architecture and training preset
     model_epochs: int | None = None  # override the preset's epochs
+    distal_epochs: int = 12  # refinement of the IM through the frozen FM (0: none)
     train_pairs: int = 12_000
     heldout_pairs: int = 2_000
     tm_epochs: int = 50
@@ -69,30 +71,33 @@ class ReproduceConfig:
 
 
 REPRODUCE_PRESETS: dict[str, dict] = {
-    "smoke": dict(
-        transitions=20_000,
-        model_preset="tiny",
-        train_pairs=96,
-        heldout_pairs=64,
-        tm_epochs=2,
-        tm_batch_size=32,
-        seeds=(0,),
-        parity_pairs=8,
-        parity_epochs=1,
-        workers=1,
-    ),
-    "quick": dict(
-        transitions=200_000,
-        model_epochs=12,
-        train_pairs=4_000,
-        heldout_pairs=1_000,
-        tm_epochs=20,
-        tm_batch_size=64,
-        seeds=(0, 1),
-        parity_pairs=500,
-        parity_epochs=5,
-    ),
-    "full": dict(),
+    "smoke": {
+        "transitions": 20_000,
+        "model_preset": "tiny",
+        "distal_epochs": 1,
+        "train_pairs": 96,
+        "heldout_pairs": 64,
+        "tm_epochs": 2,
+        "tm_batch_size": 32,
+        "seeds": (0,),
+        "parity_pairs": 8,
+        "parity_epochs": 1,
+        "workers": 1,
+    },
+    "quick": {
+        "transitions": 300_000,
+        "model_epochs": 6,
+        "distal_epochs": 4,
+        "train_pairs": 4_000,
+        "heldout_pairs": 1_000,
+        "tm_epochs": 20,
+        "tm_batch_size": 64,
+        "seeds": (0, 1),
+        "parity_pairs": 500,
+        "parity_epochs": 5,
+    },
+    # Paper sizes: 500k babbling transitions (REFERENCE #4), 12,000 + 2,000 pairs, 50 epochs, 10 seeds.
+    "full": {},
 }
 
 
@@ -202,8 +207,19 @@ def reproduce(config: ReproduceConfig, out: str | Path, progress: bool = True) -
         run_dir=models / "im",
         resume=True,
     )
+    if config.distal_epochs > 0:
+        im_res = train_im_distal(
+            data,
+            im_res.model,
+            fm_res.model,
+            train_config(
+                "im", config.model_preset, progress=progress, seed=config.seed, epochs=config.distal_epochs
+            ),
+            run_dir=models / "im-through-fm",
+            resume=True,
+        )
     shutil.copyfile(models / "fm" / "fm.pt", models / "fm.pt")
-    shutil.copyfile(models / "im" / "im.pt", models / "im.pt")
+    shutil.copyfile(im_res.checkpoint, models / "im.pt")
     validation = validate_models(fm_res.model, im_res.model, robot, seed=config.seed + 1)
     timings["babble + FM/IM"] = time.perf_counter() - t0
 
@@ -264,6 +280,14 @@ def reproduce(config: ReproduceConfig, out: str | Path, progress: bool = True) -
         "joint interpolation": evaluate_plans(joint_interpolation(robot, heldout.start, heldout.goal), robot),
         "Cartesian line + DLS IK": evaluate_plans(cartesian_dls(robot, heldout.start, heldout.goal), robot),
     }
+    imitation = train_imitation(
+        train, epochs=config.tm_epochs, batch_size=config.tm_batch_size, seed=config.seed, progress=progress
+    )
+    learned = Planner.load(out / "tm" / "ablation-fm_learned-im_learned")
+    imitator = Planner(robot, imitation, learned.fm, learned.im)
+    baselines["imitation TM (supervised, learned FM/IM)"] = evaluate_plans(
+        imitator.plan(heldout.start, heldout.goal), robot
+    )
     try:
         from .baselines import rrt_connect
 

@@ -60,6 +60,7 @@ __all__ = [
     "train_config",
     "train_fm",
     "train_im",
+    "train_im_distal",
     "validate_models",
 ]
 
@@ -524,6 +525,73 @@ def train_im(
     if not isinstance(model, LearnedIM):
         raise ConfigError(f"train_im trains a LearnedIM, got {type(model).__name__}")
     return _train_supervised("im", model, data, cfg, run_dir, resume)
+
+
+def train_im_distal(
+    data: Transitions,
+    im: LearnedIM,
+    fm: ForwardModel,
+    cfg: TrainConfig | None = None,
+    run_dir: str | Path | None = None,
+    resume: bool = False,
+    action_weight: float = 0.1,
+) -> TrainResult:
+    """Train ``im`` through the frozen forward model ``fm``: the action must *reach* the target.
+
+    Regression onto babbled actions learns, for a redundant arm, the mean of the many actions that
+    reach a displacement, which need not reach it. Here the loss is the distance between the target
+    ef(t+1) and where ``fm`` says the IM's action leads, ‖FM(s, IM(s, ef′))_ef − ef′‖², plus
+    ``action_weight`` times the squared error to the babbled action, which picks one solution among
+    the redundant ones. Both terms are divided by the data's variance (of the ef step and of the
+    action) so that the weight is unit-free. Only the IM's parameters change; ``fm`` is frozen.
+    ``im`` is usually a model already trained by :func:`train_im`, refined here.
+    """
+    cfg = cfg or train_config("im", "improved", epochs=10)
+    if not isinstance(im, LearnedIM):
+        raise ConfigError(f"train_im_distal refines a LearnedIM, got {type(im).__name__}")
+    if fm.robot_name != im.robot_name:
+        raise ConfigError(f"the FM is for {fm.robot_name!r}, the IM for {im.robot_name!r}")
+    if action_weight < 0:
+        raise ConfigError(f"action_weight must be ≥ 0, got {action_weight}")
+    fm.eval()
+    fm.requires_grad_(False)
+    seed_everything(cfg.seed)
+    L = im.layout
+    dtype = next(im.parameters()).dtype
+    train, val = data.to(dtype).split(cfg.val_fraction, seed=cfg.seed)
+    s, a, s_next = train.tensors()
+    var_ef = float((s_next[:, L.ef] - s[:, L.ef]).square().mean())
+    var_a = float(a.square().mean())
+
+    def loss_fn(model, s, a, s_next):
+        target = s_next[..., L.ef]
+        action = model(s, target)
+        reached = fm(s, action)[..., L.ef]
+        return (reached - target).square().sum(-1).mean() / var_ef + action_weight * (
+            (action - a).square().sum(-1).mean() / var_a
+        )
+
+    def metrics_fn(model, s, a, s_next):
+        target = s_next[..., L.ef]
+        reached = fm(s, model(s, target))[..., L.ef]
+        return {"val_fm_reach_err_mm": float((reached - target).norm(dim=-1).mean()) * 1e3}
+
+    ckpt = Path(run_dir) / "im.pt" if run_dir is not None else None
+    history = fit(
+        im,
+        train.tensors(),
+        val.tensors() if len(val) else None,
+        cfg,
+        loss_fn=loss_fn,
+        metrics_fn=metrics_fn,
+        run_dir=run_dir,
+        checkpoint=ckpt,
+        save_fn=lambda path, m, extra: save_model(m, path, extra=extra),
+        load_fn=lambda path: load_checkpoint(path, kind="im", robot=im.robot_name),
+        resume=resume,
+        desc="train IM through FM",
+    )
+    return TrainResult(im, history, ckpt)
 
 
 # --------------------------------------------------------------------------------------------------

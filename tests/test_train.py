@@ -1,5 +1,6 @@
 """Training: optimisers, logging, seeding, learning beats trivial predictors, resume, validation."""
 
+import copy
 import json
 
 import numpy as np
@@ -20,6 +21,7 @@ from kinlearn.train import (
     train_config,
     train_fm,
     train_im,
+    train_im_distal,
     validate_models,
 )
 
@@ -238,3 +240,57 @@ def test_validation_of_the_analytic_models():
 def test_validation_refuses_a_model_of_another_robot():
     with pytest.raises(ConfigError, match="panda"):
         validate_models(AnalyticFM("panda"), None, "iiwa14", n=100)
+
+
+# --------------------------------------------------------------------------------------------------
+# The difference forward model and the IM trained through the FM
+# --------------------------------------------------------------------------------------------------
+
+
+def test_difference_fm_needs_predict_delta_and_telescopes(gen):
+    with pytest.raises(ConfigError, match="predict_delta"):
+        fm_config("iiwa14", "paper", ef_mode="difference")
+    fm = LearnedFM(fm_config("iiwa14", "improved", fk_hidden=(16,)))
+    robot = load_robot("iiwa14")
+    theta = robot.sample(4, gen, margin=0.5)
+    s = torch.cat((theta, kinematics(robot).position(theta)), dim=-1)
+    s0 = s
+    with torch.no_grad():
+        for _ in range(5):  # a rollout of five steps
+            a = 0.05 * torch.randn(4, 7, generator=gen)
+            s = torch.cat((s[:, :7] + a, fm(s, a)[:, 7:]), dim=-1)
+        # ef(t) = ef(0) + g(θ(t)) − g(θ(0)): the per-step errors do not add up
+        expected = s0[:, 7:] + fm._g(s[:, :7]) - fm._g(s0[:, :7])
+    assert torch.allclose(s[:, 7:], expected, atol=1e-5)
+
+
+def test_difference_fm_learns_better_than_the_direct_head(data, fresh):
+    def ef_mae(preset_overrides):
+        cfg = fm_config("iiwa14", "tiny", **preset_overrides)
+        model = train_fm(data, cfg, tiny("fm", epochs=4)).model
+        with torch.no_grad():
+            return float((model(fresh.s, fresh.a)[:, 7:] - fresh.s_next[:, 7:]).abs().mean())
+
+    assert ef_mae({"ef_mode": "difference", "fk_hidden": (64, 64)}) < ef_mae({})
+
+
+def test_im_trained_through_the_fm_reaches_targets_better(data, fresh, tmp_path):
+    fm = AnalyticFM(load_robot("iiwa14"))  # a perfect FM isolates what the refinement does to the IM
+    im = train_im(data, im_config("iiwa14", "tiny"), tiny("im", epochs=3)).model
+    L = fresh.layout
+    target = fresh.s_next[:, L.ef]
+
+    def reach_mse():
+        with torch.no_grad():
+            return float((fm(fresh.s, im(fresh.s, target))[:, L.ef] - target).square().sum(-1).mean())
+
+    before = reach_mse()
+    learned_fm = LearnedFM(fm_config("iiwa14", "tiny"))
+    frozen = {k: v.clone() for k, v in learned_fm.state_dict().items()}
+    train_im_distal(data, copy.deepcopy(im), learned_fm, tiny("im", epochs=1))  # the FM stays unchanged
+    assert all(torch.equal(frozen[k], v) for k, v in learned_fm.state_dict().items())
+    res = train_im_distal(data, im, fm, tiny("im", epochs=3), run_dir=tmp_path)
+    assert reach_mse() < 0.5 * before
+    assert load_im(res.checkpoint, robot="iiwa14") is not None
+    with pytest.raises(ConfigError, match="panda"):
+        train_im_distal(data, im, AnalyticFM(load_robot("panda")), tiny("im", epochs=1))
