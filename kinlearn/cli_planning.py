@@ -69,7 +69,9 @@ def _add_train_tm(sub) -> None:
     )
     p.add_argument("--preset", choices=sorted(TM_PRESETS), default="default", help="training preset")
     p.add_argument("--endpoints", type=Path, required=True, help="a make-endpoints run directory")
-    p.add_argument("--models-dir", type=Path, default=None, help="folder with fm.pt and im.pt (learned)")
+    p.add_argument("--fm-checkpoint", type=Path, default=None, help="a learned fm.pt (from train-fm)")
+    p.add_argument("--im-checkpoint", type=Path, default=None, help="a learned im.pt (from train-im)")
+    p.add_argument("--models-dir", type=Path, default=None, help="or: one folder holding fm.pt and im.pt")
     p.add_argument("--fm", choices=("learned", "analytic"), default="learned")
     p.add_argument("--im", choices=("learned", "analytic"), default="learned")
     p.add_argument("--epochs", type=int, default=None)
@@ -87,6 +89,12 @@ def _run_train_tm(args: argparse.Namespace) -> int:
     over: dict = {"robot": args.robot, "fm": args.fm, "im": args.im, "seed": args.seed}
     if args.models_dir is not None:
         over["models_dir"] = str(args.models_dir.resolve())
+    for kind, path in (("fm", args.fm_checkpoint), ("im", args.im_checkpoint)):
+        if path is not None:  # the run directory becomes the models' folder
+            if not path.is_file():
+                raise ConfigError(f"--{kind}-checkpoint: no file at {path}")
+            shutil.copyfile(path, run_dir / f"{kind}.pt")
+            over["models_dir"] = str(run_dir.resolve())
     for key in ("epochs", "batch_size", "loss"):
         if getattr(args, key) is not None:
             over[key] = getattr(args, key)
@@ -104,7 +112,7 @@ def _run_train_tm(args: argparse.Namespace) -> int:
     for kind in ("fm", "im"):  # keep the run self-contained: copy the learned models beside tm.pt
         if getattr(cfg, kind) == "learned" and cfg.models_dir:
             src = Path(cfg.models_dir) / f"{kind}.pt"
-            if src.resolve() != (run_dir / f"{kind}.pt").resolve():
+            if src.is_file() and src.resolve() != (run_dir / f"{kind}.pt").resolve():
                 shutil.copyfile(src, run_dir / f"{kind}.pt")
     train_tm(cfg, run_dir, train, heldout, progress=not args.no_progress)
     if heldout is not None:

@@ -79,6 +79,16 @@ def test_tiny_train_and_validate(tmp_path, capsys):
     res = json.loads((tmp_path / "val" / "validation.json").read_text())
     assert res["n"] == 2000 and "fm_run_config" in res
     assert (tmp_path / "val" / "config.json").is_file() and (tmp_path / "val" / "validation.md").is_file()
+    # train-im refined through the frozen FM: a second stage in its own folder, im.pt replaced
+    through = ["--through-fm", str(tmp_path / "fm" / "fm.pt"), "--through-fm-epochs", "1"]
+    assert main(["train-im", *common, *data, *through, "--run-dir", str(tmp_path / "im2")]) == 0
+    assert (tmp_path / "im2" / "through-fm" / "im.pt").is_file()
+    refined = load_im(tmp_path / "im2" / "im.pt")
+    staged = load_im(tmp_path / "im2" / "through-fm" / "im.pt")
+    assert all(
+        torch.equal(a, b)
+        for a, b in zip(refined.state_dict().values(), staged.state_dict().values(), strict=True)
+    )
 
 
 def test_errors_are_reported_not_raised(tmp_path, capsys):

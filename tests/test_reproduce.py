@@ -76,6 +76,20 @@ def test_cli_endpoints_train_tm_plan_export(tmp_path, capsys):
     assert main(["export", "--model", str(tm), "--out", str(out)]) == 0
     payload = torch.load(out / "tm.pt", weights_only=True)
     assert payload["extra"] == {}  # no optimiser state in an exported planner
+    # learned models from their own run directories, copied into the TM's run
+    tiny = ["--preset", "tiny", "--epochs", "1", "--transitions", "2000", "--no-progress", "--validate", "0"]
+    assert main(["train-fm", *tiny, "--run-dir", str(tmp_path / "fm")]) == 0
+    assert main(["train-im", *tiny, "--run-dir", str(tmp_path / "im")]) == 0
+    ckpts = [
+        "--fm-checkpoint",
+        str(tmp_path / "fm" / "fm.pt"),
+        "--im-checkpoint",
+        str(tmp_path / "im" / "im.pt"),
+    ]
+    learned = ["train-tm", "--endpoints", str(ep), "--epochs", "1", *ckpts, "--no-progress"]
+    assert main([*learned, "--run-dir", str(tmp_path / "tm-learned")]) == 0
+    assert (tmp_path / "tm-learned" / "fm.pt").is_file() and (tmp_path / "tm-learned" / "im.pt").is_file()
+    assert main(["plan", "--model", str(tmp_path / "tm-learned"), "--start", start, "--goal", goal]) == 0
     # bad input: a joint outside its limits is a clear error with exit status 2
     assert main(["plan", "--model", str(tm), "--start", "0,3,0,0,0,0,0", "--goal", goal]) == 2
     assert "iiwa_joint_2" in capsys.readouterr().err
