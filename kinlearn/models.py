@@ -343,7 +343,9 @@ class LearnedFM(ForwardModel):
         width = config.shared[-1]
         self.joints_head = _mlp((width, *config.joints_head), config.activation, dof)
         if config.ef_mode == "difference":
-            self.fk = _mlp((2 * dof, *config.fk_hidden), config.activation, 3)
+            # No output bias: a constant cancels in g(θ + a) − g(θ) and would never train.
+            hidden = _mlp((2 * dof, *config.fk_hidden), config.activation, None)
+            self.fk = nn.Sequential(*hidden, nn.Linear(config.fk_hidden[-1], 3, bias=False))
         else:
             self.ef_head = _mlp((width, *config.ef_head), config.activation, 3)
         if config.normalize:
