@@ -24,6 +24,9 @@ def rectify(
     fm: torch.nn.Module,
     im: torch.nn.Module,
     layout: StateLayout,
+    *,
+    refine: int = 0,
+    exact_joints: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Algorithm 1: roll the frozen IM and FM through the TM's waypoints from the true start.
 
@@ -31,14 +34,26 @@ def rectify(
     ``s0``, ``sT``: ``(N, S)``. For t = 1 … T: â(t−1) = IM[s̃(t−1), ef target(t)],
     s̃(t) = FM[s̃(t−1), â(t−1)], with s̃(0) = s(0) and the last target the goal's end effector.
 
+    Two options go beyond the paper (both off by default, which is Algorithm 1 as published):
+
+    - ``refine``: after the IM proposes â, correct it that many times with the models alone:
+      â ← â + IM[FM[s̃, â], target], the IM's action from where the FM says â leads. Like a Newton
+      step with the IM as the approximate inverse.
+    - ``exact_joints``: keep the joints of s̃(t) at θ(0) + Σ â (an action *is* a joint change), and
+      take only the end effector from the FM, instead of the FM's learned joint prediction.
+
     Returns ``(states, actions)``: s̃(1) … s̃(T) as ``(N, T, S)`` and â(0) … â(T−1) as ``(N, T, dof)``.
     """
     targets = torch.cat((waypoints, sT[:, None, layout.ef]), dim=1)
     s = s0
     states, actions = [], []
     for t in range(targets.shape[1]):
-        a = im(s, targets[:, t])
-        s = fm(s, a)
+        target = targets[:, t]
+        a = im(s, target)
+        for _ in range(refine):
+            a = a + im(fm(s, a), target)
+        nxt = fm(s, a)
+        s = layout.join(s[:, layout.joints] + a, nxt[:, layout.ef]) if exact_joints else nxt
         actions.append(a)
         states.append(s)
     return torch.stack(states, dim=1), torch.stack(actions, dim=1)

@@ -205,3 +205,25 @@ def test_training_config_errors(pairs, tmp_path):
         train_tm(tm_preset("default", epochs=1), tmp_path, pairs, progress=False)
     with pytest.raises(ConfigError, match="panda"):
         train_tm(_tiny(robot="panda"), tmp_path, pairs, progress=False)
+
+
+def test_rectify_refinement_and_exact_joints(pairs, iiwa):
+    lay = StateLayout(iiwa.dof)
+    fm = AnalyticFM(iiwa)
+    weak_im = AnalyticIM(iiwa, iterations=1, damping=0.2)  # heavily damped: undershoots every target
+    s0, sT = pairs.start[:32].double(), pairs.goal[:32].double()
+    frac = torch.linspace(0, 1, 12, dtype=torch.float64)[1:-1, None]
+    wp = s0[:, None, lay.ef] + frac * (sT[:, None, lay.ef] - s0[:, None, lay.ef])
+    targets = torch.cat((wp, sT[:, None, lay.ef]), dim=1)
+
+    def reach_error(**kw):
+        states, actions = rectify(wp, s0, sT, fm, weak_im, lay, **kw)
+        return float((states[..., lay.ef] - targets).norm(dim=-1).mean()), states, actions
+
+    plain, _, _ = reach_error()
+    refined, _, _ = reach_error(refine=2)
+    assert refined < 0.5 * plain
+    _, states, actions = reach_error(refine=1, exact_joints=True)
+    assert torch.equal(
+        states[..., lay.joints], s0[:, None, lay.joints] + actions.cumsum(1)
+    ) or torch.allclose(states[..., lay.joints], s0[:, None, lay.joints] + actions.cumsum(1), atol=1e-12)
