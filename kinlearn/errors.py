@@ -52,3 +52,7 @@ class MissingDependencyError(KinlearnError, ImportError):
 
 class PlanningError(KinlearnError, RuntimeError):
     """A planner found no solution for a query."""
+
+
+class TrainingDivergedError(ConfigError):
+    """Training produced a non-finite loss (usually: the learning rate is too high)."""

@@ -25,7 +25,7 @@ from tqdm.auto import tqdm
 from .babbling import BabblingConfig, babble
 from .baselines import cartesian_dls, joint_interpolation
 from .endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
-from .errors import ConfigError, MissingDependencyError
+from .errors import ConfigError, MissingDependencyError, TrainingDivergedError
 from .imitation import train_imitation
 from .io import write_json
 from .metrics import PAPER_TABLE2, TABLE2_COLUMNS, format_table, plan_metrics, summarize
@@ -116,7 +116,10 @@ def _job(job: dict) -> dict:
         train = train.split(job["limit"])[0]
     heldout = load_endpoints(job["heldout"], robot=cfg.robot)
     t0 = time.perf_counter()
-    train_tm(cfg, run_dir, train, progress=False)
+    try:
+        train_tm(cfg, run_dir, train, progress=False)
+    except TrainingDivergedError as exc:
+        return {"name": job["name"], "diverged": str(exc), "train_seconds": time.perf_counter() - t0}
     wall = time.perf_counter() - t0
     with open(run_dir / "metrics.jsonl") as fh:
         last = json.loads(fh.read().splitlines()[-1])
@@ -302,14 +305,18 @@ def reproduce(config: ReproduceConfig, out: str | Path, progress: bool = True) -
     table1 = {}
     for k, row in OPTIMIZER_SWEEP.items():
         runs = [results[f"table1-{k}-seed{s}"] for s in config.seeds]
+        ok = [r for r in runs if "diverged" not in r]
         table1[k] = {
             "optimizer": row["optim"],
             "paper_l_tm": row["paper_l_tm"],
-            "final_l_tm": _mean_std([r["final_l_tm"] for r in runs]),
-            "heldout": _merge([r["heldout"] for r in runs]),
+            "seeds": len(runs),
+            "diverged": len(runs) - len(ok),
+            "final_l_tm": _mean_std([r["final_l_tm"] for r in ok]) if ok else None,
+            "heldout": _merge([r["heldout"] for r in ok]) if ok else None,
             "train_seconds": _mean_std([r["train_seconds"] for r in runs]),
         }
-    best = min(table1, key=lambda k: table1[k]["final_l_tm"]["mean"])
+    converged = [k for k in table1 if table1[k]["final_l_tm"] is not None]
+    best = min(converged, key=lambda k: table1[k]["final_l_tm"]["mean"]) if converged else None
     ablation = {n: results[n] for n in results if n.startswith("ablation")}
     figures = _figures(out, robot, heldout)
     timings["total"] = time.perf_counter() - t_all
@@ -378,16 +385,22 @@ def _markdown(res: dict) -> str:
     for k, row in res["table1"].items():
         o = row["optimizer"]
         name = f"{o['name']}(lr={o['lr']:g})"
-        lines.append(
-            f"| {k} | {name} | {row['paper_l_tm']:.3f} | {row['final_l_tm']['mean']:.4f} ± "
-            f"{row['final_l_tm']['std']:.4f} |"
+        ours = (
+            "—"
+            if row["final_l_tm"] is None
+            else f"{row['final_l_tm']['mean']:.4f} ± {row['final_l_tm']['std']:.4f}"
         )
+        if row["diverged"]:
+            ours += f" ({row['diverged']} of {row['seeds']} seeds diverged)"
+        lines.append(f"| {k} | {name} | {row['paper_l_tm']:.3f} | {ours} |")
     rows = {}
     for k, row in res["table1"].items():
         rows[f"paper #{k}"] = PAPER_TABLE2[k]
-        rows[f"#{k} kinlearn, paper loss"] = row["heldout"]
-    rows.update({n.replace("ablation-", "default loss, "): r["heldout"] for n, r in res["ablation"].items()})
-    rows["reference parity (authors' defects)"] = res["reference_parity"]["heldout"]
+        if row["heldout"] is not None:
+            rows[f"#{k} kinlearn, paper loss"] = row["heldout"]
+    runs = {n.replace("ablation-", "default loss, "): r for n, r in res["ablation"].items()}
+    runs["reference parity (authors' defects)"] = res["reference_parity"]
+    rows.update({n: r["heldout"] for n, r in runs.items() if "heldout" in r})
     rows.update({k: v for k, v in res["baselines"].items() if "skipped" not in v})
     lines += [
         "",
@@ -399,6 +412,9 @@ def _markdown(res: dict) -> str:
     for k, v in res["baselines"].items():
         if "skipped" in v:
             lines.append(f"- {k}: skipped ({v['skipped']})")
+    for n, r in runs.items():
+        if "diverged" in r:
+            lines.append(f"- {n}: {r['diverged']}")
     if res["figures"]:
         lines += ["", "## Figures", ""] + [f"![{f}]({f})" for f in res["figures"]]
     return "\n".join(lines) + "\n"

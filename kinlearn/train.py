@@ -30,7 +30,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from .babbling import BabblingConfig, Transitions, babble
-from .errors import CheckpointError, ConfigError, DatasetError
+from .errors import CheckpointError, ConfigError, DatasetError, TrainingDivergedError
 from .io import atomic_write, load_checkpoint
 from .kinematics import kinematics
 from .models import (
@@ -326,7 +326,7 @@ def fit(
                 "lr": opt.param_groups[0]["lr"],
             }
             if not math.isfinite(record["train_loss"]):
-                raise ConfigError(
+                raise TrainingDivergedError(
                     f"training diverged at epoch {epoch + 1} (loss {record['train_loss']}); lower the learning rate"
                 )
             if val is not None and val[0].shape[0] > 0:

@@ -17,7 +17,7 @@ import torch
 from tqdm.auto import tqdm
 
 from .endpoints import EndpointPairs
-from .errors import CheckpointError, ConfigError
+from .errors import CheckpointError, ConfigError, TrainingDivergedError
 from .io import load_checkpoint, save_checkpoint, write_json
 from .models import AnalyticFM, AnalyticIM, load_fm, load_im
 from .rectify import LossConfig, rectify, tm_loss
@@ -203,6 +203,7 @@ def train_tm(
     for m in (fm, im):
         m.eval()
         m.requires_grad_(False)
+        m.validate_inputs = False  # a diverging TM is caught by the loss check below
     gen = seed_everything(config.seed)
     tm = TrajectoryModel(config.tm)
     tm.fit_normalization(train.start, train.goal)
@@ -252,6 +253,10 @@ def train_tm(
             for i in range(0, n, config.batch_size):
                 idx = perm[i : i + config.batch_size]
                 _, (loss, terms) = _step_loss(tm, fm, im, train.start[idx], train.goal[idx], config.loss)
+                if not torch.isfinite(loss):
+                    raise TrainingDivergedError(
+                        f"TM training diverged at epoch {epoch + 1} (loss {float(loss)}); lower the learning rate"
+                    )
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
                 opt.step()

@@ -227,3 +227,25 @@ def test_rectify_refinement_and_exact_joints(pairs, iiwa):
     assert torch.equal(
         states[..., lay.joints], s0[:, None, lay.joints] + actions.cumsum(1)
     ) or torch.allclose(states[..., lay.joints], s0[:, None, lay.joints] + actions.cumsum(1), atol=1e-12)
+
+
+def test_divergence_is_a_typed_error_and_reproduce_records_it(pairs, tmp_path):
+    from kinlearn.errors import TrainingDivergedError
+    from kinlearn.reproduce import _job
+    from kinlearn.train import OptimConfig
+
+    cfg = _tiny(optim=OptimConfig("sgd", 1e6), epochs=2)
+    with pytest.raises(TrainingDivergedError, match="lower the learning rate"):
+        train_tm(cfg, tmp_path / "tm", pairs, progress=False)
+    # In a sweep, a diverged run is a result, not a crash.
+    save_endpoints(pairs, tmp_path / "pairs.npz")
+    job = {
+        "name": "sgd-huge",
+        "config": cfg.to_dict(),
+        "run_dir": str(tmp_path / "job"),
+        "train": str(tmp_path / "pairs.npz"),
+        "heldout": str(tmp_path / "pairs.npz"),
+        "limit": None,
+    }
+    result = _job(job)
+    assert result["name"] == "sgd-huge" and "diverged" in result["diverged"]
