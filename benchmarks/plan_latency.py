@@ -74,10 +74,11 @@ class _Core(torch.nn.Module):
         super().__init__()
         self.tm, self.fm, self.im = planner.tm, planner.fm, planner.im
         self.layout, self.kin = planner.layout, planner.kin
+        self.rollout = {"refine": planner.refine, "exact_joints": planner.exact_joints}
 
     def forward(self, s0: torch.Tensor, sT: torch.Tensor):
         waypoints = self.tm(s0, sT)
-        _, actions = rectify(waypoints, s0, sT, self.fm, self.im, self.layout)
+        _, actions = rectify(waypoints, s0, sT, self.fm, self.im, self.layout, **self.rollout)
         theta0 = s0[:, self.layout.joints]
         joints = torch.cat((theta0[:, None], theta0[:, None] + torch.cumsum(actions, dim=1)), dim=1)
         return waypoints, actions, joints, self.kin.position(joints, validate=False)
@@ -130,6 +131,7 @@ def main() -> None:
     ap.add_argument("--slow-calls", type=int, default=200, help="batch-1 calls for Cartesian DLS")
     ap.add_argument("--batch", type=int, default=12_000)
     ap.add_argument("--rrt-time-limit", type=float, default=1.0)
+    ap.add_argument("--no-compile", action="store_true", help="skip the Planner.compile() row")
     ap.add_argument("--no-rrt", action="store_true")
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
@@ -161,6 +163,22 @@ def main() -> None:
         if frozen is not None:
             name = "what-if: TM + rollout + FK traced, frozen, no validation"
             lat[name] = (per_call(lambda i: frozen(*one(i)), k), "")
+        if not args.no_compile:
+            compiled = Planner(
+                robot,
+                planner.tm,
+                planner.fm,
+                planner.im,
+                refine=planner.refine,
+                exact_joints=planner.exact_joints,
+            ).compile()
+            t0 = time.perf_counter()
+            compiled.plan(s0[0], sT[0])
+            print(f"Planner.compile(): first call (compilation) {time.perf_counter() - t0:.1f} s")
+            lat["learned planner: Planner.compile() then plan"] = (
+                per_call(lambda i: compiled.plan(s0[i % n], sT[i % n]), k),
+                "",
+            )
         lat["joint interpolation"] = (per_call(lambda i: joint_interpolation(robot, *one(i)), k), "")
         thr["joint interpolation"] = time_call(lambda: joint_interpolation(robot, s0[:B], sT[:B]), repeats=3)
         lat["Cartesian line + DLS IK (20 it.)"] = (
@@ -240,19 +258,17 @@ def main() -> None:
     parts: dict[str, np.ndarray] = {}
     with torch.no_grad():
         parts["input validation (start and goal: checks + FK)"] = per_call(
-            lambda i: (planner._state(s0[i % n], "start"), planner._state(sT[i % n], "goal")), k
+            lambda i: planner._states(s0[i % n], sT[i % n]), k
         )
         parts["TM forward"] = lat["TM forward alone"][0]
         wp = planner.tm(s0[:1], sT[:1])
-        parts["rollout: IM + FM × T (rectify)"] = per_call(
+        rollout = {"refine": planner.refine, "exact_joints": planner.exact_joints}
+        parts[f"rollout: IM + FM × T (rectify, {rollout})"] = per_call(
+            lambda i: rectify(wp, *one(i), planner.fm, planner.im, layout, **rollout), k
+        )
+        parts["  the paper's rollout (refine=0)"] = per_call(
             lambda i: rectify(wp, *one(i), planner.fm, planner.im, layout), k
         )
-        validate = planner.fm.validate_inputs, planner.im.validate_inputs
-        planner.fm.validate_inputs = planner.im.validate_inputs = False
-        parts["  same rollout, FM/IM finiteness checks off"] = per_call(
-            lambda i: rectify(wp, *one(i), planner.fm, planner.im, layout), k
-        )
-        planner.fm.validate_inputs, planner.im.validate_inputs = validate
         joints = torch.zeros(1, planner.tm.config.steps + 1, robot.dof)
         parts["FK of the joint path"] = per_call(lambda i: planner.kin.position(joints, validate=False), k)
     total = float(np.median(lat[ref][0])) * 1e6
@@ -266,7 +282,7 @@ def main() -> None:
     print(markdown_table(["part", "median µs", "share of plan"], rows))
     steps = planner.tm.config.steps
     print(
-        f"The rollout makes {2 * steps} separate FM/IM calls (T = {steps}), each a handful of tiny operations at "
+        f"The rollout makes {2 * (planner.refine + 1) * steps} separate FM/IM calls (T = {steps}), each a handful of tiny operations at "
         "batch 1 (MLP layers; FK, Jacobian and a 3×3 solve for the analytic IM), so at batch 1 the time is "
         "per-operator overhead, not arithmetic."
     )
