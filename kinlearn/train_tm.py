@@ -255,7 +255,7 @@ def train_tm(
                 _, (loss, terms) = _step_loss(tm, fm, im, train.start[idx], train.goal[idx], config.loss)
                 if not torch.isfinite(loss):
                     raise TrainingDivergedError(
-                        f"TM training diverged at epoch {epoch + 1} (loss {float(loss)}); lower the learning rate"
+                        f"TM training diverged at epoch {epoch + 1} (loss {loss.item()}); lower the learning rate"
                     )
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
