@@ -139,3 +139,9 @@ def test_tiny_learned_pipeline_for_panda(tmp_path):
     assert planner.robot.name == "panda"
     plan = planner.plan(pairs.start[:4], pairs.goal[:4])
     assert plan.joints.shape == (4, 12, 7) and torch.isfinite(plan.ef).all()
+
+
+def test_rollout_options_are_checked(iiwa):
+    tm = TrajectoryModel(TMConfig())
+    with pytest.raises(ConfigError, match="refine"):
+        Planner(iiwa, tm, AnalyticFM(iiwa), AnalyticIM(iiwa), refine=-1)

@@ -90,6 +90,8 @@ def test_cli_endpoints_train_tm_plan_export(tmp_path, capsys):
     assert main([*learned, "--run-dir", str(tmp_path / "tm-learned")]) == 0
     assert (tmp_path / "tm-learned" / "fm.pt").is_file() and (tmp_path / "tm-learned" / "im.pt").is_file()
     assert main(["plan", "--model", str(tmp_path / "tm-learned"), "--start", start, "--goal", goal]) == 0
-    # bad input: a joint outside its limits is a clear error with exit status 2
+    # bad input: a missing checkpoint, a joint outside its limits: clear errors with exit status 2
+    assert main([*args, "--fm-checkpoint", str(tmp_path / "nope.pt"), "--run-dir", str(tmp_path / "x")]) == 2
+    assert "no file at" in capsys.readouterr().err
     assert main(["plan", "--model", str(tm), "--start", "0,3,0,0,0,0,0", "--goal", goal]) == 2
     assert "iiwa_joint_2" in capsys.readouterr().err

@@ -294,3 +294,7 @@ def test_im_trained_through_the_fm_reaches_targets_better(data, fresh, tmp_path)
     assert load_im(res.checkpoint, robot="iiwa14") is not None
     with pytest.raises(ConfigError, match="panda"):
         train_im_distal(data, im, AnalyticFM(load_robot("panda")), tiny("im", epochs=1))
+    with pytest.raises(ConfigError, match="action_weight"):
+        train_im_distal(data, im, fm, tiny("im", epochs=1), action_weight=-1.0)
+    with pytest.raises(ConfigError, match="LearnedIM"):
+        train_im_distal(data, AnalyticIM(load_robot("iiwa14")), fm, tiny("im", epochs=1))

@@ -249,3 +249,12 @@ def test_divergence_is_a_typed_error_and_reproduce_records_it(pairs, tmp_path):
     }
     result = _job(job)
     assert result["name"] == "sgd-huge" and "diverged" in result["diverged"]
+
+
+def test_endpoint_config_errors():
+    with pytest.raises(ConfigError, match="positive"):
+        make_endpoints(EndpointConfig(n=0))
+    with pytest.raises(ConfigError, match="7 joint values"):
+        make_endpoints(EndpointConfig(n=4, home=(0.0, 0.1)))
+    with pytest.raises(ConfigError, match="widen the region"):
+        make_endpoints(EndpointConfig(n=4, region=(5.0, 6.0, 5.0, 6.0, 5.0, 6.0)))
