@@ -134,7 +134,7 @@ def _job(job: dict) -> dict:
     }
 
 
-def _run_jobs(jobs: list[dict], workers: int, backend: str) -> list[dict]:
+def _run_jobs(jobs: list[dict], workers: int, backend: str, progress: bool = True) -> list[dict]:
     if backend == "ray":
         try:
             import ray
@@ -146,15 +146,15 @@ def _run_jobs(jobs: list[dict], workers: int, backend: str) -> list[dict]:
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
         remote = ray.remote(num_cpus=1)(_job)
         refs = [remote.remote(j) for j in jobs]
-        return [ray.get(r) for r in tqdm(refs, desc="TM sweep (ray)")]
+        return [ray.get(r) for r in tqdm(refs, desc="TM sweep (ray)", disable=not progress)]
     if backend != "local":
         raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
     if workers <= 1:
-        return [_job(j) for j in tqdm(jobs, desc="TM sweep")]
+        return [_job(j) for j in tqdm(jobs, desc="TM sweep", disable=not progress)]
     ctx = torch.multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         futures = [pool.submit(_job, j) for j in jobs]
-        for _ in tqdm(cf.as_completed(futures), total=len(futures), desc="TM sweep"):
+        for _ in tqdm(cf.as_completed(futures), total=len(futures), desc="TM sweep", disable=not progress):
             pass
         return [f.result() for f in futures]
 
@@ -274,7 +274,7 @@ def reproduce(config: ReproduceConfig, out: str | Path, progress: bool = True) -
         limit=config.parity_pairs,
     )
     t0 = time.perf_counter()
-    results = {r["name"]: r for r in _run_jobs(jobs, config.workers, config.backend)}
+    results = {r["name"]: r for r in _run_jobs(jobs, config.workers, config.backend, progress)}
     timings["TM jobs"] = time.perf_counter() - t0
 
     # 4. baselines on the same held-out pairs
