@@ -68,17 +68,15 @@ def get_planner(args, pairs) -> tuple[Planner, str]:
 
 
 class _Core(torch.nn.Module):
-    """TM + IM/FM rollout + FK of the joint path, as in ``Planner.plan`` without input handling."""
+    """``Planner.plan`` without input handling: the planner's own TM + rollout, then FK of the joint path."""
 
     def __init__(self, planner: Planner):
         super().__init__()
-        self.tm, self.fm, self.im = planner.tm, planner.fm, planner.im
-        self.layout, self.kin = planner.layout, planner.kin
-        self.rollout = {"refine": planner.refine, "exact_joints": planner.exact_joints}
+        self.tm, self.fm, self.im = planner.tm, planner.fm, planner.im  # registered, for tracing
+        self.rollout, self.layout, self.kin = planner._rollout, planner.layout, planner.kin
 
     def forward(self, s0: torch.Tensor, sT: torch.Tensor):
-        waypoints = self.tm(s0, sT)
-        _, actions = rectify(waypoints, s0, sT, self.fm, self.im, self.layout, **self.rollout)
+        waypoints, actions = self.rollout(s0, sT)
         theta0 = s0[:, self.layout.joints]
         joints = torch.cat((theta0[:, None], theta0[:, None] + torch.cumsum(actions, dim=1)), dim=1)
         return waypoints, actions, joints, self.kin.position(joints, validate=False)
