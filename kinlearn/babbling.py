@@ -86,8 +86,13 @@ class BabblingConfig:
 
     @classmethod
     def for_transitions(cls, n: int, walkers: int = 1000, **kwargs) -> BabblingConfig:
-        """A config giving at least ``n`` transitions with ``walkers`` walkers (fewer if ``n`` is small)."""
-        walkers = max(1, min(walkers, n))
+        """A config giving at least ``n`` transitions with ``walkers`` walkers (fewer if ``n`` is small).
+
+        Raises :class:`~kinlearn.ConfigError` unless ``n`` and ``walkers`` are ≥ 1.
+        """
+        if int(n) < 1 or int(walkers) < 1:
+            raise ConfigError(f"need at least 1 transition and 1 walker, got n={n}, walkers={walkers}")
+        walkers = min(int(walkers), int(n))
         return cls(walkers=walkers, steps=-(-n // walkers), **kwargs)
 
     def to_dict(self) -> dict:

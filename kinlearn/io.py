@@ -1,17 +1,24 @@
 """Files that users keep: checkpoints, datasets and JSON, written atomically and checked on load.
 
-A checkpoint is a plain dict saved with ``torch.save``: ``format`` (this module's version),
+A checkpoint is a plain dict saved with ``torch.save``: ``format`` (:data:`CHECKPOINT_FORMAT`),
 ``kind`` (e.g. ``"fm"``), ``robot`` (name), ``config`` (a JSON-able dict to rebuild the model),
-``state_dict`` and optional ``extra`` (epoch, optimiser state, ...). Never a pickled module:
-loading uses ``weights_only=True``.
+``state_dict``, ``extra`` (epoch, optimiser state, ...), ``depends`` (the checkpoints it was made
+with, each as ``{"path": relative to the checkpoint's folder, "sha256": of that file}``) and
+``sha256``, the content hash of all the rest (:func:`content_sha256`), verified on every load. Never
+a pickled module: loading uses ``weights_only=True``. Format 1 (no hash, no ``depends``) still loads.
+
+Every file is written to a temporary ``.<name>.<pid>.tmp`` beside its target and renamed onto it: an
+interrupted write leaves the old file intact; the temporary file is deleted on an exception, and one
+left by a killed process is deleted by the next write of the same file (:func:`remove_stale_tmp`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
-import tempfile
-from collections.abc import Callable
+import shutil
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -21,42 +28,141 @@ import torch
 from .errors import CheckpointError, DatasetError
 
 __all__ = [
+    "CHECKPOINT_FORMAT",
+    "DATASET_FORMAT",
     "FORMAT_VERSION",
+    "atomic_copy",
     "atomic_write",
+    "content_sha256",
+    "file_sha256",
     "load_checkpoint",
     "load_npz",
     "read_json",
+    "remove_stale_tmp",
+    "resolve_dependency",
     "save_checkpoint",
     "save_npz",
     "write_json",
 ]
 
-FORMAT_VERSION = 1
+#: Version of the checkpoint layout written by :func:`save_checkpoint`. 2: content hash + ``depends``.
+CHECKPOINT_FORMAT = 2
+#: Checkpoint versions :func:`load_checkpoint` reads (1: no content hash, loaded unverified).
+READABLE_CHECKPOINT_FORMATS = (1, 2)
+#: Version of the ``.npz`` dataset layout written by :func:`save_npz`.
+DATASET_FORMAT = 1
+#: The checkpoint format (kept under its old name).
+FORMAT_VERSION = CHECKPOINT_FORMAT
+
+
+def _tmp_path(path: Path) -> Path:
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+
+def _pid_alive(pid: int) -> bool:
+    if os.name != "posix":  # no cheap liveness test: treat every other writer as alive
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def remove_stale_tmp(folder: str | Path, name: str | None = None) -> list[Path]:
+    """Delete temporary files of :func:`atomic_write` left in ``folder`` by processes that are gone.
+
+    ``name``: only those of the target file ``name``; otherwise every ``.<name>.<pid>.tmp`` in
+    ``folder`` (not recursive). Files of a process still running are kept (it may be writing them);
+    this process's own leftovers are deleted. Returns the deleted paths.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    removed = []
+    for tmp in folder.glob(f".{name}.*.tmp" if name else ".*.tmp"):
+        stem = tmp.name[1:-4]  # "<name>.<pid>"
+        owner = stem.rsplit(".", 1)[-1]
+        pid = int(owner) if owner.isdigit() else None  # older versions used random suffixes
+        if pid is not None and pid != os.getpid() and _pid_alive(pid):
+            continue
+        try:
+            tmp.unlink()
+            removed.append(tmp)
+        except FileNotFoundError:
+            pass
+    return removed
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it onto ``path``.
 
-    A crash midway leaves the old file (if any) intact, never a half-written one.
+    A crash midway leaves the old file (if any) intact, never a half-written one. The temporary file
+    is deleted when ``write`` raises; one left by a killed process is deleted before this write.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    remove_stale_tmp(path.parent, path.name)
+    tmp = _tmp_path(path)
     try:
-        write(Path(tmp))
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600 files; give the usual permissions
+        write(tmp)
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
     return path
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+def atomic_copy(src: str | Path, dst: str | Path) -> Path:
+    """Copy file ``src`` to ``dst`` atomically (see :func:`atomic_write`)."""
+    return atomic_write(dst, lambda p: shutil.copyfile(src, p))
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 of a file's bytes, as 64 hex digits."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _feed(h, obj: Any) -> None:
+    """Feed ``obj`` to hash ``h`` in a canonical, unambiguous encoding (see :func:`content_sha256`)."""
+    if isinstance(obj, torch.Tensor):
+        t = obj.detach().cpu().contiguous()
+        head = f"T{t.dtype}{tuple(t.shape)}".encode()
+        h.update(b"%d:" % len(head) + head)
+        h.update(t.reshape(-1).view(torch.uint8).numpy())  # a view: no copy of large tensors
+    elif isinstance(obj, np.ndarray):
+        _feed(h, torch.from_numpy(np.ascontiguousarray(obj)))
+    elif isinstance(obj, Mapping):
+        h.update(b"D%d:" % len(obj))
+        for key in sorted(obj, key=lambda k: (type(k).__name__, repr(k))):
+            _feed(h, key)
+            _feed(h, obj[key])
+    elif isinstance(obj, (list, tuple)):  # one encoding for both: a tuple may come back as a list
+        h.update(b"L%d:" % len(obj))
+        for item in obj:
+            _feed(h, item)
+    elif isinstance(obj, bytes):
+        h.update(b"B%d:" % len(obj) + obj)
+    else:  # None, bool, int, float, str and other plain values: their type and repr
+        text = f"{type(obj).__name__}={obj!r}".encode()
+        h.update(b"S%d:" % len(text) + text)
+
+
+def content_sha256(obj: Any) -> str:
+    """SHA-256 of a nested structure of dicts, lists, tensors and plain values, as 64 hex digits.
+
+    Independent of how it is serialised: dict keys are sorted, tensors contribute their dtype, shape
+    and bytes. Used as a checkpoint's content hash and as a fingerprint of training data.
+    """
+    h = hashlib.sha256()
+    _feed(h, obj)
+    return h.hexdigest()
 
 
 def write_json(path: str | Path, obj: Any) -> Path:
@@ -67,6 +173,18 @@ def read_json(path: str | Path) -> Any:
     return json.loads(Path(path).read_text())
 
 
+def _dependency_record(ckpt: Path, dep: str | Path | tuple[str | Path, str]) -> dict:
+    path, sha = dep if isinstance(dep, tuple) else (dep, None)
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"dependency {path} of {ckpt} is not a file")
+    try:
+        rel = os.path.relpath(path.resolve(), ckpt.parent.resolve())
+    except ValueError:  # another drive: only the file name can be kept
+        rel = path.name
+    return {"path": Path(rel).as_posix(), "sha256": sha or file_sha256(path)}
+
+
 def save_checkpoint(
     path: str | Path,
     *,
@@ -75,21 +193,33 @@ def save_checkpoint(
     config: dict,
     state_dict: dict,
     extra: dict | None = None,
+    depends: Mapping[str, str | Path | tuple[str | Path, str]] | None = None,
 ) -> Path:
-    """Save a checkpoint atomically (see the module docstring for its contents)."""
+    """Save a checkpoint atomically (see the module docstring for its contents).
+
+    ``depends`` names the checkpoints this one was made with, e.g. ``{"fm": path, "im": path}``: each
+    is recorded by its path relative to this checkpoint's folder and its file's SHA-256 (a value may
+    be ``(path, sha256)`` when the hash is already known), and found again by
+    :func:`resolve_dependency`.
+    """
+    path = Path(path)
     payload = {
-        "format": FORMAT_VERSION,
+        "format": CHECKPOINT_FORMAT,
         "kind": kind,
         "robot": robot,
         "config": config,
         "state_dict": state_dict,
         "extra": extra or {},
+        "depends": {name: _dependency_record(path, dep) for name, dep in (depends or {}).items()},
     }
+    payload["sha256"] = content_sha256(payload)
     return atomic_write(path, lambda p: torch.save(payload, p))
 
 
-def load_checkpoint(path: str | Path, *, kind: str, robot: str | None = None) -> dict:
-    """Load and check a checkpoint: it must exist, be readable, of this format, ``kind`` and ``robot``."""
+def load_checkpoint(path: str | Path, *, kind: str | None, robot: str | None = None) -> dict:
+    """Load and check a checkpoint: it must exist, be readable, of a known format, ``kind`` (``None``:
+    any) and ``robot`` (``None``: any), and its content must match its hash (format 2; format 1 files
+    carry none and load unverified). Raises :class:`~kinlearn.CheckpointError` naming what is wrong."""
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"no checkpoint file at {path}")
@@ -101,20 +231,62 @@ def load_checkpoint(path: str | Path, *, kind: str, robot: str | None = None) ->
         ) from exc
     if not isinstance(payload, dict) or "format" not in payload:
         raise CheckpointError(f"{path} is not a kinlearn checkpoint (no format field)")
-    if payload["format"] != FORMAT_VERSION:
+    if payload["format"] not in READABLE_CHECKPOINT_FORMATS:
         raise CheckpointError(
-            f"{path} has checkpoint format {payload['format']}, this kinlearn reads format {FORMAT_VERSION}"
+            f"{path} has checkpoint format {payload['format']}; this kinlearn reads formats "
+            f"{', '.join(map(str, READABLE_CHECKPOINT_FORMATS))} (a newer kinlearn wrote it?)"
         )
-    if payload.get("kind") != kind:
+    if payload["format"] >= 2:
+        stored = payload.pop("sha256", None)
+        actual = content_sha256(payload)
+        if stored != actual:
+            raise CheckpointError(
+                f"{path} is corrupt or was modified: its content hash is {actual}, the checkpoint records "
+                f"{stored}; restore it from a copy or train it again"
+            )
+        payload["sha256"] = stored
+    payload.setdefault("depends", {})
+    payload.setdefault("extra", {})
+    if kind is not None and payload.get("kind") != kind:
         raise CheckpointError(f"{path} holds a {payload.get('kind')!r} model, expected a {kind!r} model")
     if robot is not None and payload.get("robot") != robot:
         raise CheckpointError(f"{path} was trained for robot {payload.get('robot')!r}, not {robot!r}")
     return payload
 
 
+def resolve_dependency(ckpt_path: str | Path, payload: dict, name: str) -> Path:
+    """The file of dependency ``name`` recorded in checkpoint ``payload`` (loaded from ``ckpt_path``).
+
+    Looked for at its recorded path relative to the checkpoint's folder, then under its file name
+    beside the checkpoint; the file's SHA-256 must be the recorded one. Raises
+    :class:`~kinlearn.CheckpointError` naming the expected file and hash when it is missing or differs.
+    """
+    ckpt_path = Path(ckpt_path)
+    record = (payload.get("depends") or {}).get(name)
+    if not isinstance(record, dict) or "path" not in record or "sha256" not in record:
+        recorded = ", ".join(sorted(payload.get("depends") or {})) or "none"
+        raise CheckpointError(f"{ckpt_path} records no dependency {name!r} (it records: {recorded})")
+    rel, expected = Path(record["path"]), record["sha256"]
+    candidates = [Path(os.path.normpath(ckpt_path.parent / rel)), ckpt_path.parent / rel.name]
+    seen = []
+    for cand in dict.fromkeys(candidates):  # ordered, without duplicates
+        if cand.is_file():
+            actual = file_sha256(cand)
+            if actual == expected:
+                return cand
+            seen.append(f"{cand} has sha256 {actual}")
+    made = f"{ckpt_path} was made with {name} {record['path']} of sha256 {expected}"
+    if seen:
+        raise CheckpointError(
+            f"{made}, but {'; '.join(seen)}: another model. Put the {name} file it was made with beside it"
+        )
+    where = " or ".join(str(c) for c in dict.fromkeys(candidates))
+    raise CheckpointError(f"{made}; no such file at {where}. Put that {name} file beside the checkpoint")
+
+
 def save_npz(path: str | Path, *, kind: str, robot: str, config: dict, arrays: dict[str, np.ndarray]) -> Path:
     """Save arrays with their config and robot name as ``.npz``, atomically."""
-    meta = json.dumps({"format": FORMAT_VERSION, "kind": kind, "robot": robot, "config": config})
+    meta = json.dumps({"format": DATASET_FORMAT, "kind": kind, "robot": robot, "config": config})
 
     def write(p: Path) -> None:
         with open(p, "wb") as fh:
@@ -136,8 +308,8 @@ def load_npz(path: str | Path, *, kind: str, robot: str | None = None) -> tuple[
         raise DatasetError(
             f"{path} is not a readable kinlearn dataset ({type(exc).__name__}: {exc})"
         ) from exc
-    if meta.get("format") != FORMAT_VERSION:
-        raise DatasetError(f"{path} has dataset format {meta.get('format')}, expected {FORMAT_VERSION}")
+    if meta.get("format") != DATASET_FORMAT:
+        raise DatasetError(f"{path} has dataset format {meta.get('format')}, expected {DATASET_FORMAT}")
     if meta.get("kind") != kind:
         raise DatasetError(f"{path} holds a {meta.get('kind')!r} dataset, expected {kind!r}")
     if robot is not None and meta.get("robot") != robot:

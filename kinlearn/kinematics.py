@@ -20,13 +20,14 @@ import contextlib
 import io
 import math
 from abc import ABC, abstractmethod
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
 import torch
 
 from .errors import ConfigError
-from .robot import Robot, check_finite, check_last_dim
+from .robot import Robot, check_finite, check_last_dim, check_real_dtype, load_robot
 
 __all__ = [
     "BACKENDS",
@@ -52,7 +53,10 @@ class Kinematics(ABC):
         self.dof = robot.dof
 
     def _prepare(self, q: torch.Tensor, validate: bool) -> tuple[torch.Tensor, tuple[int, ...]]:
+        if isinstance(q, np.ndarray):  # numpy arrays are taken as plan() takes them; dtype follows
+            q = torch.from_numpy(q)
         if validate:
+            check_real_dtype(q, "joint values q")
             check_last_dim(q, self.dof, "joint values q")
             check_finite(q, "joint values q")
         batch = tuple(q.shape[:-1])
@@ -243,6 +247,28 @@ class FastKinematics(Kinematics):
         pts = torch.stack([base, *ps, T[:, :3, 3]], dim=1)
         return pts.reshape(*batch, self.dof + 2, 3)
 
+    def link_poses(self, q: torch.Tensor, validate: bool = True) -> torch.Tensor:
+        """Poses base ← link of the root link and of each joint's child link: ``(..., dof + 1, 4, 4)``.
+
+        Index 0 is the root link (the identity); index k is the URDF frame of the link that joint k
+        moves, i.e. joint k's frame after its motion (where collision geometry of that link lives).
+        """
+        flat, batch = self._prepare(q, validate)
+        Rs, ps, _ = self._frames(flat)
+        if not hasattr(self, "_link_axes"):  # A_kᵀ: undo the fold of each joint's axis onto z
+            self._link_axes = np.stack([_z_to_axis(j.axis).T for j in self.robot.joints])
+        R, p = torch.stack(Rs, dim=1), torch.stack(ps, dim=1)  # (N, dof, 3, 3), (N, dof, 3)
+        prism = torch.tensor(self.prismatic, device=flat.device)
+        c = torch.where(prism, torch.ones_like(flat), torch.cos(flat)).unsqueeze(-1)
+        s = torch.where(prism, torch.zeros_like(flat), torch.sin(flat)).unsqueeze(-1)
+        p = p + R[..., 2] * torch.where(prism, flat, torch.zeros_like(flat)).unsqueeze(-1)
+        R = torch.stack((c * R[..., 0] + s * R[..., 1], c * R[..., 1] - s * R[..., 0], R[..., 2]), dim=-1)
+        R = R @ torch.as_tensor(self._link_axes, dtype=flat.dtype, device=flat.device)
+        bottom = flat.new_tensor([0.0, 0.0, 0.0, 1.0]).expand(*R.shape[:2], 1, 4)
+        T = torch.cat((torch.cat((R, p.unsqueeze(-1)), dim=-1), bottom), dim=-2)
+        root = torch.eye(4, dtype=flat.dtype, device=flat.device).expand(flat.shape[0], 1, 4, 4)
+        return torch.cat((root, T), dim=1).reshape(*batch, self.dof + 1, 4, 4)
+
     def _jacobian_flat(self, q: torch.Tensor) -> torch.Tensor:
         return self._position_and_jacobian_flat(q)[1]
 
@@ -425,10 +451,15 @@ _KINDS: dict[str, type[Kinematics]] = {
 _KIN_CACHE: dict[tuple[int, str], Kinematics] = {}
 
 
-def kinematics(robot: Robot, backend: Backend = "fast") -> Kinematics:
-    """The kinematics of ``robot`` through ``backend`` (one of :data:`BACKENDS`), cached per robot."""
+def kinematics(robot: Robot | str, backend: Backend = "fast") -> Kinematics:
+    """The kinematics of ``robot`` (a :class:`Robot`, or a name or URDF path for :func:`load_robot`)
+    through ``backend`` (one of :data:`BACKENDS`), cached per robot."""
     if backend not in _KINDS:
         raise ConfigError(f"unknown kinematics backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+    if isinstance(robot, (str, Path)):
+        robot = load_robot(robot)
+    elif not isinstance(robot, Robot):
+        raise ConfigError(f"robot must be a kinlearn Robot or a robot name, got {type(robot).__name__}")
     key = (id(robot), backend)
     if key not in _KIN_CACHE:
         _KIN_CACHE[key] = _KINDS[backend](robot)

@@ -17,7 +17,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .errors import JointLimitError, NonFiniteError, RobotDescriptionError, ShapeError, UnknownRobotError
+from .errors import (
+    DTypeError,
+    JointLimitError,
+    NonFiniteError,
+    RobotDescriptionError,
+    ShapeError,
+    UnknownRobotError,
+)
 
 __all__ = ["ROBOTS", "Joint", "Robot", "RobotSpec", "available_robots", "load_robot"]
 
@@ -188,7 +195,17 @@ def check_last_dim(x: torch.Tensor, n: int | tuple[int, ...], what: str) -> None
         allowed = " or ".join(f"(..., {k})" for k in options)
         raise ShapeError(f"{what} must have shape {allowed}, got {tuple(x.shape)}")
     if not x.is_floating_point():
-        raise ShapeError(f"{what} must be a floating-point tensor, got {x.dtype}")
+        raise DTypeError(f"{what} must be a real floating-point tensor, got {x.dtype}")
+
+
+def check_real_dtype(x: torch.Tensor, what: str) -> None:
+    """Raise :class:`DTypeError` if ``x`` is a bool or complex tensor (or no tensor): such values are not
+    angles or lengths, and converting them would silently turn True into 1 rad or drop an imaginary part.
+    Integer tensors pass (callers convert or reject them)."""
+    if not isinstance(x, torch.Tensor):
+        raise ShapeError(f"{what} must be a torch.Tensor, got {type(x).__name__}")
+    if x.dtype == torch.bool or x.is_complex():
+        raise DTypeError(f"{what} must hold real numbers, got a {x.dtype} tensor")
 
 
 def check_finite(x: torch.Tensor, what: str) -> None:

@@ -9,7 +9,12 @@ A training run directory holds ``metrics.jsonl`` (one JSON record per epoch) and
 atomically after every epoch with the weights, the optimiser's state, the epoch, the shuffling
 generator's state and the history so far. ``resume=True`` continues from it: the learning rate is a
 pure function of the step and the shuffling generator is restored, so a resumed run ends with the
-same weights as an uninterrupted one.
+same weights as an uninterrupted one. Resuming checks that the checkpoint was made with the same
+training configuration, model configuration and data (:class:`~kinlearn.CheckpointError` naming
+what differs); a constant-rate run may be extended to more epochs.
+
+Divergence is an error (:class:`~kinlearn.errors.TrainingDivergedError`): a non-finite loss, or an
+epoch's mean loss above :data:`DIVERGENCE_FACTOR` times the loss of the run's first step.
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ from tqdm.auto import tqdm
 
 from .babbling import BabblingConfig, Transitions, babble
 from .errors import CheckpointError, ConfigError, DatasetError, TrainingDivergedError
-from .io import atomic_write, load_checkpoint
+from .io import atomic_write, content_sha256, load_checkpoint, remove_stale_tmp
 from .kinematics import kinematics
 from .models import (
     FMConfig,
@@ -43,9 +48,11 @@ from .models import (
     save_model,
 )
 from .robot import Robot, load_robot
+from .runs import diff_configs
 from .state import StateLayout
 
 __all__ = [
+    "DIVERGENCE_FACTOR",
     "GOALS",
     "PAPER_FIGURES",
     "TRAIN_PRESETS",
@@ -68,6 +75,9 @@ __all__ = [
 # --------------------------------------------------------------------------------------------------
 # Generic pieces
 # --------------------------------------------------------------------------------------------------
+
+#: An epoch's mean loss above this multiple of the first step's loss means training diverged.
+DIVERGENCE_FACTOR = 1e6
 
 
 @dataclass
@@ -229,6 +239,15 @@ class TrainConfig:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
+    def resume_differences(self, stored: dict) -> list[str]:
+        """What differs between this config and ``stored`` (a checkpoint's) in a way that forbids
+        resuming: all but the progress bar and the evaluation batch size; a constant-rate run may
+        change its number of epochs (its learning rate does not depend on it)."""
+        diffs = diff_configs(stored, self.to_dict(), ignore=("progress", "eval_batch_size"))
+        if self.schedule == "constant" and stored.get("schedule") == "constant":
+            diffs = [d for d in diffs if not d.startswith("epochs:")]
+        return diffs
+
     @classmethod
     def from_dict(cls, d: dict) -> TrainConfig:
         names = {f.name for f in dataclasses.fields(cls)}
@@ -265,7 +284,9 @@ def fit(
     ``cfg.eval_batch_size``, averaged over chunks by size) are recorded. With ``run_dir`` the records go
     to ``run_dir/metrics.jsonl``; with ``checkpoint`` and ``save_fn(path, model, extra)`` a checkpoint
     is written after every epoch, and ``resume=True`` restores the latest one through
-    ``load_fn(path) -> {"state_dict": ..., "extra": ...}``.
+    ``load_fn(path) -> {"state_dict": ..., "extra": ...}``, after checking that it was trained with the
+    same ``cfg`` (:meth:`TrainConfig.resume_differences`; :class:`CheckpointError` otherwise).
+    Raises :class:`TrainingDivergedError` when the loss diverges (see the module docstring).
     """
     train = tuple(train)
     n = train[0].shape[0]
@@ -278,7 +299,10 @@ def fit(
     steps_per_epoch = -(-n // cfg.batch_size)
     total_steps = steps_per_epoch * cfg.epochs
     start_epoch, history = 0, []
+    loss_ref: float | None = None  # the loss of the run's first step: the scale divergence is judged on
     ckpt = Path(checkpoint) if checkpoint is not None else None
+    if ckpt is not None:
+        remove_stale_tmp(ckpt.parent, ckpt.name)  # left by a write that was killed
     if resume and ckpt is not None and ckpt.is_file():
         if load_fn is None:
             raise ConfigError("resume=True needs load_fn to read the checkpoint")
@@ -286,10 +310,21 @@ def fit(
         extra = payload.get("extra") or {}
         if "optimizer" not in extra or "epoch" not in extra:
             raise CheckpointError(f"{ckpt} holds no training state (optimizer, epoch); cannot resume from it")
-        model.load_state_dict(payload["state_dict"])
-        opt.load_state_dict(extra["optimizer"])
+        if isinstance(extra.get("train_config"), dict):
+            diffs = cfg.resume_differences(extra["train_config"])
+            if diffs:
+                raise CheckpointError(
+                    f"{ckpt} was trained with another training configuration ({'; '.join(diffs)}); resume "
+                    "with the same settings or train into a new run directory"
+                )
+        try:
+            model.load_state_dict(payload["state_dict"])
+            opt.load_state_dict(extra["optimizer"])
+        except (RuntimeError, ValueError, KeyError) as exc:
+            raise CheckpointError(f"{ckpt} does not fit the model being trained ({exc})") from exc
         gen.set_state(extra["generator"])
         start_epoch, history = int(extra["epoch"]), list(extra.get("history", []))
+        loss_ref = extra.get("loss_ref")
     logger = None
     if run_dir is not None:
         if start_epoch > 0:
@@ -316,6 +351,8 @@ def fit(
                     for group in opt.param_groups:
                         group["lr"] = lr
                 loss = loss_fn(model, *batch)
+                if loss_ref is None:
+                    loss_ref = float(loss.detach())
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
                 opt.step()
@@ -325,14 +362,13 @@ def fit(
                 "train_loss": float(total) / steps_per_epoch,
                 "lr": opt.param_groups[0]["lr"],
             }
-            if not math.isfinite(record["train_loss"]):
-                raise TrainingDivergedError(
-                    f"training diverged at epoch {epoch + 1} (loss {record['train_loss']}); lower the learning rate"
-                )
+            _check_divergence(record["train_loss"], loss_ref, epoch)
             if val is not None and val[0].shape[0] > 0:
                 record.update(_evaluate(model, tuple(val), cfg.eval_batch_size, loss_fn, metrics_fn))
             record["epoch_time_s"] = time.perf_counter() - t0
             history.append(record)
+            if logger is not None:  # before the checkpoint: a resume drops records beyond it
+                logger.log(record)
             if ckpt is not None and save_fn is not None:
                 extra = {
                     "epoch": epoch + 1,
@@ -340,10 +376,9 @@ def fit(
                     "generator": gen.get_state(),
                     "history": history,
                     "train_config": cfg.to_dict(),
+                    "loss_ref": loss_ref,
                 }
                 save_fn(ckpt, model, extra)
-            if logger is not None:
-                logger.log(record)
             bar.update(1)
             bar.set_postfix({k: f"{v:.3g}" for k, v in record.items() if k in ("train_loss", "val_loss")})
     finally:
@@ -352,6 +387,24 @@ def fit(
             logger.close()
     model.eval()
     return history
+
+
+def _check_divergence(loss: float, loss_ref: float | None, epoch: int, what: str = "training") -> None:
+    """Raise :class:`TrainingDivergedError` for a non-finite ``loss`` or one that exploded."""
+    if not math.isfinite(loss):
+        raise TrainingDivergedError(
+            f"{what} diverged at epoch {epoch + 1} (loss {loss}); lower the learning rate"
+        )
+    if (
+        loss_ref is not None
+        and math.isfinite(loss_ref)
+        and loss_ref > 0
+        and loss > DIVERGENCE_FACTOR * loss_ref
+    ):
+        raise TrainingDivergedError(
+            f"{what} diverged at epoch {epoch + 1}: the loss grew to {loss:.4g}, more than "
+            f"{DIVERGENCE_FACTOR:g} times its first value {loss_ref:.4g}; lower the learning rate"
+        )
 
 
 @torch.no_grad()
@@ -461,12 +514,13 @@ def _train_supervised(
     train, val = data.to(dtype).split(cfg.val_fraction, seed=cfg.seed)
     model.fit_normalization(*train.tensors())
     ckpt = Path(run_dir) / f"{kind}.pt" if run_dir is not None else None
+    identity = {"data_sha256": content_sha256(data.tensors())} if ckpt is not None else {}
 
     def load(path: Path) -> dict:
-        return load_checkpoint(path, kind=kind, robot=model.robot_name)
+        return _load_to_resume(path, kind, model, identity)
 
     def save(path: Path, m: nn.Module, extra: dict) -> None:
-        save_model(m, path, extra=extra)
+        save_model(m, path, extra={**extra, **identity})
 
     history = fit(
         model,
@@ -482,6 +536,24 @@ def _train_supervised(
         desc=f"train {kind.upper()}",
     )
     return TrainResult(model, history, ckpt)
+
+
+def _load_to_resume(path: Path, kind: str, model: nn.Module, identity: dict) -> dict:
+    """Load checkpoint ``path`` to continue training ``model``: it must hold the same architecture and
+    (where it records them) the same data and frozen models (``identity``)."""
+    payload = load_checkpoint(path, kind=kind, robot=model.robot_name)
+    diffs = diff_configs(payload.get("config") or {}, {"type": "learned", **model.config_dict()})
+    diffs = [f"model {d}" for d in diffs]
+    extra = payload.get("extra") or {}
+    for key, value in identity.items():
+        if key in extra and extra[key] != value:
+            diffs.append(f"{key}: {extra[key][:16]}… → {value[:16]}…")
+    if diffs:
+        raise CheckpointError(
+            f"{path} was trained with another model or data ({'; '.join(diffs)}); resume with the same "
+            "preset and data, or train into a new run directory"
+        )
+    return payload
 
 
 def train_fm(
@@ -577,6 +649,10 @@ def train_im_distal(
         return {"val_fm_reach_err_mm": float((reached - target).norm(dim=-1).mean()) * 1e3}
 
     ckpt = Path(run_dir) / "im.pt" if run_dir is not None else None
+    identity = {}
+    if ckpt is not None:
+        fm_id = {"config": fm.config_dict(), "state_dict": fm.state_dict(), "action_weight": action_weight}
+        identity = {"data_sha256": content_sha256(data.tensors()), "through_fm_sha256": content_sha256(fm_id)}
     history = fit(
         im,
         train.tensors(),
@@ -586,8 +662,8 @@ def train_im_distal(
         metrics_fn=metrics_fn,
         run_dir=run_dir,
         checkpoint=ckpt,
-        save_fn=lambda path, m, extra: save_model(m, path, extra=extra),
-        load_fn=lambda path: load_checkpoint(path, kind="im", robot=im.robot_name),
+        save_fn=lambda path, m, extra: save_model(m, path, extra={**extra, **identity}),
+        load_fn=lambda path: _load_to_resume(path, "im", im, identity),
         resume=resume,
         desc="train IM through FM",
     )

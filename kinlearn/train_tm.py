@@ -3,30 +3,55 @@
 The FM and IM are each either learned (checkpoints from ``kinlearn train-fm`` / ``train-im``) or
 analytic (FK; a damped-least-squares IK step): the four combinations are the ablation. Their
 weights never change here: they are frozen and only the TM's parameters reach the optimiser.
+
+``tm.pt`` records the learned FM/IM files it was trained through by identity (path relative to
+``tm.pt`` and SHA-256, :func:`kinlearn.io.resolve_dependency`), never by an absolute folder: a run
+folder can move, and a swapped model is an error. Resuming checks the configuration, those models
+and the training pairs. Divergence (a non-finite loss, waypoints beyond :data:`WAYPOINT_BOUND_REACHES`
+arm reaches from the base, or a loss above ``DIVERGENCE_FACTOR`` × the first step's) is an error.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
 import torch
 from tqdm.auto import tqdm
 
 from .endpoints import EndpointPairs
-from .errors import CheckpointError, ConfigError, TrainingDivergedError
-from .io import load_checkpoint, save_checkpoint, write_json
+from .errors import CheckpointError, ConfigError, DatasetError, TrainingDivergedError
+from .io import (
+    content_sha256,
+    file_sha256,
+    load_checkpoint,
+    remove_stale_tmp,
+    resolve_dependency,
+    save_checkpoint,
+    write_json,
+)
 from .models import AnalyticFM, AnalyticIM, load_fm, load_im
 from .rectify import LossConfig, rectify, tm_loss
-from .robot import load_robot
-from .train import OptimConfig, RunLogger, _truncate_log, make_optimizer, seed_everything
+from .robot import Robot, load_robot
+from .runs import diff_configs
+from .train import (
+    OptimConfig,
+    RunLogger,
+    _check_divergence,
+    _truncate_log,
+    make_optimizer,
+    seed_everything,
+)
 from .trajectory import TMConfig, TrajectoryModel
 
 __all__ = [
     "TM_PRESETS",
+    "WAYPOINT_BOUND_REACHES",
     "TMTrainConfig",
     "build_fm_im",
     "evaluate_tm",
@@ -36,6 +61,17 @@ __all__ = [
 ]
 
 ModelKind = Literal["learned", "analytic"]
+
+#: Waypoints farther than this many arm reaches from the base mean that training diverged.
+WAYPOINT_BOUND_REACHES = 10.0
+
+
+def arm_reach(robot: Robot) -> float:
+    """An upper bound of the end effector's distance from the base (m): the chain's link lengths and
+    the prismatic joints' travel, summed."""
+    links = sum(float(np.linalg.norm(j.T_prev[:3, 3])) for j in robot.joints)
+    travel = sum(max(abs(j.lower), abs(j.upper)) for j in robot.joints if j.kind == "prismatic")
+    return links + travel + float(np.linalg.norm(robot.T_tip[:3, 3]))
 
 
 @dataclass
@@ -183,11 +219,16 @@ def train_tm(
     im: torch.nn.Module | None = None,
     resume: bool = True,
     progress: bool = True,
+    write_config: bool = True,
 ) -> TrajectoryModel:
     """Train a TM on ``train`` pairs; checkpoint ``run_dir/tm.pt`` after every epoch; resume from it.
 
-    ``fm``/``im`` override the models that ``config`` names (they are frozen either way).
-    Logs per-epoch loss terms (and held-out metrics when ``val`` is given) to ``run_dir/metrics.jsonl``.
+    ``fm``/``im`` override the models that ``config`` names (they are frozen either way); learned
+    ones loaded from ``config.models_dir`` are recorded in ``tm.pt`` by identity. Logs per-epoch loss
+    terms (and held-out metrics when ``val`` is given) to ``run_dir/metrics.jsonl``; writes the config
+    to ``run_dir/config.json`` unless ``write_config=False`` (the CLI keeps its own record there).
+    Raises :class:`DatasetError` for empty or non-finite pairs, :class:`CheckpointError` when resuming
+    a ``tm.pt`` made with another configuration, FM/IM or pairs, :class:`TrainingDivergedError`.
     """
     run_dir = Path(run_dir)
     robot = load_robot(config.robot)
@@ -197,8 +238,18 @@ def train_tm(
         raise ConfigError(
             f"TM config is for {config.tm.robot!r} ({config.tm.dof} joints), not {robot.name!r}"
         )
+    _check_pairs(train, "training pairs", robot)
+    if val is not None and len(val) == 0:
+        val = None
+    if val is not None:
+        _check_pairs(val, "held-out pairs", robot)
+    depends: dict[str, tuple[Path, str]] = {}
     if fm is None or im is None:
         built_fm, built_im = build_fm_im(config)
+        for kind, given in (("fm", fm), ("im", im)):
+            if given is None and getattr(config, kind) == "learned":
+                path = Path(config.models_dir) / f"{kind}.pt"
+                depends[kind] = (path, file_sha256(path))
         fm, im = fm or built_fm, im or built_im
     for m in (fm, im):
         m.eval()
@@ -223,20 +274,31 @@ def train_tm(
         sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0)
 
     ckpt = run_dir / "tm.pt"
-    start_epoch = 0
+    data_sha256 = content_sha256((train.start, train.goal))
+    bound = WAYPOINT_BOUND_REACHES * arm_reach(robot)
+    start_epoch, loss_ref = 0, None
+    remove_stale_tmp(run_dir, ckpt.name)  # left by a write that was killed
     if resume and ckpt.exists():
         payload = load_checkpoint(ckpt, kind="tm", robot=robot.name)
-        if payload["config"] != _train_config_dict(config):
-            raise CheckpointError(f"{ckpt} was trained with another configuration; use a new run directory")
-        tm.load_state_dict(payload["state_dict"])
+        diffs = _resume_differences(payload, config, depends, data_sha256)
+        if diffs:
+            raise CheckpointError(
+                f"{ckpt} was trained with another configuration ({'; '.join(diffs)}); resume with the same "
+                "settings, models and pairs, or train into a new run directory"
+            )
         extra = payload["extra"]
-        opt.load_state_dict(extra["optimizer"])
-        sched.load_state_dict(extra["scheduler"])
+        try:
+            tm.load_state_dict(payload["state_dict"])
+            opt.load_state_dict(extra["optimizer"])
+            sched.load_state_dict(extra["scheduler"])
+        except (RuntimeError, ValueError, KeyError) as exc:
+            raise CheckpointError(f"{ckpt} does not fit the TM being trained ({exc})") from exc
         gen.set_state(extra["generator"])
         torch.set_rng_state(extra["torch_rng"])
-        start_epoch = extra["epoch"]
+        start_epoch, loss_ref = extra["epoch"], extra.get("loss_ref")
     _truncate_log(run_dir / "metrics.jsonl", start_epoch)  # records written after the last checkpoint
-    write_json(run_dir / "config.json", _train_config_dict(config))
+    if write_config:
+        write_json(run_dir / "config.json", _train_config_dict(config))
 
     with RunLogger(run_dir) as logger:
         bar = tqdm(
@@ -252,11 +314,16 @@ def train_tm(
             sums: dict[str, float] = {}
             for i in range(0, n, config.batch_size):
                 idx = perm[i : i + config.batch_size]
-                _, (loss, terms) = _step_loss(tm, fm, im, train.start[idx], train.goal[idx], config.loss)
-                if not torch.isfinite(loss):
+                wp, (loss, terms) = _step_loss(tm, fm, im, train.start[idx], train.goal[idx], config.loss)
+                far = wp.detach().abs().amax()
+                if not bool(torch.isfinite(loss) & (far <= bound)):  # one check per step
                     raise TrainingDivergedError(
-                        f"TM training diverged at epoch {epoch + 1} (loss {loss.item()}); lower the learning rate"
+                        f"TM training diverged at epoch {epoch + 1} (loss {loss.item():.4g}, a waypoint "
+                        f"{far.item():.4g} m from the base, beyond {bound:.3g} m = {WAYPOINT_BOUND_REACHES:g} "
+                        f"× the arm's reach); lower the learning rate"
                     )
+                if loss_ref is None:
+                    loss_ref = float(loss.detach())
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
                 opt.step()
@@ -264,6 +331,7 @@ def train_tm(
                 w = idx.numel() / n
                 for k, v in {"loss": loss.detach(), **terms}.items():
                     sums[k] = sums.get(k, 0.0) + float(v) * w
+            _check_divergence(sums["loss"], loss_ref, epoch, what="TM training")
             record = {
                 "epoch": epoch + 1,
                 "lr": sched.get_last_lr()[0],
@@ -277,7 +345,7 @@ def train_tm(
                 ckpt,
                 kind="tm",
                 robot=robot.name,
-                config=_train_config_dict(config),
+                config=_checkpoint_config(config),
                 state_dict=tm.state_dict(),
                 extra={
                     "epoch": epoch + 1,
@@ -285,7 +353,10 @@ def train_tm(
                     "scheduler": sched.state_dict(),
                     "generator": gen.get_state(),
                     "torch_rng": torch.get_rng_state(),
+                    "loss_ref": loss_ref,
+                    "data_sha256": data_sha256,
                 },
+                depends=depends,
             )
     tm.eval()
     return tm
@@ -295,14 +366,65 @@ def _train_config_dict(config: TMTrainConfig) -> dict:
     return copy.deepcopy(config.to_dict())
 
 
-def load_tm(path: str | Path, robot: str | None = None) -> tuple[TrajectoryModel, TMTrainConfig]:
-    """Load a TM checkpoint written by :func:`train_tm`; returns the model (eval mode) and its config."""
+def _checkpoint_config(config: TMTrainConfig) -> dict:
+    """The config as ``tm.pt`` stores it: without ``models_dir`` (the FM/IM are recorded by identity)."""
+    return {**_train_config_dict(config), "models_dir": None}
+
+
+def _check_pairs(pairs: EndpointPairs, what: str, robot: Robot) -> None:
+    size = robot.dof + 3
+    if len(pairs) == 0:
+        raise DatasetError(f"the {what} are empty: make endpoints with --n ≥ 1")
+    for name, t in (("start", pairs.start), ("goal", pairs.goal)):
+        if t.ndim != 2 or t.shape != (len(pairs), size):
+            raise DatasetError(f"the {what}' {name} states must have shape (N, {size}), got {tuple(t.shape)}")
+        if not bool(torch.isfinite(t).all()):
+            raise DatasetError(f"the {what}' {name} states hold NaN or infinity; make the endpoints again")
+
+
+def _resume_differences(payload: dict, config: TMTrainConfig, depends: dict, data_sha256: str) -> list[str]:
+    """What differs between checkpoint ``payload`` and the run about to resume from it."""
+    diffs = diff_configs(
+        {**payload["config"], "models_dir": None}, _checkpoint_config(config), ignore=("progress",)
+    )
+    if config.schedule == "constant" and payload["config"].get("schedule") == "constant":
+        diffs = [d for d in diffs if not d.startswith("epochs:")]  # the rate does not depend on it
+    recorded = payload.get("depends") or {}
+    for kind, (path, sha) in depends.items():
+        old = (recorded.get(kind) or {}).get("sha256")
+        if old is not None and old != sha:
+            diffs.append(f"{kind} {path}: sha256 {old[:16]}… → {sha[:16]}… (another model)")
+    old_data = payload["extra"].get("data_sha256")
+    if old_data is not None and old_data != data_sha256:
+        diffs.append(f"training pairs: sha256 {old_data[:16]}… → {data_sha256[:16]}…")
+    return diffs
+
+
+def load_tm(
+    path: str | Path, robot: str | None = None, *, resolve: bool = True
+) -> tuple[TrajectoryModel, TMTrainConfig]:
+    """Load a TM checkpoint written by :func:`train_tm`; returns the model (eval mode) and its config.
+
+    With ``resolve`` the learned FM/IM the TM records are found and verified
+    (:func:`kinlearn.io.resolve_dependency`) and the config's ``models_dir`` names their folder, so
+    that :func:`build_fm_im` loads exactly them. Raises :class:`CheckpointError` when one is missing or
+    was replaced.
+    """
     payload = load_checkpoint(path, kind="tm", robot=robot)
     try:
         config = TMTrainConfig.from_dict(payload["config"])
         tm = TrajectoryModel(config.tm)
         tm.load_state_dict(payload["state_dict"])
-    except (TypeError, KeyError, RuntimeError) as exc:
+    except (TypeError, KeyError, RuntimeError, ConfigError) as exc:
         raise CheckpointError(f"{path}: the TM checkpoint does not match this kinlearn ({exc})") from exc
+    learned = [k for k in ("fm", "im") if getattr(config, k) == "learned" and k in payload["depends"]]
+    if resolve and learned:
+        folders = {resolve_dependency(path, payload, k).parent for k in learned}
+        if len(folders) > 1:
+            raise CheckpointError(
+                f"{path}: its FM and IM were found in different folders ({', '.join(map(str, folders))}); "
+                "put fm.pt and im.pt in one folder"
+            )
+        config = dataclasses.replace(config, models_dir=str(folders.pop()))
     tm.eval()
     return tm, config

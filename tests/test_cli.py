@@ -1,13 +1,19 @@
 """The kinlearn command: help on every subcommand, tiny runs that write config.json and outputs."""
 
+import argparse
+import hashlib
 import json
 
 import pytest
 import torch
 
-from kinlearn.babbling import load_transitions
+from kinlearn import ConfigError, DatasetError
+from kinlearn.babbling import BabblingConfig, load_transitions
 from kinlearn.cli import add_command, build_parser, main, register_subcommand
+from kinlearn.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
 from kinlearn.models import LearnedFM, LearnedIM, load_fm, load_im
+from kinlearn.planner import DEFAULT_CHECKPOINTS
+from kinlearn.train_tm import tm_preset, train_tm
 
 COMMANDS = ("babble", "train-fm", "train-im", "validate")
 
@@ -113,6 +119,293 @@ def test_subcommands_can_be_added():
         assert args.loud and args.command == "hello"
         assert main(["hello", "--robot", "panda", "--run-dir", "unused"]) == 0
         assert seen == ["panda"]
+    finally:
+        from kinlearn import cli
+
+        cli._SUBCOMMANDS.remove(add)
+
+
+# --------------------------------------------------------------------------------------------------
+# The run-directory policy on every command (issue cases 1, 2) and degenerate inputs (case 4)
+# --------------------------------------------------------------------------------------------------
+
+
+def _sha(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Finished tiny runs of every stage: babbling data, two FMs, an IM, endpoints, a TM."""
+    root = tmp_path_factory.mktemp("runs")
+    assert main(["babble", "--transitions", "3000", "--walkers", "50", "--run-dir", str(root / "b")]) == 0
+    tiny = ["--preset", "tiny", "--epochs", "1", "--no-progress", "--validate", "0"]
+    data = ["--data", str(root / "b" / "babbling.npz")]
+    assert main(["train-fm", *tiny, *data, "--run-dir", str(root / "fm")]) == 0
+    assert main(["train-fm", *tiny, *data, "--seed", "7", "--run-dir", str(root / "fm-other")]) == 0
+    assert main(["train-im", *tiny, *data, "--run-dir", str(root / "im")]) == 0
+    assert main(["make-endpoints", "--n", "48", "--heldout", "8", "--run-dir", str(root / "ep")]) == 0
+    tm = ["train-tm", "--endpoints", str(root / "ep"), "--epochs", "1", "--batch-size", "16", "--no-progress"]
+    tm += ["--fm-checkpoint", str(root / "fm" / "fm.pt"), "--im-checkpoint", str(root / "im" / "im.pt")]
+    assert main([*tm, "--run-dir", str(root / "tm")]) == 0
+    return root, tiny, data, tm
+
+
+def test_a_finished_run_is_never_changed_silently(runs, capsys):
+    """Case 1: train-tm with another FM on a finished run is refused before anything is written."""
+    root, tiny, data, tm = runs
+    before = {p.name: _sha(p) for p in (root / "tm").iterdir() if p.is_file()}
+    other = [*tm, "--fm-checkpoint", str(root / "fm-other" / "fm.pt"), "--run-dir", str(root / "tm")]
+    capsys.readouterr()
+    assert main(other) == 2
+    assert "already holds a train-tm run" in capsys.readouterr().err
+    assert main([*other, "--resume"]) == 2  # resuming through another FM: the difference is named
+    assert "models.fm.sha256" in capsys.readouterr().err
+    assert {p.name: _sha(p) for p in (root / "tm").iterdir() if p.is_file()} == before
+    # train-fm into a finished run: refused, its model and config.json untouched
+    fm_before = {n: _sha(root / "fm" / n) for n in ("fm.pt", "config.json")}
+    assert main(["train-fm", *tiny, *data, "--seed", "3", "--run-dir", str(root / "fm")]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert {n: _sha(root / "fm" / n) for n in ("fm.pt", "config.json")} == fm_before
+    # every command that writes a run directory follows the same policy
+    ep = ["make-endpoints", "--n", "8", "--heldout", "0", "--run-dir", str(root / "ep")]
+    babble_again = ["babble", "--transitions", "100", "--run-dir", str(root / "b")]
+    validate = ["validate", "--fm", "analytic", "--n", "100", "--run-dir", str(root / "val")]
+    assert main(validate) == 0
+    for argv in (ep, babble_again, validate, ["reproduce", "--smoke", "--run-dir", str(root / "tm")]):
+        assert main(argv) == 2, argv
+        assert "error:" in capsys.readouterr().err
+
+
+def test_resume_with_an_identical_config_continues_and_overwrite_replaces(runs, tmp_path, capsys):
+    _, tiny, data, _ = runs
+    run = ["train-fm", *tiny, *data, "--run-dir", str(tmp_path / "fm")]
+    assert main(run) == 0
+    first = _sha(tmp_path / "fm" / "fm.pt")
+    assert main([*run, "--resume"]) == 0  # finished, same config: nothing to train
+    assert _sha(tmp_path / "fm" / "fm.pt") == first
+    (tmp_path / "fm" / "notes.txt").write_text("mine")
+    assert main([*run, "--seed", "4", "--overwrite"]) == 0
+    assert _sha(tmp_path / "fm" / "fm.pt") != first
+    assert json.loads((tmp_path / "fm" / "config.json").read_text())["train"]["seed"] == 4
+    assert (tmp_path / "fm" / "notes.txt").read_text() == "mine"
+    assert main([*run, "--resume", "--overwrite"]) == 2
+    assert "exclude each other" in capsys.readouterr().err
+
+
+def test_each_stage_resumes_alone(runs, tmp_path):
+    """train-im --through-fm keeps each stage's checkpoint, so a finished run resumes to the same IM;
+    a finished train-tm run resumed with the same options stays as it is."""
+    root, tiny, data, tm = runs
+    through = ["--through-fm", str(root / "fm" / "fm.pt"), "--through-fm-epochs", "1"]
+    run = ["train-im", *tiny, *data, *through, "--run-dir", str(tmp_path / "im")]
+    assert main(run) == 0
+    assert (tmp_path / "im" / "supervised" / "im.pt").is_file()
+    refined = _sha(tmp_path / "im" / "im.pt")
+    assert refined == _sha(tmp_path / "im" / "through-fm" / "im.pt")
+    assert main([*run, "--resume"]) == 0
+    assert _sha(tmp_path / "im" / "im.pt") == refined
+    before = _sha(root / "tm" / "tm.pt")
+    assert main([*tm, "--run-dir", str(root / "tm"), "--resume"]) == 0
+    assert _sha(root / "tm" / "tm.pt") == before
+
+
+@pytest.mark.parametrize(
+    ("change", "named"),
+    [
+        (["--lr", "0.01"], "train.optim.lr: 0.003 → 0.01"),
+        (["--preset", "paper"], "model."),
+        (["--data", "OTHER"], "data.sha256"),
+        (["--epochs", "2"], "train.epochs: 1 → 2"),
+    ],
+)
+def test_resume_refuses_a_changed_config(runs, tmp_path, capsys, change, named):
+    """Case 2: a new --lr, --data or --preset on --resume is refused, naming what differs."""
+    _, tiny, data, _ = runs
+    run = ["train-fm", *tiny, *data, "--run-dir", str(tmp_path / "fm")]
+    assert main(run) == 0
+    before = _sha(tmp_path / "fm" / "config.json")
+    if change[0] == "--data":
+        other = tmp_path / "other"
+        babble = ["babble", "--transitions", "2000", "--walkers", "40", "--seed", "5"]
+        assert main([*babble, "--run-dir", str(other)]) == 0
+        change = ["--data", str(other / "babbling.npz")]
+    capsys.readouterr()
+    assert main([*run, *change, "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "another configuration" in err and named in err, err
+    assert _sha(tmp_path / "fm" / "config.json") == before
+
+
+def test_export_never_overwrites_the_shipped_planner_by_default(runs, tmp_path, capsys):
+    root, *_ = runs
+    shipped = DEFAULT_CHECKPOINTS / "iiwa14"
+    before = {p.name: _sha(p) for p in shipped.glob("*.pt")}
+    with pytest.raises(SystemExit) as exc:
+        main(["export", "--model", str(root / "tm")])
+    assert exc.value.code == 2
+    assert "--out" in capsys.readouterr().err
+    assert main(["export", "--model", str(root / "tm"), "--to-package"]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert {p.name: _sha(p) for p in shipped.glob("*.pt")} == before
+    # into a folder: it loads on its own, records its FM/IM by hash; a second export is refused
+    out = tmp_path / "planner"
+    assert main(["export", "--model", str(root / "tm"), "--out", str(out)]) == 0
+    payload = torch.load(out / "tm.pt", weights_only=True)
+    assert payload["depends"]["fm"] == {"path": "fm.pt", "sha256": _sha(out / "fm.pt")}
+    assert payload["extra"] == {} and payload["config"]["models_dir"] is None
+    assert main(["export", "--model", str(root / "tm"), "--out", str(out)]) == 2
+    assert main(["export", "--model", str(root / "tm"), "--out", str(out), "--overwrite"]) == 0
+
+
+def test_degenerate_endpoint_sets(tmp_path, capsys):
+    """Case 4: --n 0 is rejected; --heldout 0 trains without held-out metrics; NaN is a dataset error."""
+    with pytest.raises(SystemExit):
+        main(["make-endpoints", "--n", "0", "--run-dir", str(tmp_path / "none")])
+    assert "--n: expected an integer ≥ 1, got '0'" in capsys.readouterr().err
+    assert not (tmp_path / "none").exists()
+    with pytest.raises(ConfigError, match="positive"):
+        EndpointConfig(n=0)
+    with pytest.raises(ConfigError, match="min_distance"):
+        EndpointConfig(min_distance=float("nan"))
+    with pytest.raises(DatasetError, match="empty"):
+        train_tm(
+            tm_preset("default", fm="analytic", im="analytic"),
+            tmp_path / "t",
+            make_endpoints(EndpointConfig(n=4)).split(0)[0],
+            progress=False,
+        )
+    ep = tmp_path / "ep"
+    assert main(["make-endpoints", "--n", "24", "--heldout", "0", "--run-dir", str(ep)]) == 0
+    assert not (ep / "endpoints_heldout.npz").exists()
+    analytic = ["train-tm", "--fm", "analytic", "--im", "analytic", "--epochs", "1", "--no-progress"]
+    assert main([*analytic, "--endpoints", str(ep), "--run-dir", str(tmp_path / "tm")]) == 0
+    # a NaN in an endpoints file: reported as a broken file when loaded, not as divergence
+    pairs = load_endpoints(ep / "endpoints_train.npz")
+    pairs.start[3, 2] = float("nan")
+    bad = tmp_path / "bad"
+    save_endpoints(pairs, bad / "endpoints_train.npz")
+    with pytest.raises(DatasetError, match="NaN"):
+        load_endpoints(bad / "endpoints_train.npz")
+    capsys.readouterr()
+    assert main([*analytic, "--endpoints", str(bad), "--run-dir", str(tmp_path / "tm-bad")]) == 2
+    err = capsys.readouterr().err
+    assert "NaN" in err and "learning rate" not in err
+    assert not (tmp_path / "tm-bad").exists()  # refused before anything was written
+
+
+def test_babbling_walkers_are_rejected_not_clamped(capsys, tmp_path):
+    with pytest.raises(SystemExit):
+        main(["babble", "--walkers", "0", "--run-dir", str(tmp_path / "b")])
+    assert "--walkers: expected an integer ≥ 1" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="walker"):
+        BabblingConfig.for_transitions(1000, walkers=0)
+    with pytest.raises(ConfigError, match="transition"):
+        BabblingConfig.for_transitions(0)
+
+
+# --------------------------------------------------------------------------------------------------
+# Learning rates (case 5) and every numeric option
+# --------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("command", ["train-fm", "train-im", "train-tm"])
+@pytest.mark.parametrize("lr", ["-1", "0", "nan", "inf", "fast"])
+def test_learning_rates_must_be_positive_finite_numbers(command, lr, capsys):
+    extra = ["--endpoints", "ep"] if command == "train-tm" else []
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args([command, *extra, "--lr", lr])
+    assert exc.value.code == 2
+    assert f"argument --lr: expected a finite number > 0, got '{lr}'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["babble", "--transitions", "0"],
+        ["babble", "--max-step", "-0.1"],
+        ["babble", "--retarget-prob", "1.5"],
+        ["babble", "--threads", "0"],
+        ["train-fm", "--epochs", "0"],
+        ["train-fm", "--batch-size", "-4"],
+        ["train-fm", "--val-fraction", "1"],
+        ["train-fm", "--validate", "-1"],
+        ["train-im", "--through-fm-epochs", "0"],
+        ["train-im", "--action-weight", "-1"],
+        ["validate", "--n", "0"],
+        ["validate", "--im-iterations", "0"],
+        ["make-endpoints", "--heldout", "-1"],
+        ["make-endpoints", "--min-distance", "inf"],
+        ["make-endpoints", "--start-spread", "-1"],
+        ["train-tm", "--endpoints", "ep", "--epochs", "0"],
+        ["train-tm", "--endpoints", "ep", "--alpha", "1"],
+        ["train-tm", "--endpoints", "ep", "--batch-size", "1.5"],
+        ["reproduce", "--workers", "0"],
+    ],
+)
+def test_numeric_options_are_validated_with_a_clear_message(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(argv)
+    assert exc.value.code == 2
+    assert f"argument {argv[-2]}: expected " in capsys.readouterr().err
+
+
+def test_train_tm_zero_values_are_values_and_a_huge_rate_is_divergence(runs, tmp_path, capsys):
+    """`--alpha 0` is used, not replaced by the preset's; lr = 1e9 is caught though the loss stays finite."""
+    root, *_ = runs
+    analytic = ["train-tm", "--endpoints", str(root / "ep"), "--fm", "analytic", "--im", "analytic"]
+    analytic += ["--epochs", "1", "--batch-size", "16", "--no-progress"]
+    argv = [*analytic, "--optimizer", "rmsprop", "--alpha", "0", "--run-dir", str(tmp_path / "a")]
+    assert main(argv) == 0
+    optim = json.loads((tmp_path / "a" / "config.json").read_text())["tm"]["optim"]
+    assert optim["name"] == "rmsprop" and optim["alpha"] == 0.0
+    capsys.readouterr()
+    assert main([*analytic, "--epochs", "3", "--lr", "1e9", "--run-dir", str(tmp_path / "b")]) == 2
+    assert "diverged" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------------------------------
+# Help and options (case 7), exit status
+# --------------------------------------------------------------------------------------------------
+
+
+def _subparsers():
+    parser = build_parser()
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return sub.choices
+
+
+def test_every_option_has_help():
+    for name, p in _subparsers().items():
+        if name == "plan":
+            continue
+        missing = [a.dest for a in p._actions if not a.help]
+        assert missing == [], f"{name}: options without help: {missing}"
+
+
+def test_validate_help_states_its_real_default_seed(capsys):
+    assert build_parser().parse_args(["validate"]).seed == 10_000
+    with pytest.raises(SystemExit):
+        main(["validate", "--help"])
+    assert "(default: 10000)" in capsys.readouterr().out
+
+
+def test_export_takes_no_seed_or_run_dir(capsys):
+    for option in (["--seed", "1"], ["--run-dir", "x"]):
+        with pytest.raises(SystemExit) as exc:
+            build_parser().parse_args(["export", "--model", "m", "--out", "o", *option])
+        assert exc.value.code == 2
+        assert "unrecognized arguments" in capsys.readouterr().err
+
+
+def test_interrupted_commands_exit_with_130(capsys):
+    def add(sub):
+        add_command(sub, "stop", "Get interrupted.", lambda args: (_ for _ in ()).throw(KeyboardInterrupt))
+
+    register_subcommand(add)
+    try:
+        assert main(["stop"]) == 130
+        assert "interrupted" in capsys.readouterr().err
     finally:
         from kinlearn import cli
 

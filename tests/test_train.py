@@ -1,7 +1,10 @@
 """Training: optimisers, logging, seeding, learning beats trivial predictors, resume, validation."""
 
 import copy
+import functools
 import json
+import os
+import time
 
 import numpy as np
 import pytest
@@ -65,7 +68,16 @@ def test_make_optimizer(cfg, cls):
 
 
 @pytest.mark.parametrize(
-    "kwargs", [{"name": "lbfgs"}, {"lr": 0.0}, {"lr": float("nan")}, {"alpha": 1.0}, {"weight_decay": -1.0}]
+    "kwargs",
+    [
+        {"name": "lbfgs"},
+        {"lr": 0.0},
+        {"lr": -1.0},
+        {"lr": float("nan")},
+        {"lr": float("inf")},
+        {"alpha": 1.0},
+        {"weight_decay": -1.0},
+    ],
 )
 def test_bad_optim_config(kwargs):
     with pytest.raises(ConfigError):
@@ -298,3 +310,131 @@ def test_im_trained_through_the_fm_reaches_targets_better(data, fresh, tmp_path)
         train_im_distal(data, im, fm, tiny("im", epochs=1), action_weight=-1.0)
     with pytest.raises(ConfigError, match="LearnedIM"):
         train_im_distal(data, AnalyticIM(load_robot("iiwa14")), fm, tiny("im", epochs=1))
+
+
+# --------------------------------------------------------------------------------------------------
+# Resume checks, divergence, and kill -9 during checkpoint writes
+# --------------------------------------------------------------------------------------------------
+
+
+def test_resume_with_another_config_model_or_data_is_refused(data, tmp_path):
+    """Case 2 of the resume checks: what a run was trained with is checked, not taken on trust."""
+    small = data.subset(slice(0, 2000))
+    train_fm(small, fm_config("iiwa14", "tiny"), tiny("fm", epochs=1), run_dir=tmp_path)
+    before = (tmp_path / "fm.pt").read_bytes()
+    with pytest.raises(CheckpointError, match=r"optim\.lr: 0\.003 → 0\.01"):
+        cfg = tiny("fm", epochs=2, optim=OptimConfig("adam", 0.01))
+        train_fm(small, fm_config("iiwa14", "tiny"), cfg, run_dir=tmp_path, resume=True)
+    with pytest.raises(CheckpointError, match="data_sha256"):
+        other = data.subset(slice(2000, 4000))
+        train_fm(other, fm_config("iiwa14", "tiny"), tiny("fm", epochs=2), run_dir=tmp_path, resume=True)
+    # another architecture: a typed refusal naming the difference, not torch's size-mismatch error
+    with pytest.raises(CheckpointError, match=r"model .*predict_delta"):
+        train_fm(small, fm_config("iiwa14", "paper"), tiny("fm", epochs=2), run_dir=tmp_path, resume=True)
+    assert (tmp_path / "fm.pt").read_bytes() == before  # refused before anything was written
+    # a constant-rate run may be extended: the rate does not depend on the number of epochs
+    more = train_fm(small, fm_config("iiwa14", "tiny"), tiny("fm", epochs=2), run_dir=tmp_path, resume=True)
+    assert [r["epoch"] for r in more.history] == [1, 2]
+
+
+def test_an_exploding_loss_is_divergence_even_when_finite(data):
+    """Case 5: lr = 1e9 gives a huge but finite loss; it is reported, not trained on."""
+    from kinlearn.errors import TrainingDivergedError
+
+    cfg = tiny("fm", epochs=2, optim=OptimConfig("sgd", 1e9))
+    with pytest.raises(TrainingDivergedError, match="lower the learning rate"):
+        train_fm(data.subset(slice(0, 2000)), fm_config("iiwa14", "tiny"), cfg)
+
+
+#: A process that imports kinlearn once, then runs each command line read from stdin in a forked child
+#: (so that each run does not pay for importing torch, seconds, again): prints the child's pid, then
+#: its exit status.
+_FORKER = """
+import os, sys, torch
+torch.set_num_threads(1)
+torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))])  # its first use imports torch._dynamo (seconds)
+from kinlearn.cli import main
+for line in sys.stdin:
+    pid = os.fork()
+    if pid == 0:
+        sys.stdout = sys.stderr = open(os.devnull, "w")
+        os._exit(main(line.rstrip("\\n").split("\\t")))
+    print(pid, flush=True)
+    print(os.waitpid(pid, 0)[1], flush=True)
+"""
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)  # the forker reaps its child as soon as it ends
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _wait_for_write(run, alive, deadline, after_epoch=0):
+    """Poll until ``after_epoch`` epochs are logged and a checkpoint write is in progress (its
+    temporary file exists), or the process ends; True if a write was caught."""
+    log = run / "metrics.jsonl"
+    while alive() and time.monotonic() < deadline:
+        if (len(log.read_text().splitlines()) if log.is_file() else 0) >= after_epoch:
+            break
+        time.sleep(0.005)  # leave the CPU to the training
+    while alive() and time.monotonic() < deadline:
+        if any(run.glob(".fm.pt.*.tmp")):  # busy: a write lasts about a millisecond
+            return True
+    return False
+
+
+def test_kill_9_during_checkpoint_writes_then_resume_is_bit_identical(tmp_path):
+    """Training is killed with SIGKILL (no clean-up can run) while it writes a checkpoint, three times,
+    each time resumed with --resume; the final weights equal an uninterrupted run's bit for bit and
+    no temporary file is left behind."""
+    import random
+    import signal
+    import subprocess
+    import sys
+
+    from kinlearn.cli import main
+
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    forker = subprocess.Popen(  # starts (imports) while the uninterrupted run trains
+        [sys.executable, "-c", _FORKER], env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    assert main(["babble", "--transitions", "1500", "--walkers", "50", "--run-dir", str(tmp_path / "b")]) == 0
+    # many short epochs (3 steps each) make the checkpoint writes a good share of the time
+    args = ["train-fm", "--preset", "tiny", "--epochs", "150", "--batch-size", "512", "--validate", "0"]
+    args += ["--data", str(tmp_path / "b" / "babbling.npz"), "--no-progress"]
+    assert main([*args, "--run-dir", str(tmp_path / "whole")]) == 0
+
+    run = tmp_path / "killed"
+    rng = random.Random(0)
+    orphans, epoch = 0, 0
+    try:
+        for attempt in range(3):
+            resume = ["--resume"] * (attempt > 0)
+            forker.stdin.write("\t".join([*args, "--run-dir", str(run), *resume]) + "\n")
+            forker.stdin.flush()
+            child = int(forker.stdout.readline())
+
+            # a random moment: inside the checkpoint write after 2 to 8 more epochs
+            alive = functools.partial(_running, child)
+            if _wait_for_write(run, alive, time.monotonic() + 60, after_epoch=epoch + rng.randint(2, 8)):
+                os.kill(child, signal.SIGKILL)
+            status = int(forker.stdout.readline())
+            assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL, f"not killed: {status}"
+            orphans += len(list(run.glob(".*.tmp")))
+            epoch = torch.load(run / "fm.pt", weights_only=True)["extra"]["epoch"]
+            assert 1 <= epoch < 150
+    finally:
+        forker.stdin.close()
+        forker.wait(timeout=60)
+    assert main([*args, "--run-dir", str(run), "--resume"]) == 0
+    assert orphans > 0, "no kill landed inside a write"
+    assert list(run.rglob("*.tmp")) == []  # the temporary files the kills left are gone
+    whole = load_fm(tmp_path / "whole" / "fm.pt")
+    resumed = load_fm(run / "fm.pt")
+    for (name, a), b in zip(whole.state_dict().items(), resumed.state_dict().values(), strict=True):
+        assert torch.equal(a, b), name
+    epochs = [json.loads(line)["epoch"] for line in (run / "metrics.jsonl").read_text().splitlines()]
+    assert epochs == list(range(1, 151))

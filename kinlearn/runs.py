@@ -1,0 +1,203 @@
+"""One policy for the run directory of every command: no silent overwrite, no silent config drift.
+
+A run directory holds ``config.json`` (the command and its resolved configuration) beside the
+command's outputs. :func:`open_run` decides, before anything is written, what may happen to it:
+
+- it does not exist, or holds neither ``config.json`` nor any of the command's outputs: a new run;
+- it holds a run and ``resume=True``: the run continues, if ``config.json`` records the same command
+  with the same configuration (else :class:`~kinlearn.errors.RunDirectoryError` lists what differs);
+- it holds a run and ``overwrite=True``: the run's ``config.json`` and outputs are deleted and it
+  starts afresh (refused when the folder holds another command's run);
+- otherwise: refused with :class:`~kinlearn.errors.RunDirectoryError`, a finished run or not.
+
+:meth:`Run.begin` then creates the folder, deletes what ``--overwrite`` replaces and temporary
+files of killed writes, and writes ``config.json``; commands call it once all their checks passed.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from .errors import RunDirectoryError
+from .io import read_json, remove_stale_tmp, write_json
+
+__all__ = ["CONFIG_FILE", "IGNORED_KEYS", "META_KEYS", "Run", "diff_configs", "open_run"]
+
+#: The run record every command writes first.
+CONFIG_FILE = "config.json"
+#: Top-level keys of ``config.json`` that describe the invocation, not the configuration.
+META_KEYS = ("args", "versions")
+#: Keys (at any depth) that do not change results and are not compared on resume: progress bars,
+#: and the paths of inputs that are identified by their content hash beside them.
+IGNORED_KEYS = ("progress", "path")
+
+_MISSING = object()
+
+
+def _plain(obj: Any) -> Any:
+    """``obj`` as JSON would give it back (tuples → lists, paths → strings)."""
+    return json.loads(json.dumps(obj, default=str))
+
+
+def _strip(obj: Any, ignore: Iterable[str]) -> Any:
+    ignore = tuple(ignore)
+    if isinstance(obj, dict):
+        return {k: _strip(v, ignore) for k, v in obj.items() if k not in ignore}
+    if isinstance(obj, list):
+        return [_strip(v, ignore) for v in obj]
+    return obj
+
+
+def _short(value: Any) -> str:
+    text = "(absent)" if value is _MISSING else json.dumps(value, sort_keys=True)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def diff_configs(old: Any, new: Any, ignore: Iterable[str] = (), prefix: str = "") -> list[str]:
+    """What differs between two JSON-like configurations, as ``"key.path: old → new"`` lines.
+
+    Keys named in ``ignore`` are skipped at any depth; tuples and lists compare alike.
+    """
+    ignore = tuple(ignore)
+    old, new = _strip(_plain(old), ignore), _strip(_plain(new), ignore)
+    out: list[str] = []
+
+    def walk(a: Any, b: Any, where: str) -> None:
+        if isinstance(a, dict) and isinstance(b, dict):
+            for key in sorted(set(a) | set(b), key=str):
+                walk(a.get(key, _MISSING), b.get(key, _MISSING), f"{where}.{key}" if where else str(key))
+        elif a != b:
+            out.append(f"{where or '(value)'}: {_short(a)} → {_short(b)}")
+
+    walk(old, new, prefix)
+    return out
+
+
+@dataclass(frozen=True)
+class Run:
+    """A run directory cleared for writing by :func:`open_run`.
+
+    ``mode``: ``"new"``, ``"resume"`` (continue the run there) or ``"overwrite"`` (replace it).
+    """
+
+    path: Path
+    command: str
+    mode: Literal["new", "resume", "overwrite"]
+    outputs: tuple[str, ...]
+    record: dict | None
+
+    @property
+    def resumed(self) -> bool:
+        return self.mode == "resume"
+
+    def begin(self) -> Path:
+        """Create the folder, delete what ``overwrite`` replaces and stale temporary files, write
+        ``config.json`` (unless the command keeps none); returns the folder."""
+        self.path.mkdir(parents=True, exist_ok=True)
+        if self.mode == "overwrite":
+            # config.json first: a folder never holds a config.json beside another run's outputs
+            (self.path / CONFIG_FILE).unlink(missing_ok=True)
+            for name in self.outputs:
+                target = self.path / name
+                if target.is_dir() and not target.is_symlink():
+                    shutil.rmtree(target)
+                else:
+                    target.unlink(missing_ok=True)
+        remove_stale_tmp(self.path)
+        for name in self.outputs:
+            if (self.path / name).is_dir():
+                remove_stale_tmp(self.path / name)
+        if self.record is not None:
+            write_json(self.path / CONFIG_FILE, self.record)
+        return self.path
+
+
+def _recorded_command(path: Path) -> tuple[dict | None, str | None]:
+    """``(config.json's content, its command)``; ``(None, None)`` when absent or not a run record."""
+    cfg_path = path / CONFIG_FILE
+    if not cfg_path.is_file():
+        return None, None
+    try:
+        record = read_json(cfg_path)
+    except (OSError, ValueError):
+        return None, None
+    if not isinstance(record, dict):
+        return None, None
+    command = record.get("command")
+    return record, command if isinstance(command, str) else None
+
+
+def open_run(
+    path: str | Path,
+    *,
+    command: str,
+    config: Mapping[str, Any],
+    outputs: Sequence[str],
+    resume: bool = False,
+    overwrite: bool = False,
+    resumable: bool = True,
+    meta: Mapping[str, Any] | None = None,
+    write_config: bool = True,
+    ignore: Iterable[str] = IGNORED_KEYS,
+    option: str = "--run-dir",
+) -> Run:
+    """Check run directory ``path`` for ``command`` (see the module docstring); writes nothing.
+
+    ``config``: the resolved configuration, compared on ``resume`` (keys in ``ignore`` skipped at any
+    depth); ``outputs``: the names of the files and folders the command writes there; ``resumable``:
+    whether the command can continue a run (else only ``overwrite`` opens a held folder); ``meta``:
+    recorded in ``config.json`` but not compared (the arguments, versions); ``write_config=False``
+    for a command that keeps no ``config.json`` (``export``); ``option``: how messages name the folder's
+    command-line option. Raises
+    :class:`~kinlearn.errors.RunDirectoryError` when the folder may not be written.
+    """
+    path = Path(path)
+    if resume and not resumable:
+        raise RunDirectoryError(f"{command} runs cannot be resumed; use --overwrite or another {option}")
+    if resume and overwrite:
+        raise RunDirectoryError("--resume and --overwrite exclude each other: continue the run or replace it")
+    if path.exists() and not path.is_dir():
+        raise RunDirectoryError(f"{path} is a file, not a run directory")
+    outputs = tuple(outputs)
+    record = {"command": command, **_plain(dict(config)), **_plain(dict(meta or {}))}
+    record = record if write_config else None
+    held = [n for n in ((CONFIG_FILE,) if write_config else ()) + outputs if (path / n).exists()]
+    if not held:
+        return Run(path, command, "new", outputs, record)
+    stored, stored_command = _recorded_command(path)
+    what = f"a {stored_command} run" if stored_command else f"the outputs of an earlier {command}"
+    held_text = ", ".join(held)
+    if stored_command is not None and stored_command != command:
+        raise RunDirectoryError(
+            f"{path} holds {what} ({held_text}), not a {command} run; choose another {option}"
+        )
+    if overwrite:
+        return Run(path, command, "overwrite", outputs, record)
+    if resume:
+        if stored is None or stored_command is None:
+            raise RunDirectoryError(
+                f"{path} holds {held_text} but no {CONFIG_FILE} recording the command that made them, so "
+                f"--resume cannot check that it continues the same configuration; use --overwrite or another "
+                f"{option}"
+            )
+        skip = (*META_KEYS, "command")
+        old = {k: v for k, v in stored.items() if k not in skip}
+        new = {k: v for k, v in dict(config).items() if k not in skip}
+        diffs = diff_configs(old, new, ignore)
+        if diffs:
+            shown = "; ".join(diffs[:12]) + (f"; and {len(diffs) - 12} more" if len(diffs) > 12 else "")
+            raise RunDirectoryError(
+                f"--resume: {path} holds a {command} run with another configuration ({shown}); resume "
+                f"with the same options, --overwrite it, or choose another {option}"
+            )
+        return Run(path, command, "resume", outputs, record)
+    how = "pass --resume to continue it with the same configuration, " if resumable else "pass "
+    raise RunDirectoryError(
+        f"{path} already holds {what} ({held_text}); {how}--overwrite to replace it, or choose another "
+        f"{option}"
+    )
