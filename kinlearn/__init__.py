@@ -3,8 +3,10 @@
 Quick start::
 
     import kinlearn
-    plan = kinlearn.plan(start_joints, goal_joints)   # the shipped iiwa14 planner
-    plan.waypoints, plan.joints, plan.ef
+    plan = kinlearn.plan(start_joints, goal_joints)   # the shipped iiwa14 planner, anywhere in its range
+    plan.joints, plan.ef, plan.success, plan.goal_error
+    kinlearn.plan(start_joints, goal_position=[0.5, 0.1, 0.4])   # an end-effector goal
+    plan.timed()                                       # times, velocities, accelerations within limits
 """
 
 from .babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
@@ -14,12 +16,16 @@ from .errors import (
     CheckpointError,
     ConfigError,
     DatasetError,
+    DomainError,
+    DomainWarning,
+    DTypeError,
     JointLimitError,
     KinlearnError,
     MissingDependencyError,
     NonFiniteError,
     PlanningError,
     RobotDescriptionError,
+    RunDirectoryError,
     ShapeError,
     StateError,
     UnknownRobotError,
@@ -39,12 +45,15 @@ from .models import (
     load_im,
     save_model,
 )
-from .plan import Plan
+from .path_model import JointPathConfig, JointPathModel, load_path_model
+from .plan import Plan, Tolerance
 from .planner import Planner, plan
 from .rectify import LossConfig, rectify, tm_loss
 from .robot import ROBOTS, Robot, available_robots, load_robot
 from .state import StateLayout
+from .timing import TimedTrajectory, time_parameterize
 from .train import OptimConfig, TrainConfig, train_config, train_fm, train_im, validate_models
+from .train_path import PathLossConfig, PathTrainConfig, train_path_model
 from .train_tm import TMTrainConfig, load_tm, tm_preset, train_tm
 from .trajectory import TMConfig, TrajectoryModel
 
@@ -58,7 +67,10 @@ __all__ = [
     "BabblingConfig",
     "CheckpointError",
     "ConfigError",
+    "DTypeError",
     "DatasetError",
+    "DomainError",
+    "DomainWarning",
     "EndpointConfig",
     "EndpointPairs",
     "FMConfig",
@@ -66,6 +78,8 @@ __all__ = [
     "IMConfig",
     "InverseModel",
     "JointLimitError",
+    "JointPathConfig",
+    "JointPathModel",
     "Kinematics",
     "KinlearnError",
     "LearnedFM",
@@ -74,16 +88,21 @@ __all__ = [
     "MissingDependencyError",
     "NonFiniteError",
     "OptimConfig",
+    "PathLossConfig",
+    "PathTrainConfig",
     "Plan",
     "Planner",
     "PlanningError",
     "Robot",
     "RobotDescriptionError",
+    "RunDirectoryError",
     "ShapeError",
     "StateError",
     "StateLayout",
     "TMConfig",
     "TMTrainConfig",
+    "TimedTrajectory",
+    "Tolerance",
     "TrainConfig",
     "TrajectoryModel",
     "Transitions",
@@ -98,6 +117,7 @@ __all__ = [
     "load_endpoints",
     "load_fm",
     "load_im",
+    "load_path_model",
     "load_robot",
     "load_tm",
     "load_transitions",
@@ -110,11 +130,13 @@ __all__ = [
     "save_model",
     "save_transitions",
     "summarize",
+    "time_parameterize",
     "tm_loss",
     "tm_preset",
     "train_config",
     "train_fm",
     "train_im",
+    "train_path_model",
     "train_tm",
     "trajectory_metrics",
     "validate_models",

@@ -56,16 +56,12 @@ def _endpoints(robot: Robot, start: torch.Tensor, goal: torch.Tensor, steps: int
 
 
 def _plan_from_joints(robot: Robot, start, goal, joints: torch.Tensor, waypoints=None) -> Plan:
-    """A Plan whose joint path is ``joints (..., T+1, dof)``; waypoints default to its interior FK points."""
+    """A Plan whose joint path is ``joints (..., T+1, dof)``, judged against the goal state (joints and
+    end effector); waypoints default to its interior FK points."""
     ef = kinematics(robot, "fast").position(joints, validate=False)
-    return Plan(
-        start=start,
-        goal=goal,
-        waypoints=ef[..., 1:-1, :] if waypoints is None else waypoints,
-        actions=joints[..., 1:, :] - joints[..., :-1, :],
-        joints=joints,
-        ef=ef,
-    )
+    lo, hi = robot.limits(joints.dtype, joints.device)
+    within = ((joints >= lo - 1e-6) & (joints <= hi + 1e-6)).flatten(-2).all(-1)
+    return Plan.from_joints(goal, joints, ef, waypoints=waypoints, within_limits=within, robot=robot.name)
 
 
 def _fractions(steps: int, like: torch.Tensor) -> torch.Tensor:

@@ -1,21 +1,39 @@
-"""``kinlearn`` subcommands of the planning stage: endpoints, TM training, planning, reproduction."""
+"""``kinlearn`` subcommands of the planning stage: endpoints, TM training, planning, reproduction.
+
+Every command but ``plan`` writes under the run-directory policy of :mod:`kinlearn.runs`.
+"""
 
 from __future__ import annotations
 
 import argparse
-import shutil
+import dataclasses
+import re
 from pathlib import Path
 
 import torch
 
-from .cli import _run_dir, _write_config, add_command, register_subcommand
+from .cli import (
+    NONNEGATIVE_FLOAT,
+    NONNEGATIVE_INT,
+    POSITIVE_FLOAT,
+    POSITIVE_INT,
+    _file_identity,
+    add_command,
+    add_run_options,
+    number_type,
+    open_command_run,
+    register_subcommand,
+    settle_run_dir,
+)
 from .endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
 from .errors import ConfigError
-from .io import load_checkpoint, save_checkpoint
+from .io import atomic_copy, file_sha256, load_checkpoint, resolve_dependency, save_checkpoint
 from .metrics import plan_metrics, summarize
+from .models import load_fm, load_im
 from .planner import DEFAULT_CHECKPOINTS, Planner
 from .rectify import LOSS_PRESETS
-from .train import OptimConfig
+from .robot import load_robot
+from .runs import open_run
 from .train_tm import TM_PRESETS, tm_preset, train_tm
 
 # --------------------------------------------------------------------------------------------------
@@ -31,14 +49,21 @@ def _add_make_endpoints(sub) -> None:
         "Draw [s(0), s(T)] endpoint pairs; writes endpoints_train.npz and endpoints_heldout.npz.",
         _run_make_endpoints,
     )
-    p.add_argument("--n", type=int, default=12_000, help="training pairs (default: 12000)")
-    p.add_argument("--heldout", type=int, default=2_000, help="held-out pairs (default: 2000)")
-    p.add_argument("--start-spread", type=float, default=0.15, help="start noise around home, rad")
-    p.add_argument("--min-distance", type=float, default=0.2, help="least start-goal distance, m")
+    p.add_argument("--n", type=POSITIVE_INT, default=12_000, help="training pairs, ≥ 1 (default: 12000)")
+    p.add_argument(
+        "--heldout",
+        type=NONNEGATIVE_INT,
+        default=2_000,
+        help="held-out pairs (default: 2000; 0: none, and train-tm reports no held-out metrics)",
+    )
+    p.add_argument(
+        "--start-spread", type=NONNEGATIVE_FLOAT, default=0.15, help="start noise around home, rad"
+    )
+    p.add_argument("--min-distance", type=NONNEGATIVE_FLOAT, default=0.2, help="least start-goal distance, m")
+    add_run_options(p, resumable=False)
 
 
 def _run_make_endpoints(args: argparse.Namespace) -> int:
-    run_dir = _run_dir(args)
     cfg = EndpointConfig(
         robot=args.robot,
         n=args.n + args.heldout,
@@ -46,10 +71,14 @@ def _run_make_endpoints(args: argparse.Namespace) -> int:
         start_spread=args.start_spread,
         min_distance=args.min_distance,
     )
-    train, heldout = make_endpoints(cfg).split(args.n)
+    outputs = ("endpoints_train.npz", "endpoints_heldout.npz")
+    run = open_command_run(args, outputs, endpoints=dataclasses.asdict(cfg), split={"train": args.n})
+    pairs = make_endpoints(cfg)  # may refuse the config: before anything is written
+    run_dir = run.begin()
+    train, heldout = pairs.split(args.n)
     save_endpoints(train, run_dir / "endpoints_train.npz")
-    save_endpoints(heldout, run_dir / "endpoints_heldout.npz")
-    _write_config(args, endpoints=cfg.__dict__)
+    if len(heldout):
+        save_endpoints(heldout, run_dir / "endpoints_heldout.npz")
     print(f"{len(train)} training and {len(heldout)} held-out pairs for {args.robot} in {run_dir}")
     return 0
 
@@ -72,49 +101,115 @@ def _add_train_tm(sub) -> None:
     p.add_argument("--fm-checkpoint", type=Path, default=None, help="a learned fm.pt (from train-fm)")
     p.add_argument("--im-checkpoint", type=Path, default=None, help="a learned im.pt (from train-im)")
     p.add_argument("--models-dir", type=Path, default=None, help="or: one folder holding fm.pt and im.pt")
-    p.add_argument("--fm", choices=("learned", "analytic"), default="learned")
-    p.add_argument("--im", choices=("learned", "analytic"), default="learned")
-    p.add_argument("--epochs", type=int, default=None)
-    p.add_argument("--batch-size", type=int, default=None)
-    p.add_argument("--optimizer", choices=("adam", "adamw", "rmsprop", "sgd"), default=None)
-    p.add_argument("--lr", type=float, default=None)
-    p.add_argument("--alpha", type=float, default=None, help="RMSprop smoothing constant γ")
+    p.add_argument(
+        "--fm",
+        choices=("learned", "analytic"),
+        default="learned",
+        help="forward model: learned (a checkpoint) or analytic (the robot's FK) (default: learned)",
+    )
+    p.add_argument(
+        "--im",
+        choices=("learned", "analytic"),
+        default="learned",
+        help="inverse model: learned (a checkpoint) or analytic (a DLS IK step) (default: learned)",
+    )
+    p.add_argument("--epochs", type=POSITIVE_INT, default=None, help="override the preset's epochs")
+    p.add_argument("--batch-size", type=POSITIVE_INT, default=None, help="override the preset's batch size")
+    p.add_argument(
+        "--optimizer",
+        choices=("adam", "adamw", "rmsprop", "sgd"),
+        default=None,
+        help="override the preset's optimiser",
+    )
+    p.add_argument(
+        "--lr", type=POSITIVE_FLOAT, default=None, help="override the preset's learning rate (> 0)"
+    )
+    p.add_argument(
+        "--alpha",
+        type=number_type(float, low=0, high=1, open_high=True),
+        default=None,
+        help="RMSprop smoothing constant γ, in [0, 1)",
+    )
     p.add_argument("--loss", choices=sorted(LOSS_PRESETS), default=None, help="loss preset")
     p.add_argument("--gradient", choices=("stop", "through"), default=None, help="through the FM/IM or not")
-    p.add_argument("--no-progress", action="store_true")
+    add_run_options(p, resumable=True)
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _tm_model_sources(args: argparse.Namespace, run_dir: Path) -> dict[str, Path]:
+    """The learned FM/IM files to train through, checked (they load, for this robot)."""
+    sources = {}
+    for kind, loader in (("fm", load_fm), ("im", load_im)):
+        given = getattr(args, f"{kind}_checkpoint")
+        if given is not None and not given.is_file():
+            raise ConfigError(f"--{kind}-checkpoint: no file at {given}")
+        if getattr(args, kind) != "learned":
+            if given is not None:
+                raise ConfigError(f"--{kind}-checkpoint names a learned model, but --{kind} is analytic")
+            continue
+        src = given or (args.models_dir / f"{kind}.pt" if args.models_dir is not None else None)
+        if src is None:
+            raise ConfigError(
+                f"a learned {kind.upper()} needs --{kind}-checkpoint or --models-dir (or --{kind} analytic)"
+            )
+        if not src.is_file():
+            raise ConfigError(f"--models-dir: no {kind}.pt in {src.parent}")
+        if src.resolve().parent == run_dir.resolve():
+            raise ConfigError(f"{src} lies in the run directory itself; train the TM into another --run-dir")
+        loader(src, robot=args.robot)
+        sources[kind] = src
+    return sources
 
 
 def _run_train_tm(args: argparse.Namespace) -> int:
-    run_dir = _run_dir(args)
+    # Every check first: config, endpoint pairs, the FM/IM files; nothing is written before they pass.
     over: dict = {"robot": args.robot, "fm": args.fm, "im": args.im, "seed": args.seed}
-    if args.models_dir is not None:
-        over["models_dir"] = str(args.models_dir.resolve())
-    for kind, path in (("fm", args.fm_checkpoint), ("im", args.im_checkpoint)):
-        if path is not None:  # the run directory becomes the models' folder
-            if not path.is_file():
-                raise ConfigError(f"--{kind}-checkpoint: no file at {path}")
-            shutil.copyfile(path, run_dir / f"{kind}.pt")
-            over["models_dir"] = str(run_dir.resolve())
     for key in ("epochs", "batch_size", "loss"):
         if getattr(args, key) is not None:
             over[key] = getattr(args, key)
     cfg = tm_preset(args.preset, **over)
-    if args.optimizer or args.lr or args.alpha:
-        o = cfg.optim
-        cfg.optim = OptimConfig(
-            name=args.optimizer or o.name, lr=args.lr or o.lr, alpha=args.alpha or o.alpha
-        )
-    if args.gradient:
-        cfg.loss.gradient = args.gradient
-    train = load_endpoints(args.endpoints / "endpoints_train.npz", robot=args.robot)
+    changes = {k: getattr(args, a) for k, a in (("name", "optimizer"), ("lr", "lr"), ("alpha", "alpha"))}
+    changes = {k: v for k, v in changes.items() if v is not None}  # 0 is a value, not "unset"
+    if changes:
+        cfg = dataclasses.replace(cfg, optim=dataclasses.replace(cfg.optim, **changes))
+    if args.gradient is not None:
+        cfg = dataclasses.replace(cfg, loss=dataclasses.replace(cfg.loss, gradient=args.gradient))
+    train_path = args.endpoints / "endpoints_train.npz"
+    train = load_endpoints(train_path, robot=args.robot)
     heldout_path = args.endpoints / "endpoints_heldout.npz"
     heldout = load_endpoints(heldout_path, robot=args.robot) if heldout_path.is_file() else None
-    for kind in ("fm", "im"):  # keep the run self-contained: copy the learned models beside tm.pt
-        if getattr(cfg, kind) == "learned" and cfg.models_dir:
-            src = Path(cfg.models_dir) / f"{kind}.pt"
-            if src.is_file() and src.resolve() != (run_dir / f"{kind}.pt").resolve():
-                shutil.copyfile(src, run_dir / f"{kind}.pt")
-    train_tm(cfg, run_dir, train, heldout, progress=not args.no_progress)
+    if heldout is not None and len(heldout) == 0:
+        heldout = None
+    sources = _tm_model_sources(args, settle_run_dir(args))
+    endpoints = {"path": str(args.endpoints), "train_sha256": file_sha256(train_path)}
+    if heldout is not None:
+        endpoints["heldout_sha256"] = file_sha256(heldout_path)
+    models = {k: _file_identity(sources[k]) if k in sources else "analytic" for k in ("fm", "im")}
+    outputs = ("tm.pt", "fm.pt", "im.pt", "metrics.jsonl", "tensorboard")
+    run = open_command_run(
+        args,
+        outputs,
+        resumable=True,
+        tm={**cfg.to_dict(), "models_dir": None},
+        endpoints=endpoints,
+        models=models,
+    )
+    run_dir = run.begin()
+    for kind, src in sources.items():  # the run is self-contained: the models beside tm.pt
+        dst = run_dir / f"{kind}.pt"
+        if not (dst.is_file() and file_sha256(dst) == models[kind]["sha256"]):
+            atomic_copy(src, dst)
+    if sources:
+        cfg = dataclasses.replace(cfg, models_dir=str(run_dir))
+    train_tm(
+        cfg,
+        run_dir,
+        train,
+        heldout,
+        resume=run.resumed,
+        progress=not args.no_progress,
+        write_config=False,
+    )
     if heldout is not None:
         planner = Planner.load(run_dir)
         s = summarize(plan_metrics(planner.plan(heldout.start, heldout.goal), planner.robot))
@@ -138,31 +233,190 @@ def _summary_line(s: dict) -> str:
 
 
 def _floats(text: str) -> list[float]:
-    return [float(v) for v in text.replace(",", " ").split()]
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}") from None
+    if not values:
+        raise argparse.ArgumentTypeError("expected at least one number")
+    return values
+
+
+#: Lets ``--start -0.3,0.45,…`` through: argparse otherwise takes a value starting with "-" for an option.
+_NEGATIVE_VALUES = re.compile(r"^-\.?\d[\d.,eE+\- ]*$")
 
 
 @register_subcommand
 def _add_plan(sub) -> None:
-    p = add_command(sub, "plan", "Plan one trajectory and print it.", _run_plan)
-    p.add_argument(
-        "--start", type=_floats, required=True, help="start joints (or full state), comma-separated"
+    p = add_command(
+        sub,
+        "plan",
+        "Plan from a start to a goal and print how it went. Exit status 0 when every plan reaches its "
+        "goal, 1 when one misses it (the table says by how much), 2 for bad input.",
+        _run_plan,
+        seed=False,
+        run_dir=False,
     )
-    p.add_argument("--goal", type=_floats, required=True, help="goal joints (or full state), comma-separated")
-    p.add_argument("--model", type=Path, default=None, help="a train-tm run directory (default: shipped)")
+    p._negative_number_matcher = _NEGATIVE_VALUES
+    p.add_argument(
+        "--start",
+        type=_floats,
+        required=True,
+        help="start joints (rad) or a full state [θ, ef], comma-separated",
+    )
+    goal = p.add_mutually_exclusive_group(required=True)
+    goal.add_argument("--goal", type=_floats, help="goal joints (rad) or a full state, comma-separated")
+    goal.add_argument(
+        "--goal-position",
+        type=_floats,
+        help="goal end-effector position x,y,z (m, base frame), any configuration",
+    )
+    p.add_argument("--model", type=Path, default=None, help="a planner folder (default: the shipped planner)")
+    p.add_argument("--strict", action="store_true", help="refuse a start or goal outside the training domain")
+    p.add_argument("--joints", action="store_true", help="also print the joint path")
+    p.add_argument(
+        "--timed",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="write a time-parameterised trajectory within the robot's limits (.csv or .json) for a controller",
+    )
+    p.add_argument(
+        "--velocity-scale",
+        type=number_type(float, low=0, high=1, open_low=True),
+        default=1.0,
+        help="fraction of the velocity limits the timed trajectory may use (default: 1)",
+    )
 
 
 def _run_plan(args: argparse.Namespace) -> int:
     planner = Planner.load(args.model, robot=args.robot) if args.model else Planner.default(args.robot)
-    plan = planner.plan(
-        torch.tensor(args.start, dtype=torch.float64), torch.tensor(args.goal, dtype=torch.float64)
+    start = torch.tensor(args.start, dtype=torch.float64)
+    if args.goal_position is not None:
+        plan = planner.plan(
+            start, goal_position=torch.tensor(args.goal_position, dtype=torch.float64), strict=args.strict
+        )
+    else:
+        plan = planner.plan(start, torch.tensor(args.goal, dtype=torch.float64), strict=args.strict)
+    print(plan.summary())
+    if args.joints:
+        print("\njoint path (rad), one configuration per line:")
+        for q in plan.joints.tolist():
+            print("  " + ", ".join(f"{v:+.4f}" for v in q))
+    if args.timed is not None:
+        suffix = args.timed.suffix.lower()
+        if suffix not in (".csv", ".json"):
+            raise ConfigError(f"--timed must name a .csv or .json file, got {args.timed}")
+        traj = plan.timed(planner.robot, velocity_scale=args.velocity_scale)
+        (traj.to_csv if suffix == ".csv" else traj.to_json)(args.timed)
+        print(f"timed trajectory: {len(traj.t)} samples over {traj.duration:.3f} s → {args.timed}")
+    return 0 if bool(plan.success.all()) else 1
+
+
+@register_subcommand
+def _add_train_planner(sub) -> None:
+    p = add_command(
+        sub,
+        "train-planner",
+        "Train a joint-path TM (plans anywhere in the joint range, ends at the goal state) through a frozen "
+        "FM, self-supervised; the run folder is a planner (tm.pt beside the fm.pt/im.pt it plans with).",
+        _run_train_planner,
     )
-    torch.set_printoptions(precision=4, sci_mode=False)
-    print("waypoints (end effector, m):")
-    print(plan.waypoints)
-    print("joint path (rad):")
-    print(plan.joints)
-    err = float((plan.ef[-1] - plan.goal[planner.layout.ef]).norm())
-    print(f"executed end effector at the end: {plan.ef[-1].tolist()}; goal error {err * 1e3:.2f} mm")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--fm-checkpoint", type=Path, help="the learned FM to train through (fm.pt)")
+    src.add_argument(
+        "--analytic-fm", action="store_true", help="train through the analytic FK (the ablation)"
+    )
+    p.add_argument(
+        "--im-checkpoint",
+        type=Path,
+        default=None,
+        help="a learned IM kept beside the TM for position goals (im.pt)",
+    )
+    p.add_argument(
+        "--iterations", type=POSITIVE_INT, default=6000, help="training iterations (default: 6000)"
+    )
+    p.add_argument(
+        "--batch-size", type=POSITIVE_INT, default=512, help="problems per iteration (default: 512)"
+    )
+    p.add_argument(
+        "--lr", type=POSITIVE_FLOAT, default=2e-3, help="Adam learning rate, cosine decay (default: 2e-3)"
+    )
+    p.add_argument(
+        "--hidden",
+        type=_ints,
+        default=(128, 128, 128),
+        help="MLP hidden widths, comma-separated (default: 128,128,128)",
+    )
+    p.add_argument(
+        "--modes", type=NONNEGATIVE_INT, default=6, help="sine modes of the joint correction (0: free)"
+    )
+    p.add_argument(
+        "--heldout",
+        type=NONNEGATIVE_INT,
+        default=500,
+        help="held-out workspace pairs judged at the end (0: none)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_run_options(p, resumable=True)
+
+
+def _ints(text: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in text.replace(",", " ").split())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected integers separated by commas, got {text!r}") from None
+    if not values or min(values) < 1:
+        raise argparse.ArgumentTypeError(f"expected positive integers, got {text!r}")
+    return values
+
+
+def _run_train_planner(args: argparse.Namespace) -> int:
+    from .models import AnalyticFM, save_model
+    from .train_path import PathTrainConfig, train_path_model
+    from .workspace import evaluate_workspace, heldout_pairs, workspace_table
+
+    robot = load_robot(args.robot)
+    fm = AnalyticFM(robot) if args.analytic_fm else load_fm(args.fm_checkpoint, robot=robot.name)
+    if args.im_checkpoint is not None:
+        load_im(args.im_checkpoint, robot=robot.name)  # checked before anything is written
+    cfg = PathTrainConfig(
+        robot=robot.name,
+        fm="analytic" if args.analytic_fm else "learned",
+        fm_checkpoint="fm.pt" if not args.analytic_fm else None,
+        iterations=args.iterations,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        model={"hidden": list(args.hidden), "modes": args.modes},
+        seed=args.seed,
+    )
+    models = {"fm": "analytic" if args.analytic_fm else _file_identity(args.fm_checkpoint)}
+    if args.im_checkpoint is not None:
+        models["im"] = _file_identity(args.im_checkpoint)
+    run = open_command_run(
+        args,
+        ("tm.pt", "fm.pt", "im.pt", "metrics.jsonl", "tensorboard"),
+        resumable=True,
+        planner=cfg.to_dict(),
+        models=models,
+    )
+    run_dir = run.begin()
+    if args.analytic_fm:
+        save_model(fm, run_dir / "fm.pt")
+    else:
+        atomic_copy(args.fm_checkpoint, run_dir / "fm.pt")
+    if args.im_checkpoint is not None:
+        atomic_copy(args.im_checkpoint, run_dir / "im.pt")
+    train_path_model(
+        cfg, run_dir, fm=fm, resume=run.resumed, progress=not args.no_progress, write_config=False
+    )
+    if args.heldout:
+        planner = Planner.load(run_dir)
+        pairs = heldout_pairs(robot, n=args.heldout)
+        res = evaluate_workspace(robot, pairs, {"this planner": lambda a, b: planner.plan(a, b)})
+        print(f"held-out workspace pairs ({args.heldout}, uniform within ±90% of the joint range):")
+        print(workspace_table(res))
+    print(f"trained planner in {run_dir}")
     return 0
 
 
@@ -189,16 +443,18 @@ def _add_reproduce(sub) -> None:
     mode.add_argument(
         "--full", action="store_const", const="full", dest="preset", help="paper sizes, 10 seeds"
     )
-    p.add_argument("--workers", type=int, default=None, help="worker processes of the TM sweep")
+    p.add_argument(
+        "--workers", type=POSITIVE_INT, default=None, help="worker processes of the TM sweep (≥ 1)"
+    )
     p.add_argument("--backend", choices=("local", "ray"), default="local", help="where the sweep runs")
-    p.add_argument("--no-progress", action="store_true")
+    add_run_options(p, resumable=True)
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(preset="quick")
 
 
 def _run_reproduce(args: argparse.Namespace) -> int:
     from .reproduce import default_workers, preset_config, reproduce
 
-    run_dir = _run_dir(args)
     cfg = preset_config(
         args.preset,
         robot=args.robot,
@@ -206,7 +462,22 @@ def _run_reproduce(args: argparse.Namespace) -> int:
         workers=args.workers or default_workers(),
         backend=args.backend,
     )
-    reproduce(cfg, run_dir, progress=not args.no_progress)
+    outputs = (
+        "results.json",
+        "results.md",
+        "models",
+        "tm",
+        "endpoints_train.npz",
+        "endpoints_heldout.npz",
+        "fig3_trajectories.png",
+        "fig4_histograms.png",
+    )
+    # where and how wide the sweep runs does not change its results: a resume may change them
+    run = open_command_run(
+        args, outputs, resumable=True, ignore=("workers", "backend"), reproduce=dataclasses.asdict(cfg)
+    )
+    run_dir = run.begin()
+    reproduce(cfg, run_dir, progress=not args.no_progress, write_config=False)
     print((run_dir / "results.md").read_text())
     print(f"results in {run_dir}")
     return 0
@@ -222,23 +493,66 @@ def _add_export(sub) -> None:
     p = add_command(
         sub,
         "export",
-        "Copy a train-tm run's tm.pt, fm.pt and im.pt into a folder, without optimiser state "
-        f"(default folder: the package's shipped planner, {DEFAULT_CHECKPOINTS.name}/<robot>).",
+        "Write a train-tm run's tm.pt and the fm.pt/im.pt it was trained through into one folder, without "
+        "optimiser state: --out DIR, or --to-package for the planner shipped inside the package "
+        f"({DEFAULT_CHECKPOINTS.name}/<robot>).",
         _run_export,
+        seed=False,
+        run_dir=False,
     )
     p.add_argument("--model", type=Path, required=True, help="a train-tm run directory")
-    p.add_argument("--out", type=Path, default=None)
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", type=Path, default=None, help="the folder to write")
+    where.add_argument(
+        "--to-package",
+        action="store_true",
+        help=f"write into the package's {DEFAULT_CHECKPOINTS.name}/<robot>, the planner kinlearn.plan uses",
+    )
+    add_run_options(p, resumable=False)
+
+
+def _export_sources(model_dir: Path, payload: dict) -> dict[str, Path]:
+    """The fm.pt/im.pt the TM of ``model_dir`` was trained through (verified by hash where recorded)."""
+    from .train_tm import TMTrainConfig
+
+    tm_path = model_dir / "tm.pt"
+    if payload["kind"] != "tm":  # another planner model: its FM/IM, where it has them, lie beside it
+        return {k: model_dir / f"{k}.pt" for k in ("fm", "im") if (model_dir / f"{k}.pt").is_file()}
+    config = TMTrainConfig.from_dict(payload["config"])
+    sources = {}
+    for kind in ("fm", "im"):
+        if getattr(config, kind) != "learned":
+            continue
+        if kind in payload["depends"]:
+            sources[kind] = resolve_dependency(tm_path, payload, kind)
+        elif (model_dir / f"{kind}.pt").is_file():  # a format-1 run: the models beside tm.pt
+            sources[kind] = model_dir / f"{kind}.pt"
+        elif config.models_dir and (Path(config.models_dir) / f"{kind}.pt").is_file():
+            sources[kind] = Path(config.models_dir) / f"{kind}.pt"
+        else:
+            raise ConfigError(f"cannot find the {kind}.pt that {tm_path} was trained through")
+    return sources
 
 
 def _run_export(args: argparse.Namespace) -> int:
-    out = args.out or DEFAULT_CHECKPOINTS / args.robot
+    out = args.out if args.out is not None else DEFAULT_CHECKPOINTS / args.robot
     planner = Planner.load(args.model, robot=args.robot)  # checks the run is complete and consistent
-    for kind in ("tm", "fm", "im"):
-        src = args.model / f"{kind}.pt"
-        if not src.is_file():
-            if kind == "tm":
-                raise ConfigError(f"{args.model} has no tm.pt")
-            continue
+    tm_payload = load_checkpoint(args.model / "tm.pt", kind=None, robot=planner.robot.name)
+    sources = _export_sources(args.model, tm_payload)
+    if out.resolve() == args.model.resolve():
+        raise ConfigError("--out is the run directory itself; export into another folder")
+    run = open_run(
+        out,
+        command="export",
+        config={},
+        outputs=("tm.pt", "fm.pt", "im.pt"),
+        overwrite=args.overwrite,
+        resumable=False,
+        write_config=False,
+        option="--out",
+    )
+    out = run.begin()
+    for kind, src in sources.items():
         payload = load_checkpoint(src, kind=kind, robot=planner.robot.name)
         save_checkpoint(
             out / f"{kind}.pt",
@@ -247,5 +561,17 @@ def _run_export(args: argparse.Namespace) -> int:
             config=payload["config"],
             state_dict=payload["state_dict"],
         )
+    config = tm_payload["config"]
+    if tm_payload["kind"] == "tm":  # the FM/IM are recorded by identity, not by a folder
+        config = {**config, "models_dir": None}
+    save_checkpoint(  # last: it records the exported fm.pt/im.pt by hash
+        out / "tm.pt",
+        kind=tm_payload["kind"],
+        robot=tm_payload["robot"],
+        config=config,
+        state_dict=tm_payload["state_dict"],
+        depends={kind: out / f"{kind}.pt" for kind in sources},
+    )
+    Planner.load(out, robot=planner.robot.name)  # the exported folder loads on its own
     print(f"exported the planner of {args.model} to {out}")
     return 0

@@ -56,3 +56,28 @@ class PlanningError(KinlearnError, RuntimeError):
 
 class TrainingDivergedError(ConfigError):
     """Training produced a non-finite loss (usually: the learning rate is too high)."""
+
+
+class TimingError(PlanningError):
+    """A joint path that could not be time-parameterised within the given limits."""
+
+
+class RunDirectoryError(ConfigError):
+    """A run directory that already holds a run: continue it (``--resume``, same configuration), replace it
+    (``--overwrite``) or choose another one."""
+
+
+class DTypeError(ShapeError, TypeError):
+    """A tensor of a type that cannot hold the values asked for (bool or complex joint values, ...)."""
+
+
+class ObstacleError(KinlearnError, ValueError):
+    """Obstacles that cannot describe a scene: wrong shape, NaN/inf, a radius or half extent that is not > 0."""
+
+
+class DomainError(KinlearnError, ValueError):
+    """A start or goal outside the domain the planner was trained on (raised with ``strict=True``)."""
+
+
+class DomainWarning(UserWarning):
+    """A start or goal outside the domain the planner was trained on: its plan may be poor."""

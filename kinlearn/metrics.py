@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import torch
 
 from .errors import ConfigError, ShapeError
+from .kinematics import kinematics
 from .plan import Plan
 from .robot import Robot, check_finite, check_last_dim
 from .state import StateLayout
@@ -43,6 +44,7 @@ __all__ = [
     "TABLE2_COLUMNS",
     "ZERO_LENGTH",
     "MetricInfo",
+    "dense_path_length",
     "format_table",
     "interior_angles",
     "plan_metrics",
@@ -86,6 +88,11 @@ METRICS: dict[str, MetricInfo] = {
     "executed_mean_angle": MetricInfo("exec. avg. angle (°)", 1),
     "executed_min_angle": MetricInfo("exec. min. angle (°)", 1),
     "success": MetricInfo("success ≤ 1 cm", 1, indicator=True),
+    "joint_goal_error": MetricInfo("joint goal error (rad)", 4),
+    "state_success": MetricInfo("goal state reached", 1, indicator=True),
+    "executed_sharp_turn": MetricInfo("exec. turn < 90°", 1, indicator=True),
+    "dense_path_length": MetricInfo("executed path, dense (m)", 3),
+    "path_ratio": MetricInfo("path / joint lerp", 3),
     "limit_violation": MetricInfo("limit violations", 1, indicator=True),
     "sharp_turn": MetricInfo("min. angle < 90°", 1, indicator=True),
     "sharp_turn_paper": MetricInfo("min. angle < 69.9°", 1, indicator=True),
@@ -223,7 +230,11 @@ def trajectory_metrics(
 
 
 def plan_metrics(
-    plan: Plan, robot: Robot, success_radius: float = 0.01, limit_tol: float = 1e-6
+    plan: Plan,
+    robot: Robot,
+    success_radius: float = 0.01,
+    limit_tol: float = 1e-6,
+    joint_tolerance: float = 0.05,
 ) -> dict[str, torch.Tensor]:
     """Every per-trajectory metric of a batch of plans: the paper's and those of executing the plan.
 
@@ -238,6 +249,10 @@ def plan_metrics(
     - ``path_length`` = Σ_k ‖plan.ef[..., k+1, :] − plan.ef[..., k, :]‖ (m);
     - ``executed_avg_spacing``, ``executed_max_spacing_deviation``, ``executed_mean_angle``,
       ``executed_min_angle``: the paper's spacing and angle metrics of the executed path itself;
+    - ``joint_goal_error`` = max over joints of |plan.joints[..., T, :] − θ(s(T))| (rad); ``state_success``:
+      1 where the goal *state* is reached, goal_error ≤ ``success_radius`` and joint_goal_error ≤
+      ``joint_tolerance``;
+    - ``executed_sharp_turn``: 1 where the executed path (``plan.ef``) turns sharper than 90° anywhere;
     - ``limit_violation``: 1 where any joint value of the path leaves ``robot``'s position limits by more
       than ``limit_tol`` rad, else 0;
     - ``sharp_turn``: 1 where ``min_angle`` < 90°; ``sharp_turn_paper``: 1 where ``min_angle`` < 69.9°.
@@ -266,18 +281,22 @@ def plan_metrics(
     check_finite(plan.ef, "plan.ef")
 
     _, ef_start = layout.split(plan.start)
-    _, ef_goal = layout.split(plan.goal)
+    ef_goal = plan.target  # the goal state's end effector, or the position asked for
     out = trajectory_metrics(ef_start, plan.waypoints, ef_goal)
     dtype = out["init_distance"].dtype
 
     ef = plan.ef.double()
     executed = _polyline_metrics(ef, prefix="executed_")
     goal_error = torch.linalg.vector_norm(ef[..., -1, :] - ef_goal.double(), dim=-1)
+    joint_goal_error = (plan.joints[..., -1, :] - plan.goal[..., : robot.dof]).double().abs().amax(-1)
     lo, hi = robot.limits(plan.joints.dtype, plan.joints.device)
     outside = (plan.joints < lo - limit_tol) | (plan.joints > hi + limit_tol)
     extra = {
         "goal_error": goal_error,
         "success": (goal_error <= success_radius).double(),
+        "joint_goal_error": joint_goal_error,
+        "state_success": ((goal_error <= success_radius) & (joint_goal_error <= joint_tolerance)).double(),
+        "executed_sharp_turn": (executed["executed_min_angle"] < SHARP_ANGLE).double(),
         "start_error": torch.linalg.vector_norm(ef[..., 0, :] - ef_start.double(), dim=-1),
         "tracking_error": torch.linalg.vector_norm(ef[..., 1:-1, :] - plan.waypoints.double(), dim=-1).mean(
             -1
@@ -298,6 +317,27 @@ def plan_metrics(
 # --------------------------------------------------------------------------------------------------
 # Summaries and tables
 # --------------------------------------------------------------------------------------------------
+
+
+def dense_path_length(robot: Robot, joints: torch.Tensor, max_step: float = 0.01) -> torch.Tensor:
+    """Length (m) of the end-effector path that executing ``joints (..., T+1, dof)`` draws: the joint path
+    is followed linearly between consecutive configurations, sampled so that no joint moves more than
+    ``max_step`` rad between samples, and the samples' exact FK positions are joined. ``(...)``, float64.
+    """
+    check_last_dim(joints, robot.dof, "joints")
+    q = joints.double().reshape(-1, *joints.shape[-2:])
+    step = float((q[:, 1:] - q[:, :-1]).abs().amax()) if q.shape[1] > 1 else 0.0
+    m = max(1, math.ceil(step / max_step))
+    f = torch.arange(m, dtype=q.dtype)[:, None] / m
+    dense = torch.cat(
+        ((q[:, :-1, None] + f * (q[:, 1:, None] - q[:, :-1, None])).flatten(1, 2), q[:, -1:]), 1
+    )
+    kin = kinematics(robot)
+    lengths = []
+    for chunk in dense.split(max(1, 2_000_000 // dense.shape[1])):
+        ef = kin.position(chunk, validate=False)
+        lengths.append((ef[:, 1:] - ef[:, :-1]).norm(dim=-1).sum(-1))
+    return torch.cat(lengths).reshape(joints.shape[:-2])
 
 
 def summarize(per_traj: Mapping[str, torch.Tensor]) -> dict[str, dict[str, float]]:

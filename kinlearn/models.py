@@ -135,6 +135,23 @@ class ForwardModel(_RobotModel):
     def _forward(self, s: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
 
+    def ef_along(self, theta: torch.Tensor, ef0: torch.Tensor, every: int = 1) -> torch.Tensor:
+        """The end effector the model predicts along a joint path, rolled out from a known start.
+
+        ``theta``: ``(N, L, dof)`` the joint path (θ(0) first); ``ef0``: ``(N, 3)`` the end effector at
+        θ(0). Each step's state keeps the path's exact joints and takes its end effector from the
+        model: ef(k+1) = FM[[θ(k), ef(k)], θ(k+1) − θ(k)]'s ef. Returns the end effector at every
+        ``every``-th configuration (0, every, 2·every, …), ``(N, ⌈L / every⌉, 3)``, ef(0) = ``ef0``.
+        The steps should stay within the range the model was trained on (the babbling step bound).
+        Models whose end effector is a function of the joints override this with a parallel version
+        that evaluates only the configurations asked for.
+        """
+        efs = [ef0]
+        for k in range(theta.shape[1] - 1):
+            s = self.layout.join(theta[:, k], efs[-1])
+            efs.append(self(s, theta[:, k + 1] - theta[:, k])[..., self.layout.ef])
+        return torch.stack(efs[::every], dim=1)
+
 
 class InverseModel(_RobotModel):
     """``forward(s (..., S), ef_target (..., 3)) -> a (..., dof)``; attributes ``layout``, ``robot_name``."""
@@ -374,6 +391,15 @@ class LearnedFM(ForwardModel):
             step = (step - self.out_norm.mean[self.layout.ef]) / self.out_norm.std[self.layout.ef]
         return torch.cat((self.joints_head(h), step), dim=-1)
 
+    def ef_along(self, theta: torch.Tensor, ef0: torch.Tensor, every: int = 1) -> torch.Tensor:
+        """See :meth:`ForwardModel.ef_along`. With ``ef_mode="difference"`` the rollout telescopes to
+        ef(0) + g(θ(k)) − g(θ(0)), computed for the asked k at once (the same numbers as the
+        step-by-step rollout, up to rounding)."""
+        if self.config.ef_mode != "difference":
+            return super().ef_along(theta, ef0, every)
+        g = self._g(theta[:, ::every])
+        return ef0.unsqueeze(1) + (g - g[:, :1])
+
     def _target(self, s: torch.Tensor, s_next: torch.Tensor) -> torch.Tensor:
         y = s_next - s if self.config.predict_delta else s_next
         return self.out_norm.encode(y) if self.config.normalize else y
@@ -468,6 +494,10 @@ class AnalyticFM(ForwardModel):
     def _forward(self, s: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         theta = s[..., self.layout.joints] + a
         return self.layout.join(theta, self.kin.position(theta, validate=False))
+
+    def ef_along(self, theta: torch.Tensor, ef0: torch.Tensor, every: int = 1) -> torch.Tensor:
+        """See :meth:`ForwardModel.ef_along`: the exact FK of the configurations (``ef0`` is FK(θ(0)))."""
+        return self.kin.position(theta[:, ::every], validate=False)
 
 
 class AnalyticIM(InverseModel):

@@ -9,6 +9,7 @@ Every figure is written as a PNG atomically (a crash never leaves a half-written
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -64,14 +65,15 @@ def _flat(plan: Plan) -> Plan:
     """The plan with its batch dimensions flattened to one, ``(N, ...)``."""
     if not isinstance(plan, Plan):
         raise ShapeError(f"plan must be a kinlearn.Plan, got {type(plan).__name__}")
-    if plan.start.ndim < 2:
-        raise ShapeError(f"plots need a batch of plans, plan.start (N, dof+3); got {tuple(plan.start.shape)}")
-    lead = plan.start.ndim - 1
+    if plan.goal.ndim < 2:
+        raise ShapeError(f"plots need a batch of plans, plan.goal (N, dof+3); got {tuple(plan.goal.shape)}")
+    lead = plan.goal.ndim - 1
 
     def flat(x: torch.Tensor) -> torch.Tensor:
-        return x.detach().reshape(-1, *x.shape[lead:]).cpu().double()
+        x = x.detach().reshape(-1, *x.shape[lead:]).cpu()
+        return x.double() if x.is_floating_point() else x
 
-    return Plan(*(flat(getattr(plan, f)) for f in ("start", "goal", "waypoints", "actions", "joints", "ef")))
+    return dataclasses.replace(plan, **{f: flat(getattr(plan, f)) for f in Plan._BATCHED})
 
 
 def _check_indices(indices: Sequence[int], n: int) -> list[int]:

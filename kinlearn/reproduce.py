@@ -2,7 +2,10 @@
 
 babble → FM/IM → endpoint pairs → TM for the paper's six optimiser configurations (Table 1) over
 several seeds → evaluation on held-out pairs (Table 2) → the ablation (learned/analytic FM × IM) →
-the reference-parity row → the baselines → ``results.md``, ``results.json`` and the figures.
+the reference-parity row → the baselines → the workspace task (joint-path TMs trained through the
+learned and the analytic FM, judged on held-out pairs across the joint range with joint goals and
+with end-effector position goals, beside the baselines) → ``results.md``, ``results.json`` and the
+figures.
 
 The sweep runs as independent jobs on local worker processes, or as Ray tasks (``backend="ray"``).
 """
@@ -68,6 +71,9 @@ class ReproduceConfig:
     workers: int = 2
     backend: Literal["local", "ray"] = "local"
     seed: int = 0
+    workspace_iterations: int = 6000  # joint-path TM training iterations (0: skip the workspace task)
+    workspace_batch_size: int = 512
+    workspace_pairs: int = 2_000  # held-out workspace pairs (uniform within ±90% of the joint range)
 
 
 REPRODUCE_PRESETS: dict[str, dict] = {
@@ -83,6 +89,9 @@ REPRODUCE_PRESETS: dict[str, dict] = {
         "parity_pairs": 8,
         "parity_epochs": 1,
         "workers": 1,
+        "workspace_iterations": 4,
+        "workspace_batch_size": 16,
+        "workspace_pairs": 32,
     },
     "quick": {
         "transitions": 300_000,
@@ -95,6 +104,9 @@ REPRODUCE_PRESETS: dict[str, dict] = {
         "seeds": (0, 1),
         "parity_pairs": 500,
         "parity_epochs": 5,
+        "workspace_iterations": 400,
+        "workspace_batch_size": 256,
+        "workspace_pairs": 1_000,
     },
     # Paper sizes: 500k babbling transitions (REFERENCE #4), 12,000 + 2,000 pairs, 50 epochs, 10 seeds.
     "full": {},
@@ -178,12 +190,19 @@ def _merge(summaries: list[dict]) -> dict:
     return out
 
 
-def reproduce(config: ReproduceConfig, out: str | Path, progress: bool = True) -> dict:
-    """Run the whole pipeline into ``out``; returns the results written to ``out/results.json``."""
+def reproduce(
+    config: ReproduceConfig, out: str | Path, progress: bool = True, write_config: bool = True
+) -> dict:
+    """Run the whole pipeline into ``out``; returns the results written to ``out/results.json``.
+
+    Stages already done in ``out`` (by an interrupted call with the same config) are resumed.
+    ``write_config=False``: leave ``out/config.json`` to the caller (``kinlearn reproduce`` keeps its
+    run record there)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     robot = load_robot(config.robot)
-    write_json(out / "config.json", asdict(config))
+    if write_config:
+        write_json(out / "config.json", asdict(config))
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
 
@@ -301,7 +320,14 @@ def reproduce(config: ReproduceConfig, out: str | Path, progress: bool = True) -
         baselines["RRT-Connect (OMPL)"] = {"skipped": str(exc)}
     timings["baselines"] = time.perf_counter() - t0
 
-    # 5. tables, figures, results
+    # 5. the workspace task
+    t0 = time.perf_counter()
+    workspace = (
+        _workspace(config, robot, models, out / "workspace", progress) if config.workspace_iterations else {}
+    )
+    timings["workspace"] = time.perf_counter() - t0
+
+    # 6. tables, figures, results
     table1 = {}
     for k, row in OPTIMIZER_SWEEP.items():
         runs = [results[f"table1-{k}-seed{s}"] for s in config.seeds]
@@ -328,12 +354,74 @@ def reproduce(config: ReproduceConfig, out: str | Path, progress: bool = True) -
         "ablation": ablation,
         "reference_parity": results["reference-parity"],
         "baselines": baselines,
+        "workspace": workspace,
         "figures": figures,
         "timings_s": timings,
     }
     write_json(out / "results.json", res)
     (out / "results.md").write_text(_markdown(res))
     return res
+
+
+def _workspace(config: ReproduceConfig, robot, models: Path, out: Path, progress: bool) -> dict:
+    """Joint-path TMs through the learned and the analytic FM, judged on held-out workspace pairs."""
+    from .baselines import rrt_connect
+    from .models import AnalyticFM, AnalyticIM, load_fm, load_im
+    from .train_path import PathTrainConfig, train_path_model
+    from .workspace import evaluate_workspace, heldout_pairs
+
+    fm, im = load_fm(models / "fm.pt", robot=robot.name), load_im(models / "im.pt", robot=robot.name)
+    afm, aim = AnalyticFM(robot), AnalyticIM(robot)
+    tms = {}
+    for kind in ("learned", "analytic"):
+        cfg = PathTrainConfig(
+            robot=robot.name,
+            fm=kind,
+            fm_checkpoint=str((models / "fm.pt").resolve()) if kind == "learned" else None,
+            iterations=config.workspace_iterations,
+            batch_size=config.workspace_batch_size,
+            seed=config.seed,
+        )
+        tms[kind] = train_path_model(
+            cfg, out / f"tm-fm_{kind}", fm=fm if kind == "learned" else afm, progress=progress
+        )
+    pairs = heldout_pairs(robot, n=config.workspace_pairs)
+    dof = robot.dof
+
+    def joint_goals(planner):
+        return lambda a, b: planner.plan(a, b)
+
+    def position_goals(planner):
+        return lambda a, b: planner.plan(a[:, :dof], goal_position=b[:, dof:])
+
+    rows = {
+        "kinlearn joint-path TM, trained through the learned FM": joint_goals(Planner(robot, tms["learned"])),
+        "kinlearn joint-path TM, trained through the analytic FM": joint_goals(
+            Planner(robot, tms["analytic"])
+        ),
+        "joint interpolation": lambda a, b: joint_interpolation(robot, a, b),
+        "Cartesian line + DLS IK (analytic robot)": lambda a, b: cartesian_dls(robot, a, b),
+    }
+    joint = evaluate_workspace(robot, pairs, rows)
+    try:
+        n_rrt = min(len(pairs), 500)
+        sub = pairs.split(n_rrt)[0]
+        joint[f"RRT-Connect (OMPL, {n_rrt} pairs)"] = evaluate_workspace(
+            robot, sub, {"rrt": lambda a, b: rrt_connect(robot, a, b, seed=config.seed)}
+        )["rrt"]
+    except MissingDependencyError as exc:
+        joint["RRT-Connect (OMPL)"] = {"skipped": str(exc)}
+    position = {}
+    for fm_kind, f in (("learned", fm), ("analytic", afm)):
+        for im_kind, i in (("learned", im), ("analytic", aim)):
+            planner = Planner(robot, tms["learned"], f, i)
+            name = f"kinlearn, goal joints from the {fm_kind} FM + {im_kind} IM"
+            position[name] = evaluate_workspace(robot, pairs, {name: position_goals(planner)})[name]
+    paper = make_endpoints(EndpointConfig(robot=robot.name, n=config.heldout_pairs, seed=config.seed + 777))
+    paper_task = evaluate_workspace(
+        robot, paper, {"kinlearn joint-path TM (learned FM)": joint_goals(Planner(robot, tms["learned"]))}
+    )
+    return {"pairs": len(pairs), "joint_goals": joint, "position_goals": position, "paper_task": paper_task}
 
 
 def _optim(d: dict):
@@ -415,6 +503,27 @@ def _markdown(res: dict) -> str:
     for n, r in runs.items():
         if "diverged" in r:
             lines.append(f"- {n}: {r['diverged']}")
+    ws = res.get("workspace") or {}
+    if ws:
+        from .workspace import POSITION_COLUMNS, workspace_table
+
+        lines += [
+            "",
+            f"## Workspace task — {ws['pairs']} held-out pairs uniform within ±90% of the joint range",
+            "",
+            "Goals given as joints (the goal state must be reached: end effector ≤ 1 cm and every joint ≤ 0.05 rad):",
+            "",
+            workspace_table({k: v for k, v in ws["joint_goals"].items() if "skipped" not in v}),
+            "",
+            "Goals given as an end-effector position (any configuration; success = end effector ≤ 1 cm). The "
+            "goal joints come from the IM stepped through the FM along the straight line: the FM × IM ablation.",
+            "",
+            workspace_table(ws["position_goals"], POSITION_COLUMNS),
+            "",
+            "The same planner on held-out pairs of the paper's task:",
+            "",
+            workspace_table(ws["paper_task"]),
+        ]
     if res["figures"]:
         lines += ["", "## Figures", ""] + [f"![{f}]({f})" for f in res["figures"]]
     return "\n".join(lines) + "\n"

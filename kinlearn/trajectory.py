@@ -79,6 +79,9 @@ class TrajectoryModel(nn.Module):
         self.register_buffer("in_std", torch.ones(2 * S))
         self.register_buffer("out_mean", torch.zeros(3))
         self.register_buffer("out_std", torch.ones(3))
+        #: Box of the training pairs' [s(0), s(T)] (the domain the planner warns outside of); ±inf: unknown.
+        self.register_buffer("domain_lo", torch.full((2 * S,), -torch.inf))
+        self.register_buffer("domain_hi", torch.full((2 * S,), torch.inf))
 
     @property
     def robot_name(self) -> str:
@@ -86,10 +89,13 @@ class TrajectoryModel(nn.Module):
 
     @torch.no_grad()
     def fit_normalization(self, start: torch.Tensor, goal: torch.Tensor) -> None:
-        """Set input/output statistics from training pairs (no-op unless ``config.normalize``)."""
+        """Record the training pairs' domain; set input/output statistics from them when
+        ``config.normalize``."""
+        x = torch.cat((start, goal), dim=-1).reshape(-1, 2 * self.layout.size).double()
+        self.domain_lo.copy_(x.min(0).values)
+        self.domain_hi.copy_(x.max(0).values)
         if not self.config.normalize:
             return
-        x = torch.cat((start, goal), dim=-1).reshape(-1, 2 * self.layout.size).double()
         self.in_mean.copy_(x.mean(0))
         self.in_std.copy_(x.std(0).clamp_min(1e-3))
         ef = torch.cat((start[..., self.layout.ef], goal[..., self.layout.ef])).reshape(-1, 3).double()
@@ -113,6 +119,12 @@ class TrajectoryModel(nn.Module):
         out, _ = self.gru(x, h0)
         ef = self.head(self.shared(out)) * self.out_std + self.out_mean
         return ef.reshape(*batch, steps, 3)
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        # Checkpoints written before the domain was recorded: the domain is unknown (no warnings).
+        for name, fill in (("domain_lo", -torch.inf), ("domain_hi", torch.inf)):
+            state_dict.setdefault(prefix + name, torch.full_like(getattr(self, name), fill))
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def check_inputs(self, s0: torch.Tensor, sT: torch.Tensor) -> None:
         for what, s in (("start state s0", s0), ("goal state sT", sT)):

@@ -47,7 +47,7 @@ def pairs(robot, n: int, seed: int = 0, dtype=torch.float64):
 
 def check_plan(robot, plan, start, goal, steps):
     n = start.shape[:-1]
-    assert plan.start is start and plan.goal is goal
+    assert torch.allclose(plan.start, start) and plan.goal is goal
     assert plan.waypoints.shape == (*n, steps - 1, 3)
     assert plan.actions.shape == (*n, steps, robot.dof)
     assert plan.joints.shape == (*n, steps + 1, robot.dof)

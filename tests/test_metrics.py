@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -174,12 +175,12 @@ def hand_made_plan(robot, end_offsets: torch.Tensor) -> Plan:
     q0 = robot.sample(n, generator=g, dtype=torch.float64, margin=0.2)
     qT = robot.sample(n, generator=g, dtype=torch.float64, margin=0.2)
     fk = kinematics(robot).position
-    start, goal = layout.join(q0, fk(q0)), layout.join(qT, fk(qT))
+    goal = layout.join(qT, fk(qT))
     frac = torch.linspace(0, 1, T + 1, dtype=torch.float64)[:, None]
     joints = q0[:, None] + frac * (qT - q0)[:, None]
     ef = fk(joints)
     ef[:, -1] = fk(qT) + end_offsets
-    return Plan(start, goal, ef[:, 1:-1], joints[:, 1:] - joints[:, :-1], joints, ef)
+    return Plan.from_joints(goal, joints, ef, waypoints=ef[:, 1:-1])
 
 
 def test_goal_error_and_success_rate(robot):
@@ -215,7 +216,7 @@ def test_joint_limit_violations(robot):
     joints[0, 2, 3] = upper[3] + 0.01  # clearly outside
     joints[1, 1, 0] = upper[0]  # exactly at the limit: allowed
     joints[1, 2, 6] = -upper[6] - 1e-8  # within the tolerance
-    plan = Plan(plan.start, plan.goal, plan.waypoints, plan.actions, joints, plan.ef)
+    plan = dataclasses.replace(plan, joints=joints)
     m = plan_metrics(plan, robot)
     assert m["limit_violation"].tolist() == [1.0, 0.0, 0.0]
     assert plan_metrics(plan, robot, limit_tol=0.0)["limit_violation"].tolist() == [1.0, 1.0, 0.0]
@@ -234,7 +235,7 @@ def test_sharp_turn_indicators(robot):
     waypoints[1, 1] = waypoints[1, 0] + 0.1 * torch.tensor(
         [-math.cos(a), math.sin(a), 0], dtype=torch.float64
     )
-    plan = Plan(plan.start, plan.goal, waypoints, plan.actions, plan.joints, plan.ef)
+    plan = dataclasses.replace(plan, waypoints=waypoints)
     m = plan_metrics(plan, robot)
     assert float(m["min_angle"][0]) == pytest.approx(0.0, abs=1e-6)
     assert float(m["min_angle"][1]) == pytest.approx(80.0, abs=1e-6)
@@ -245,15 +246,13 @@ def test_sharp_turn_indicators(robot):
 def test_plan_metrics_validation(robot):
     plan = hand_made_plan(robot, torch.zeros(2, 3, dtype=torch.float64))
     with pytest.raises(ShapeError):
-        plan_metrics(
-            Plan(plan.start, plan.goal, plan.waypoints[:, :-1], plan.actions, plan.joints, plan.ef), robot
-        )
+        plan_metrics(dataclasses.replace(plan, waypoints=plan.waypoints[:, :-1]), robot)
     with pytest.raises(ShapeError):
         plan_metrics(plan, load_robot("ur5"))  # 6-DoF robot, 7-DoF plan
     ef = plan.ef.clone()
     ef[0, 1, 1] = float("inf")
     with pytest.raises(NonFiniteError):
-        plan_metrics(Plan(plan.start, plan.goal, plan.waypoints, plan.actions, plan.joints, ef), robot)
+        plan_metrics(dataclasses.replace(plan, ef=ef), robot)
     with pytest.raises(ShapeError):
         plan_metrics("not a plan", robot)
 

@@ -1,0 +1,111 @@
+"""Fast CPU inference for the joint-path planner: the TM's MLP and the FK check in NumPy, float64.
+
+A plan at batch 1 is a few dozen tiny array operations. Through torch each costs several
+microseconds of dispatch; NumPy's cost per operation is a fraction of that, which is what brings a
+whole batch-1 plan (checks, inference, joint path, FK of every configuration) to tens of
+microseconds. The arithmetic is the same as :class:`~kinlearn.path_model.JointPathModel` and
+:class:`~kinlearn.kinematics.FastKinematics` (tests hold the two to agree); this module only holds
+the weights and constants as float64 arrays, made once when a planner is built.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from .path_model import JointPathModel
+
+__all__ = ["NumpyFK", "NumpyPathModel"]
+
+
+class NumpyFK:
+    """End-effector positions of a serial chain for ``(N, dof)`` float64 arrays.
+
+    Built from a :class:`~kinlearn.kinematics.FastKinematics`' canonical fixed transforms (every joint
+    a rotation about, or translation along, z): each joint's 4 × 4 transform F_i · Z_i(q_i) is formed
+    for all joints at once, and the chain's product is reduced pairwise (log₂ of the joint count
+    batched matrix products instead of one product per joint).
+    """
+
+    def __init__(self, fast_kinematics):
+        F = np.asarray(fast_kinematics.F, dtype=np.float64)
+        self.dof = F.shape[0] - 1
+        self.F = F
+        self.prismatic = np.array(fast_kinematics.prismatic, dtype=bool)
+        size = 1 << (self.dof).bit_length()  # dof + 1 transforms, padded with identities to a power of 2
+        self._template = np.broadcast_to(np.eye(4), (size, 4, 4)).copy()
+        self._template[: self.dof + 1] = F
+        self._R0, self._R1 = F[: self.dof, :, 0], F[: self.dof, :, 1]
+
+    def position(self, q: np.ndarray) -> np.ndarray:
+        """``q (N, dof)`` → ``(N, 3)``."""
+        dof = self.dof
+        A = np.repeat(self._template[None], q.shape[0], axis=0)
+        if self.prismatic.any():
+            qr = np.where(self.prismatic, 0.0, q)
+            A[:, :dof, :, 3] += self.F[:dof, :, 2] * np.where(self.prismatic, q, 0.0)[..., None]
+        else:
+            qr = q
+        c, s = np.cos(qr)[..., None], np.sin(qr)[..., None]
+        A[:, :dof, :, 0] = c * self._R0 + s * self._R1
+        A[:, :dof, :, 1] = c * self._R1 - s * self._R0
+        while A.shape[1] > 1:
+            A = A[:, 0::2] @ A[:, 1::2]
+        return A[:, 0, :3, 3]
+
+
+class NumpyPathModel:
+    """The joint-path TM's forward pass in NumPy: ``(θ(0), ef(0), θ(T), ef(T))`` → joint and
+    end-effector waypoints, as :meth:`JointPathModel.forward` computes them."""
+
+    def __init__(self, tm: JointPathModel, dtype=np.float32):
+        """``dtype``: of the network's weights and arithmetic (float32 halves a batch-1 pass's time; the
+        waypoints are then assembled in float64)."""
+
+        def arr(t: torch.Tensor) -> np.ndarray:
+            return t.detach().cpu().double().numpy().copy()
+
+        linears = [m for m in tm.net if isinstance(m, torch.nn.Linear)]
+        self.weights = [arr(m.weight.T) for m in linears]
+        self.biases = [arr(m.bias) for m in linears]
+        # Standardisation folded into the first layer: (x − μ)/σ · W + b = x · (W/σ) + (b − (μ/σ) · W).
+        mean, std = arr(tm.in_mean), arr(tm.in_std)
+        self.biases[0] = self.biases[0] - (mean / std) @ self.weights[0]
+        self.weights[0] = self.weights[0] / std[:, None]
+        self.dtype = np.dtype(dtype)
+        self.weights = [w.astype(self.dtype) for w in self.weights]
+        self.biases = [b.astype(self.dtype) for b in self.biases]
+        self.silu = tm.config.activation == "silu"
+        self.dof = tm.config.dof
+        self.half_range = arr(tm.half_range)
+        self.fractions = arr(tm.fractions)[:, None]
+        self.ef_scale = float(tm.ef_scale)
+        self.W = tm.config.steps - 1
+        self.modes = tm.config.modes
+        self.basis = arr(tm.basis)
+        self.n_joint_out = self.modes * self.dof if self.modes else self.W * self.dof
+
+    def _act(self, h: np.ndarray) -> np.ndarray:
+        if self.silu:
+            return h / (1.0 + np.exp(-h))
+        return np.tanh(h)
+
+    def __call__(
+        self, theta0: np.ndarray, ef0: np.ndarray, thetaT: np.ndarray, efT: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Each input ``(N, ·)`` float64 → ``(joints (N, T − 1, dof), ef (N, T − 1, 3))``."""
+        h = np.concatenate((theta0, ef0, thetaT, efT, thetaT - theta0), axis=1).astype(self.dtype)
+        last = len(self.weights) - 1
+        for k, (W, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            h = h @ W + b
+            if k < last:
+                h = self._act(h)
+        h = h.astype(np.float64)
+        n, nj = h.shape[0], self.n_joint_out
+        r = h[:, :nj].reshape(n, -1, self.dof)
+        if self.modes:
+            r = self.basis @ r
+        f = self.fractions
+        joints = theta0[:, None] + f * (thetaT - theta0)[:, None] + self.half_range * r
+        ef = ef0[:, None] + f * (efT - ef0)[:, None] + self.ef_scale * h[:, nj:].reshape(n, self.W, 3)
+        return joints, ef
