@@ -26,7 +26,7 @@ from .cli import (
     settle_run_dir,
 )
 from .endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
-from .errors import ConfigError
+from .errors import ConfigError, MissingDependencyError
 from .io import atomic_copy, file_sha256, load_checkpoint, resolve_dependency, save_checkpoint
 from .metrics import plan_metrics, summarize
 from .models import load_fm, load_im
@@ -417,6 +417,77 @@ def _run_train_planner(args: argparse.Namespace) -> int:
         print(f"held-out workspace pairs ({args.heldout}, uniform within ±90% of the joint range):")
         print(workspace_table(res))
     print(f"trained planner in {run_dir}")
+    return 0
+
+
+@register_subcommand
+def _add_model_error(sub) -> None:
+    p = add_command(
+        sub,
+        "model-error",
+        "Plan to held-out end-effector positions when the robot's model is wrong: kinlearn's planner (learned "
+        "from the true robot) against model-based planners given a perturbed URDF, all judged by the true FK; "
+        "writes model_error.json, model_error.md and model_error.png.",
+        _run_model_error,
+    )
+    p.add_argument("--model", type=Path, default=None, help="a planner folder (default: the shipped planner)")
+    p.add_argument(
+        "--n-goals", type=POSITIVE_INT, default=2000, help="held-out position goals (default: 2000)"
+    )
+    p.add_argument(
+        "--seeds", type=_ints_nonneg, default=(0, 1, 2), help="perturbation seeds per level (default: 0,1,2)"
+    )
+    p.add_argument("--no-rrt", action="store_true", help="leave out RRT-Connect")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_run_options(p, resumable=False)
+
+
+def _ints_nonneg(text: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in text.replace(",", " ").split())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected integers separated by commas, got {text!r}") from None
+    if not values or min(values) < 0:
+        raise argparse.ArgumentTypeError(f"expected integers ≥ 0, got {text!r}")
+    return values
+
+
+def _run_model_error(args: argparse.Namespace) -> int:
+    import json
+
+    from .io import atomic_write
+    from .model_error import DEFAULT_LEVELS, model_error_sweep, model_error_table, plot_model_error
+
+    planner = Planner.load(args.model, robot=args.robot) if args.model else Planner.default(args.robot)
+    run = open_command_run(
+        args,
+        ("model_error.json", "model_error.md", "model_error.png"),
+        sweep={
+            "n_goals": args.n_goals,
+            "seeds": list(args.seeds),
+            "rrt": not args.no_rrt,
+            "model": str(args.model),
+        },
+    )
+    out = run.begin()
+    results = model_error_sweep(
+        args.robot,
+        DEFAULT_LEVELS,
+        args.n_goals,
+        tuple(args.seeds),
+        planner=planner,
+        rrt=not args.no_rrt,
+        progress=not args.no_progress,
+    )
+    atomic_write(out / "model_error.json", lambda tmp: tmp.write_text(json.dumps(results, indent=1)))
+    table = model_error_table(results)
+    atomic_write(out / "model_error.md", lambda tmp: tmp.write_text(table + "\n"))
+    try:
+        plot_model_error(results, out / "model_error.png")
+    except MissingDependencyError as exc:
+        print(f"figure skipped: {exc}")
+    print(table)
+    print(f"results in {out}")
     return 0
 
 

@@ -386,3 +386,11 @@ def test_readme_quick_start_runs(tmp_path, monkeypatch):
     exec(compile(code, "README.md", "exec"), namespace)
     assert bool(namespace["plan"].success) or float(namespace["plan"].goal_error) > 0.01
     assert namespace["traj"].duration > 0
+
+
+def test_plan_takes_a_robot_object(iiwa, workspace_pairs):
+    """kinlearn.plan(..., robot=Robot) uses that robot's shipped planner; an unknown one is refused."""
+    plan = kinlearn.plan(workspace_pairs.start[:2, :7], workspace_pairs.goal[:2, :7], robot=iiwa)
+    assert plan.joints.shape[0] == 2 and plan.robot == "iiwa14"
+    with pytest.raises(ConfigError, match="ships no planner"):
+        kinlearn.plan(torch.zeros(7), torch.zeros(7), robot=load_robot("panda"))

@@ -175,3 +175,24 @@ def test_sweep_table_and_figure(tmp_path):
         model_error_sweep(levels=((0.0, float("nan")),), n_goals=4, seeds=(0,))
     with pytest.raises(ConfigError):
         model_error_sweep(n_goals=0)
+
+
+def test_model_error_command(tmp_path, capsys):
+    from kinlearn.cli import main
+
+    out = tmp_path / "me"
+    args = [
+        "model-error",
+        "--n-goals",
+        "8",
+        "--seeds",
+        "0",
+        "--no-rrt",
+        "--no-progress",
+        "--run-dir",
+        str(out),
+    ]
+    assert main(args) == 0
+    assert "kinlearn planner" in capsys.readouterr().out
+    assert {"model_error.json", "model_error.md", "config.json"} <= {p.name for p in out.iterdir()}
+    assert main(args) == 2  # a finished run is not overwritten silently
