@@ -448,7 +448,7 @@ _KINDS: dict[str, type[Kinematics]] = {
     "pk": PkKinematics,
     "pinocchio": PinocchioKinematics,
 }
-_KIN_CACHE: dict[tuple[int, str], Kinematics] = {}
+_KIN_CACHE: dict[tuple[int, str], tuple[Robot, Kinematics]] = {}
 
 
 def kinematics(robot: Robot | str, backend: Backend = "fast") -> Kinematics:
@@ -460,7 +460,10 @@ def kinematics(robot: Robot | str, backend: Backend = "fast") -> Kinematics:
         robot = load_robot(robot)
     elif not isinstance(robot, Robot):
         raise ConfigError(f"robot must be a kinlearn Robot or a robot name, got {type(robot).__name__}")
+    # The cache holds the robot itself beside its kinematics: while an entry lives its robot does too,
+    # so no other Robot can take over its id and be handed this robot's kinematics.
     key = (id(robot), backend)
-    if key not in _KIN_CACHE:
-        _KIN_CACHE[key] = _KINDS[backend](robot)
-    return _KIN_CACHE[key]
+    cached = _KIN_CACHE.get(key)
+    if cached is None or cached[0] is not robot:
+        cached = _KIN_CACHE[key] = (robot, _KINDS[backend](robot))
+    return cached[1]

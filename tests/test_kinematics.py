@@ -176,3 +176,17 @@ def test_pk_backend_is_pytorch_kinematics():
     import pytorch_kinematics as pk
 
     assert isinstance(kin._chain(torch.float64, torch.device("cpu")), pk.SerialChain)
+
+
+def test_kinematics_cache_never_serves_another_robot():
+    """Robots built one after another (ids may be reused once one is freed) get their own kinematics."""
+    from kinlearn.kinematics import kinematics as kin_of
+
+    seen = []
+    for name in ("iiwa14", "panda", "ur5", "iiwa14"):
+        robot = load_robot(name)
+        robot = type(robot)(robot.name, robot.urdf, robot.ee_frame)  # a fresh object each time
+        k = kin_of(robot)
+        assert k.robot is robot
+        seen.append(float(k.position(torch.zeros(robot.dof, dtype=torch.float64))[2]))
+    assert seen[0] == seen[3] and seen[0] != seen[1]
