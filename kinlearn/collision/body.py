@@ -1,0 +1,342 @@
+"""The arm's collision body as spheres fixed to its links, placed by the fast forward kinematics.
+
+The sphere numbers live in ``robots/<robot>/collision_spheres.json`` (see ``robots/README.md`` for
+where each comes from). Two sets exist for the iiwa14, both Drake's published sphere models: the
+``sparse`` set (12 spheres on links 1–7, the base cylinder covered by 6 spheres, 18 in all) and the
+``dense`` set (46 spheres, 4 of them on the base).
+
+:class:`BodySpheres` maps joints ``(..., dof)`` to world (base-frame) sphere centres ``(..., M, 3)``,
+batched and differentiable; it also carries each sphere's radius and link, the sphere pairs checked
+for self-collision, which spheres the floor applies to, and a bound on how far each sphere can travel
+per radian of each joint (used by the dense path check).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from ..errors import ConfigError, RobotDescriptionError
+from ..kinematics import FastKinematics, _snap, _z_to_axis, kinematics
+from ..robot import Robot, _bundled_dir
+
+__all__ = ["SPHERE_FILE", "BodySpheres", "body_spheres", "cover_cylinder", "sphere_sets"]
+
+#: File name of a robot's sphere model inside its folder of the bundled ``robots/``.
+SPHERE_FILE = "collision_spheres.json"
+SPHERE_FORMAT = 1
+
+
+def cover_cylinder(
+    centre: tuple[float, float, float],
+    radius: float,
+    length: float,
+    ring: int = 6,
+    ring_radius: float = 0.054,
+) -> np.ndarray:
+    """Spheres ``(ring, 4)`` [x, y, z, r] that together contain a z-axis cylinder.
+
+    One ring of ``ring`` equal spheres in the cylinder's mid-plane, centres ``ring_radius`` from its
+    axis. Each sphere contains the full-height column over a disc of radius
+    c = sqrt(R² + d² − 2 R d cos(π/ring)) around its centre (R the cylinder's radius, d the ring
+    radius): neighbouring discs then meet on the cylinder's rim, and for d ≤ R / (2 cos(π/ring)) the
+    ring also covers the axis. The sphere radius is sqrt(c² + (length/2)²), rounded up to 1e-5 m.
+    """
+    R, d, h = float(radius), float(ring_radius), float(length) / 2.0
+    half = math.pi / ring
+    if not (ring >= 3 and 0.0 < d <= R / (2.0 * math.cos(half))):
+        raise ConfigError(
+            f"a ring of {ring} spheres at {d} m from the axis cannot cover a cylinder of radius {R} m; "
+            f"use ring >= 3 and 0 < ring_radius <= {R / (2.0 * math.cos(half)):.4g}"
+        )
+    c = math.sqrt(R * R + d * d - 2.0 * R * d * math.cos(half))
+    rho = math.ceil(math.sqrt(c * c + h * h) * 1e5) / 1e5
+    k = np.arange(ring)
+    out = np.empty((ring, 4))
+    out[:, 0] = centre[0] + d * np.cos(2 * half * k)
+    out[:, 1] = centre[1] + d * np.sin(2 * half * k)
+    out[:, 2] = centre[2]
+    out[:, 3] = rho
+    return out
+
+
+@cache
+def _read_model(path: str) -> dict:
+    return json.loads(Path(path).read_text())
+
+
+def _model_path(robot: Robot) -> Path:
+    return _bundled_dir() / robot.name / SPHERE_FILE
+
+
+def sphere_sets(robot: Robot) -> dict:
+    """The raw sphere model of ``robot`` as read from its JSON file (see ``robots/README.md``)."""
+    path = _model_path(robot)
+    if not path.is_file():
+        raise RobotDescriptionError(
+            f"robot {robot.name!r} has no collision sphere model (no {SPHERE_FILE} in its folder of "
+            f"kinlearn's robots/); sphere bodies exist for: {', '.join(_robots_with_spheres())}"
+        )
+    model = _read_model(str(path))
+    if model.get("format") != SPHERE_FORMAT or model.get("robot") != robot.name:
+        raise RobotDescriptionError(
+            f"{path} is not a format-{SPHERE_FORMAT} sphere model of {robot.name!r} "
+            f"(format {model.get('format')!r}, robot {model.get('robot')!r})"
+        )
+    return model
+
+
+def _robots_with_spheres() -> list[str]:
+    root = _bundled_dir()
+    return sorted(p.parent.name for p in root.glob(f"*/{SPHERE_FILE}"))
+
+
+def _lever_arms(robot: Robot, link: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """``(M, dof)``: an upper bound on sphere m's distance from joint j's axis, over all configurations.
+
+    Joint j (0-based) moves the links after it. For a sphere on the link joint j itself moves, the
+    distance is exact: the sphere's distance from the axis in that link. Further down the chain it is
+    at most (distance of joint j+1's origin from axis j) + (the fixed origin-to-origin offsets from
+    joint j+1 to the joint that moves the sphere's link) + (the sphere's offset in its link), by the
+    triangle inequality (rotations keep lengths); a prismatic joint in between adds its largest
+    displacement. A prismatic joint moves every point by exactly its displacement: lever 1.
+    """
+    F = kinematics(robot, "fast").F  # F[i]: fixed transform before joint i, in frames with the axis on z
+    axes = [_z_to_axis(j.axis) for j in robot.joints]
+    reach = [max(abs(j.lower), abs(j.upper)) if j.kind == "prismatic" else 0.0 for j in robot.joints]
+    lever = np.zeros((len(link), robot.dof))
+    for m, (lk, c) in enumerate(zip(link, local, strict=True)):
+        own = lk - 1  # the joint that moves the sphere's link
+        if own < 0:
+            continue
+        folded = axes[own].T @ c  # the centre in joint `own`'s frame, its axis along z
+        for j in range(own + 1):
+            if robot.joints[j].kind == "prismatic":
+                lever[m, j] = 1.0
+            elif j == own:
+                lever[m, j] = float(np.hypot(folded[0], folded[1]))
+            else:
+                chain = sum(float(np.linalg.norm(F[i, :3, 3])) + reach[i] for i in range(j + 2, own + 1))
+                lever[m, j] = (
+                    float(np.hypot(F[j + 1, 0, 3], F[j + 1, 1, 3]))
+                    + reach[j + 1]
+                    + chain
+                    + float(np.linalg.norm(c))
+                )
+    return lever
+
+
+class BodySpheres(nn.Module):
+    """Collision spheres fixed to a robot's links: joints ``(..., dof)`` → centres ``(..., M, 3)``.
+
+    Buffers (move with ``.to()``): ``local`` ``(M, 3)`` centres in their link's frame, ``radii``
+    ``(M,)``, ``link`` ``(M,)`` (0 = base, k = the link joint k moves), ``pairs`` ``(P, 2)`` the sphere
+    pairs checked for self-collision, ``floor_mask`` ``(M,)`` the spheres the floor applies to (all but
+    the base's: the base stands on it), ``lever`` ``(M, dof)`` metres a sphere can travel per radian of
+    each joint at most. Differentiable in the joints; dtype and device of the output follow ``q``.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        spheres: np.ndarray,
+        pairs: np.ndarray,
+        name: str = "",
+    ):
+        super().__init__()
+        spheres = np.asarray(spheres, dtype=np.float64)
+        if spheres.ndim != 2 or spheres.shape[1] != 5 or spheres.shape[0] == 0:
+            raise RobotDescriptionError(
+                f"sphere table must have shape (M, 5) [link, x, y, z, r], got {spheres.shape}"
+            )
+        link = spheres[:, 0].astype(np.int64)
+        if (link < 0).any() or (link > robot.dof).any() or (spheres[:, 0] != link).any():
+            raise RobotDescriptionError(
+                f"sphere links must be integers in 0…{robot.dof}, got {sorted(set(spheres[:, 0]))}"
+            )
+        if not (np.isfinite(spheres).all() and (spheres[:, 4] > 0).all()):
+            raise RobotDescriptionError("sphere centres must be finite and radii > 0")
+        self.robot = robot
+        self.name = name
+        self._kin: FastKinematics = kinematics(robot, "fast")  # type: ignore[assignment]
+        self.register_buffer("local", torch.as_tensor(spheres[:, 1:4]))
+        self.register_buffer("radii", torch.as_tensor(spheres[:, 4]))
+        self.register_buffer("link", torch.as_tensor(link))
+        self.register_buffer("pairs", torch.as_tensor(np.asarray(pairs, dtype=np.int64).reshape(-1, 2)))
+        self.register_buffer("floor_mask", torch.as_tensor(link > 0))
+        self.register_buffer("lever", torch.as_tensor(_lever_arms(robot, link, spheres[:, 1:4])))
+        # Fast path: spheres sorted base first; a moving sphere's centre is folded by its joint's axis
+        # rotation A (the fast kinematics turns every joint axis onto z), so that the joint's motion
+        # is a plain rotation about (or translation along) z applied to a constant vector.
+        if (np.diff(link) < 0).any():
+            raise RobotDescriptionError("spheres must be sorted by link, base (0) first")
+        self._num_base = int((link == 0).sum())
+        moving = link[self._num_base :]
+        folded = (
+            np.stack(
+                [
+                    _z_to_axis(robot.joints[k - 1].axis).T @ c
+                    for k, c in zip(moving, spheres[self._num_base :, 1:4], strict=True)
+                ]
+            )
+            if len(moving)
+            else np.zeros((0, 3))
+        )
+        # centres (N, M·3) = frames (N, dof·12) @ mix + bias, frames = per joint [col0, col1, col2, origin].
+        mix = np.zeros((robot.dof * 12, len(link) * 3))
+        for m, (k, f) in enumerate(zip(moving, folded, strict=True), start=self._num_base):
+            base = (k - 1) * 12
+            for a in range(3):
+                mix[base + 9 + a, 3 * m + a] = 1.0
+                for col in range(3):
+                    mix[base + 3 * col + a, 3 * m + a] = f[col]
+        bias = np.zeros(len(link) * 3)
+        bias[: 3 * self._num_base] = spheres[: self._num_base, 1:4].reshape(-1)
+        self.register_buffer("_mix", torch.as_tensor(mix), persistent=False)
+        self.register_buffer("_F4", torch.as_tensor(self._kin.F[: robot.dof].copy()), persistent=False)
+        self.register_buffer(
+            "_prismatic", torch.tensor([jt.kind == "prismatic" for jt in robot.joints]), persistent=False
+        )
+        self.register_buffer("_bias", torch.as_tensor(bias), persistent=False)
+        self._prismatic_list = tuple(jt.kind == "prismatic" for jt in robot.joints)
+        # Per joint: (translation terms [(k, t_k)], rotation columns [[(coef, k), ...] × 3]) of F_i.
+        F = self._kin.F
+        self._steps = [
+            (
+                [(k, _snap(float(F[i, k, 3]))) for k in range(3) if _snap(float(F[i, k, 3])) != 0.0],
+                [
+                    [(_snap(float(F[i, k, c])), k) for k in range(3) if _snap(float(F[i, k, c])) != 0.0]
+                    for c in range(3)
+                ],
+            )
+            for i in range(robot.dof)
+        ]
+
+    @property
+    def num_spheres(self) -> int:
+        return int(self.radii.shape[0])
+
+    def extra_repr(self) -> str:
+        return f"robot={self.robot.name!r}, set={self.name!r}, spheres={self.num_spheres}, pairs={len(self.pairs)}"
+
+    #: Large batches are evaluated in chunks of this many configurations (cache-resident intermediates).
+    chunk: int = 8192
+
+    def forward(self, q: torch.Tensor, validate: bool = True) -> torch.Tensor:
+        """World sphere centres ``(..., M, 3)`` for joints ``q (..., dof)``.
+
+        ``validate=False`` skips the shape and finiteness checks of ``q``.
+        """
+        flat, batch = self._kin._prepare(q, validate)
+        if flat.shape[0] <= self.small:
+            out = self._centres_small(flat)
+        elif flat.shape[0] > self.chunk:
+            out = torch.cat([self._centres_flat(c) for c in flat.split(self.chunk)])
+        else:
+            out = self._centres_flat(flat)
+        return out.reshape(*batch, self.num_spheres, 3)
+
+    #: Batches up to this size take :meth:`_centres_small` (fewer, larger torch operations).
+    small: int = 64
+
+    def _centres_small(self, q: torch.Tensor) -> torch.Tensor:
+        """``(N, dof)`` → ``(N, M, 3)`` by 4×4 products: few operations, for small batches."""
+        dt = q.dtype
+        F = self._F4.to(dt)  # (dof, 4, 4) fixed transforms before each joint
+        prism = self._prismatic
+        c = torch.where(prism, torch.ones_like(q), torch.cos(q)).unsqueeze(-1)
+        s = torch.where(prism, torch.zeros_like(q), torch.sin(q)).unsqueeze(-1)
+        shift = torch.where(prism, q, torch.zeros_like(q)).unsqueeze(-1)
+        n = q.shape[0]
+        T = torch.stack(
+            (
+                c * F[..., 0] + s * F[..., 1],
+                c * F[..., 1] - s * F[..., 0],
+                F[..., 2].expand(n, -1, -1),
+                F[..., 3] + shift * F[..., 2],
+            ),
+            dim=-1,
+        )  # (N, dof, 4, 4): F_i · (rotation about or shift along z by q_i)
+        acc = [T[:, 0]]
+        for i in range(1, self.robot.dof):
+            acc.append(acc[-1] @ T[:, i])
+        frames = torch.stack(acc, dim=1)[..., :3, :].transpose(-1, -2).reshape(n, -1)  # [col0, col1, col2, p]
+        return torch.addmm(self._bias.to(dt), frames, self._mix.to(dt)).reshape(n, -1, 3)
+
+    def _centres_flat(self, q: torch.Tensor) -> torch.Tensor:
+        """``(N, dof)`` → ``(N, M, 3)``.
+
+        Walks the chain once with each frame held as its origin and three axis columns ``(N, 3)``:
+        the fixed transforms between joints are applied as sparse combinations of columns (their
+        rotations are mostly signed permutations), each joint as a rotation of two columns (or a
+        shift along the third). Each sphere is then origin + Σ columns × its folded local centre.
+        """
+        dt = q.dtype
+        p = q.new_zeros(3)
+        cols = [torch.eye(3, dtype=dt, device=q.device)[k] for k in range(3)]
+        cq, sq = torch.cos(q).unsqueeze(-1), torch.sin(q).unsqueeze(-1)
+        frames = []
+        for i in range(self.robot.dof):
+            for k, t in self._steps[i][0]:
+                p = p + (cols[k] if t == 1.0 else -cols[k] if t == -1.0 else cols[k] * t)
+            cols = [self._combine(cols, terms) for terms in self._steps[i][1]]
+            if self._prismatic_list[i]:
+                p = p + cols[2] * q[:, i : i + 1]
+            else:
+                c, s = cq[:, i], sq[:, i]
+                cols = [c * cols[0] + s * cols[1], c * cols[1] - s * cols[0], cols[2]]
+            frames += [*cols, p]
+        frames = torch.cat(torch.broadcast_tensors(*frames), dim=-1)  # (N, dof · 12): [col0, col1, col2, p]
+        # Every centre is a fixed linear combination of the frames (base spheres: the constant term).
+        return torch.addmm(self._bias.to(dt), frames, self._mix.to(dt)).reshape(q.shape[0], -1, 3)
+
+    @staticmethod
+    def _combine(cols: list[torch.Tensor], terms: list[tuple[float, int]]) -> torch.Tensor:
+        out = None
+        for coef, k in terms:
+            x = cols[k] if coef == 1.0 else -cols[k] if coef == -1.0 else cols[k] * coef
+            out = x if out is None else out + x
+        return out if out is not None else torch.zeros_like(cols[0])
+
+    centres = forward
+
+    def radii_like(self, x: torch.Tensor) -> torch.Tensor:
+        """The radii ``(M,)`` in ``x``'s dtype and device."""
+        return self.radii.to(dtype=x.dtype, device=x.device)
+
+
+def _default_pairs(link: np.ndarray, adjacent_gap: int = 2) -> np.ndarray:
+    """All sphere pairs on links at least ``adjacent_gap`` apart (the candidates for self-collision)."""
+    i, j = np.triu_indices(len(link), k=1)
+    keep = np.abs(link[i] - link[j]) >= adjacent_gap
+    return np.stack([i[keep], j[keep]], axis=1)
+
+
+def body_spheres(robot: Robot, dense: bool = False, base: bool = True) -> BodySpheres:
+    """The collision spheres of ``robot``: Drake's 12-sphere set (``dense=False``) or 46-sphere set.
+
+    ``base=False`` leaves out the base's spheres (they never move: useful where only the arm matters).
+    Raises :class:`~kinlearn.errors.RobotDescriptionError` for a robot without a sphere model.
+    """
+    model = sphere_sets(robot)
+    key = "dense" if dense else "sparse"
+    entry = model["sets"][key]
+    spheres = np.asarray(entry["spheres"], dtype=np.float64)
+    if entry.get("base") == "base_cylinder_cover":
+        cover = np.asarray(model["base_cylinder_cover"]["spheres"], dtype=np.float64)
+        spheres = np.concatenate([cover, spheres])
+    if not base:
+        spheres = spheres[spheres[:, 0] > 0]
+    order = np.argsort(spheres[:, 0], kind="stable")  # base first, then link by link
+    spheres = spheres[order]
+    link = spheres[:, 0].astype(np.int64)
+    excluded = {tuple(p) for p in model.get("self_collision", {}).get("excluded_link_pairs", [])}
+    pairs = _default_pairs(link)
+    keep = np.array([(int(link[a]), int(link[b])) not in excluded for a, b in pairs], dtype=bool)
+    return BodySpheres(robot, spheres, pairs[keep] if len(pairs) else pairs, name=key)

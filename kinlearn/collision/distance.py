@@ -1,0 +1,218 @@
+"""Signed distances between spheres and obstacles, batched and differentiable in torch.
+
+A signed distance is the gap between two shapes in metres: positive when apart, zero when touching,
+negative when overlapping (then minus the penetration depth, exact for every pair here). All functions
+broadcast over leading batch dimensions and follow the dtype and device of their inputs.
+
+=================================  ==============================================================
+:func:`sphere_sphere_distance`     ‖c₁ − c₂‖ − r₁ − r₂
+:func:`sphere_box_distance`        exact signed distance from the sphere's centre to an axis-aligned
+                                   box (negative inside: minus the depth to the nearest face), − r
+:func:`sphere_plane_distance`      z − h − r for a floor at height h (solid below it)
+:func:`body_obstacle_distance`     minimum over a body's spheres and a :class:`Scene`'s obstacles
+:func:`self_collision_distance`    minimum over a body's self-collision sphere pairs
+=================================  ==============================================================
+"""
+
+from __future__ import annotations
+
+import torch
+
+from .scene import Scene
+
+__all__ = [
+    "body_obstacle_distance",
+    "self_collision_distance",
+    "sphere_box_distance",
+    "sphere_plane_distance",
+    "sphere_sphere_distance",
+]
+
+
+def sphere_sphere_distance(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Signed distance between spheres ``a (..., 4)`` and ``b (..., 4)`` ([x, y, z, r]) → ``(...)``."""
+    return torch.linalg.vector_norm(a[..., :3] - b[..., :3], dim=-1) - a[..., 3] - b[..., 3]
+
+
+def sphere_box_distance(s: torch.Tensor, box: torch.Tensor) -> torch.Tensor:
+    """Signed distance between spheres ``s (..., 4)`` and axis-aligned boxes ``box (..., 6)`` → ``(...)``.
+
+    ``box`` rows are ``[cx, cy, cz, hx, hy, hz]`` (centre, half extents). With q = |p − c| − h per axis,
+    the centre's signed distance to the box is ‖max(q, 0)‖ + min(max_i q_i, 0): the Euclidean distance
+    outside, minus the depth to the nearest face inside. The sphere's radius is subtracted.
+    """
+    q = (s[..., :3] - box[..., :3]).abs() - box[..., 3:6]
+    outside = torch.linalg.vector_norm(q.clamp_min(0.0), dim=-1)
+    inside = q.amax(dim=-1).clamp_max(0.0)
+    return outside + inside - s[..., 3]
+
+
+def sphere_plane_distance(s: torch.Tensor, height: torch.Tensor | float) -> torch.Tensor:
+    """Signed distance between spheres ``s (..., 4)`` and a floor at z = ``height`` (solid below) → ``(...)``."""
+    return s[..., 2] - height - s[..., 3]
+
+
+#: Large batches are evaluated in chunks of this many configurations, so that the (chunk, M, K)
+#: intermediates stay in cache: about 1.5× faster at 100k configurations than one pass.
+CHUNK = 4096
+
+
+def _safe_sqrt(x: torch.Tensor) -> torch.Tensor:
+    """sqrt with a finite gradient at 0 (where a distance's direction is undefined, the gradient is 0)."""
+    return x.clamp_min(torch.finfo(x.dtype).tiny).sqrt()
+
+
+def _nearest(d: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+    """``(..., M, K)`` → ``(..., M)``: the smallest distance over the obstacles the mask keeps."""
+    if mask is not None:
+        d = torch.where(mask.unsqueeze(-2), d, torch.full_like(d, torch.inf))
+    return d.amin(dim=-1)
+
+
+def _obstacles(scene: Scene, like: torch.Tensor, batch: torch.Size, flat: bool) -> list:
+    """``[spheres, sphere_mask, boxes, box_mask, floor]`` in ``like``'s dtype and device, flattened to
+    one row per configuration ``(n, ...)`` over ``batch`` if ``flat`` and batched."""
+    out = []
+    for t, tail in _FIELDS:
+        t = getattr(scene, t)
+        if t is not None:
+            t = t.to(device=like.device, dtype=like.dtype if t.is_floating_point() else t.dtype)
+            if flat and t.ndim > tail:
+                t = t.expand(*batch, *t.shape[t.ndim - tail :]).reshape(-1, *t.shape[t.ndim - tail :])
+        out.append(t)
+    return out
+
+
+#: Scene fields and the number of their trailing (non-batch) dimensions.
+_FIELDS = (("spheres", 2), ("sphere_mask", 1), ("boxes", 2), ("box_mask", 1), ("floor", 0))
+
+
+def _slice(t: torch.Tensor | None, tail: int, lo: int, hi: int):
+    return t[lo:hi] if t is not None and t.ndim > tail else t
+
+
+def _per_sphere_core(c, r, spheres, sphere_mask, boxes, box_mask, floor, floor_mask) -> torch.Tensor:
+    x, y, z = c[..., 0:1], c[..., 1:2], c[..., 2:3]  # (..., M, 1)
+    out = None
+    if spheres.shape[-2]:
+        col = spheres.unsqueeze(-3)  # (..., 1, K, 4)
+        dx, dy, dz = x - col[..., 0], y - col[..., 1], z - col[..., 2]
+        out = _nearest(_safe_sqrt(dx * dx + dy * dy + dz * dz) - col[..., 3], sphere_mask)
+    if boxes.shape[-2]:
+        col = boxes.unsqueeze(-3)  # (..., 1, B, 6)
+        qx = (x - col[..., 0]).abs() - col[..., 3]
+        qy = (y - col[..., 1]).abs() - col[..., 4]
+        qz = (z - col[..., 2]).abs() - col[..., 5]
+        ox, oy, oz = qx.clamp_min(0.0), qy.clamp_min(0.0), qz.clamp_min(0.0)
+        d = _safe_sqrt(ox * ox + oy * oy + oz * oz) + torch.maximum(torch.maximum(qx, qy), qz).clamp_max(0.0)
+        d = _nearest(d, box_mask)
+        out = d if out is None else torch.minimum(out, d)
+    out = (torch.full_like(c[..., 0], torch.inf) if out is None else out) - r
+    if floor is not None:
+        d = c[..., 2] - r - floor.unsqueeze(-1)
+        if floor_mask is not None:
+            d = torch.where(floor_mask, d, torch.full_like(d, torch.inf))
+        out = torch.minimum(out, d)
+    return out
+
+
+def _per_sphere(centres: torch.Tensor, radii: torch.Tensor, scene: Scene, floor_mask) -> torch.Tensor:
+    """``(..., M)``: each body sphere's smallest signed distance to the scene (+inf for an empty scene)."""
+    if floor_mask is not None:
+        floor_mask = floor_mask.to(centres.device)
+    batch = torch.broadcast_shapes(centres.shape[:-2], scene.batch_shape)
+    n = batch.numel()
+    M = centres.shape[-2]
+    if n <= CHUNK:
+        return _per_sphere_core(centres, radii, *_obstacles(scene, centres, batch, False), floor_mask)
+    c = centres.expand(*batch, M, 3).reshape(n, M, 3)
+    fields = _obstacles(scene, centres, batch, True)
+    parts = [
+        _per_sphere_core(
+            c[lo : lo + CHUNK],
+            radii,
+            *(_slice(t, tail, lo, lo + CHUNK) for t, (_, tail) in zip(fields, _FIELDS, strict=True)),
+            floor_mask,
+        )
+        for lo in range(0, n, CHUNK)
+    ]
+    return torch.cat(parts).reshape(*batch, M)
+
+
+def body_obstacle_distance(
+    centres: torch.Tensor,
+    radii: torch.Tensor,
+    scene: Scene,
+    *,
+    per_sphere: bool = False,
+    floor_mask: torch.Tensor | None = None,
+) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+    """Smallest signed distance between a body of spheres and a scene, per configuration.
+
+    ``centres (..., M, 3)`` (e.g. from :class:`~kinlearn.collision.BodySpheres`), ``radii (M,)``; the
+    scene's batch shape broadcasts against ``...``. ``floor_mask (M,)`` (bool) picks the spheres the
+    floor applies to (``BodySpheres.floor_mask``: every sphere but the base's); default all. Returns
+    ``(...)``, and with ``per_sphere=True`` the pair ``(distance (...), per_sphere (..., M))``. +inf
+    where the scene has no obstacle. Differentiable in the centres and in the obstacles.
+    """
+    per = _per_sphere(centres, radii.to(centres), scene, floor_mask)
+    d = per.amin(dim=-1)
+    return (d, per) if per_sphere else d
+
+
+_PAIR_CACHE: dict[tuple, tuple[torch.Tensor, torch.Tensor]] = {}
+
+
+def _pair_matrix(pairs: torch.Tensor, M: int, like: torch.Tensor) -> torch.Tensor:
+    """``(3M, 3P)``: centres ``(N, 3M)`` @ it = the difference vectors of the pairs ``(N, P, 3)``.
+
+    Cached per pairs tensor (kept alive by the cache, so its address identifies it) and version.
+    """
+    key = (pairs.data_ptr(), tuple(pairs.shape), pairs._version, M, like.dtype, like.device)
+    hit = _PAIR_CACHE.get(key)
+    if hit is not None:
+        return hit[1]
+    D = _build_pair_matrix(pairs, M, like)
+    if len(_PAIR_CACHE) >= 16:
+        _PAIR_CACHE.pop(next(iter(_PAIR_CACHE)))
+    _PAIR_CACHE[key] = (pairs, D)
+    return D
+
+
+def _build_pair_matrix(pairs: torch.Tensor, M: int, like: torch.Tensor) -> torch.Tensor:
+    P = pairs.shape[0]
+    D = like.new_zeros(3 * M, 3 * P)
+    cols = torch.arange(3 * P, device=like.device).view(P, 3)
+    for k in range(3):
+        D[3 * pairs[:, 0] + k, cols[:, k]] = 1.0
+        D[3 * pairs[:, 1] + k, cols[:, k]] = -1.0
+    return D
+
+
+def self_collision_distance(
+    centres: torch.Tensor, radii: torch.Tensor, pairs: torch.Tensor, *, per_pair: bool = False
+) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+    """Smallest signed distance over the sphere pairs ``pairs (P, 2)`` of one body, per configuration.
+
+    ``centres (..., M, 3)``, ``radii (M,)``; use ``BodySpheres.pairs`` (spheres on links at least two
+    apart, minus the link pairs the robot's sphere model excludes). Returns ``(...)`` (+inf for no
+    pairs), and with ``per_pair=True`` the pair ``(distance (...), per_pair (..., P))``.
+    """
+    batch, M = centres.shape[:-2], centres.shape[-2]
+    pairs = pairs.to(centres.device)
+    if pairs.shape[0] == 0:
+        d = torch.full(batch, torch.inf, dtype=centres.dtype, device=centres.device)
+        return (d, centres.new_zeros(*batch, 0)) if per_pair else d
+    r = radii.to(centres)
+    reach = r[pairs[:, 0]] + r[pairs[:, 1]]
+    D = _pair_matrix(pairs, M, centres)
+    flat = centres.reshape(-1, 3 * M)
+
+    def core(c: torch.Tensor) -> torch.Tensor:
+        v = (c @ D).view(c.shape[0], -1, 3)
+        return _safe_sqrt((v * v).sum(dim=-1)) - reach
+
+    per = torch.cat([core(c) for c in flat.split(CHUNK)]) if flat.shape[0] > CHUNK else core(flat)
+    per = per.reshape(*batch, -1)
+    d = per.amin(dim=-1)
+    return (d, per) if per_pair else d

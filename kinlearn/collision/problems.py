@@ -1,0 +1,651 @@
+"""Obstacle benchmark problems for the iiwa14: (start joints, goal joints, scene), verified solvable.
+
+Three scene families, modelled on the MπNets / MotionBenchMaker ones and scaled to the iiwa14's reach
+(robot base at the origin, z up, a floor at z = 0 in every scene):
+
+=============  ====================================================================================
+``tabletop``   a table (a 4 cm slab, top at 0–25 cm) in front of the robot with 2–6 boxes (up to 40 cm
+               tall) and spheres standing on it; start and goal end effectors behind two different
+               objects as seen from each other, no higher than 5 cm above them.
+``shelf``      a shelf unit of 2–3 levels (back, sides, top, bottom and level boards, optionally a
+               vertical divider: up to 8 boxes) 0.5–0.75 m from the base, open towards it; the goal end
+               effector inside a compartment, the start in another compartment or in front of the shelf.
+``barrier``    a wall 0.35–0.8 m high between the start and goal end effectors (a thin box across
+               the robot's front), so the arm must go over or around it.
+=============  ====================================================================================
+
+Each scene is turned by 0°, 90° or −90° about z (which keeps boxes axis-aligned). Start and goal are
+joint configurations found by damped-least-squares IK from random initial joints towards sampled
+end-effector targets, kept only if they are within the joint limits by ``joint_margin``, at least
+``min_clearance`` from the scene and from self-collision, and their end effectors are ≥ 0.2 m apart.
+A problem is kept only if OMPL's RRT-Connect finds a path within ``time_limit`` seconds on the same
+checker (:class:`RrtChecker`: a state is valid when its body–scene clearance and self-clearance are
+> 0; a motion is valid when the dense check of :func:`~kinlearn.collision.check_path` finds it free,
+≤ 1 cm of sphere travel between checked configurations). ``hard`` marks problems whose straight
+joint-space line from start to goal collides.
+
+Everything is seeded: problem i of ``make_problems(family, n, seed)`` uses its own sub-seed
+(:func:`problem_seed`), so a set does not depend on how many attempts earlier problems needed. Only
+RRT-Connect's time limit is wall-clock: a problem near the limit may be kept on one machine and
+replaced on another.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import torch
+
+from ..errors import ConfigError, DatasetError, MissingDependencyError, ObstacleError, PlanningError
+from ..io import load_npz, save_npz
+from ..kinematics import dls_step, kinematics
+from ..robot import Robot, load_robot
+from .body import BodySpheres, body_spheres
+from .check import check_path, clearances, segment_steps
+from .scene import Scene
+
+__all__ = [
+    "FAMILIES",
+    "PROBLEM_FORMAT",
+    "ProblemConfig",
+    "ProblemSet",
+    "RrtChecker",
+    "make_problems",
+    "problem_seed",
+    "rrt_connect_solve",
+]
+
+Family = Literal["tabletop", "shelf", "barrier"]
+FAMILIES: tuple[str, ...] = ("tabletop", "shelf", "barrier")
+#: Version of the problem-set ``.npz`` layout written by :meth:`ProblemSet.save`.
+PROBLEM_FORMAT = 1
+
+_F64 = torch.float64
+
+
+@dataclass(frozen=True)
+class ProblemConfig:
+    """How problems are generated and verified (see the module docstring)."""
+
+    joint_margin: float = 0.05  # rad inside each joint limit, for start and goal
+    min_clearance: float = 0.001  # m, start and goal: body–scene and self-collision distance
+    min_ee_distance: float = 0.2  # m between the start and goal end effectors
+    ik_batch: int = 96  # random initial configurations per IK target batch
+    ik_iterations: int = 60
+    ik_tolerance: float = 0.01  # m: an IK solution must put the end effector this close to its target
+    max_attempts: int = 60  # scenes tried per problem before giving up
+    verify: bool = True  # run RRT-Connect on every problem
+    time_limit: float = 5.0  # s, RRT-Connect's limit for a problem to count as solvable
+    max_travel: float = 0.01  # m of sphere travel between checked configurations (motion checks)
+    dense_body: bool = False  # the 46-sphere body instead of the 12-sphere one (+ base cover)
+
+    def __post_init__(self):
+        for name in (
+            "joint_margin",
+            "min_clearance",
+            "min_ee_distance",
+            "ik_tolerance",
+            "time_limit",
+            "max_travel",
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ConfigError(f"ProblemConfig.{name} must be a finite number >= 0, got {value!r}")
+        for name in ("ik_batch", "ik_iterations", "max_attempts"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"ProblemConfig.{name} must be an integer >= 1, got {value!r}")
+        if self.time_limit <= 0 or self.max_travel <= 0:
+            raise ConfigError("ProblemConfig.time_limit and max_travel must be > 0")
+
+
+def problem_seed(seed: int, index: int) -> int:
+    """The sub-seed of problem ``index`` of a set generated with ``seed`` (a 63-bit integer)."""
+    x = (int(seed) * 0x9E3779B97F4A7C15 + int(index) * 0xBF58476D1CE4E5B9 + 0x94D049BB133111EB) % (1 << 64)
+    x ^= x >> 31
+    x = (x * 0xD6E8FEB86659FD93) % (1 << 64)
+    return (x ^ (x >> 29)) & ((1 << 63) - 1)
+
+
+# --------------------------------------------------------------------------------------------------
+# Scene families. Each builder returns (boxes, spheres, start-target sampler, goal-target sampler);
+# a sampler maps (n, generator) to (n, 3) end-effector targets. All numbers in metres.
+# --------------------------------------------------------------------------------------------------
+
+
+def _u(gen: torch.Generator, lo: float, hi: float, n: int | None = None):
+    if n is None:
+        return lo + (hi - lo) * float(torch.rand((), generator=gen, dtype=_F64))
+    return lo + (hi - lo) * torch.rand(n, generator=gen, dtype=_F64)
+
+
+def _randint(gen: torch.Generator, lo: int, hi: int) -> int:
+    """An integer in [lo, hi]."""
+    return int(torch.randint(lo, hi + 1, (), generator=gen))
+
+
+def _box(cx, cy, cz, hx, hy, hz) -> list[float]:
+    return [float(cx), float(cy), float(cz), float(hx), float(hy), float(hz)]
+
+
+def _tabletop(gen: torch.Generator):
+    top = _u(gen, 0.0, 0.25)
+    x0 = _u(gen, 0.3, 0.4)
+    depth = _u(gen, 0.55, 0.8)
+    half_w = _u(gen, 0.55, 0.8)
+    yc = _u(gen, -0.1, 0.1)
+    boxes = [_box(x0 + depth / 2, yc, top - 0.02, depth / 2, half_w, 0.02)]
+    spheres = []
+    objects = []  # (x, y, footprint radius, height of the top)
+    for _ in range(_randint(gen, 2, 6)):
+        for _try in range(20):  # a spot within reach, on the table, not on another object
+            rad, ang = _u(gen, 0.4, 0.8), _u(gen, -1.2, 1.2)
+            x, y = rad * math.cos(ang), rad * math.sin(ang)
+            if x0 + 0.06 < x < x0 + depth - 0.06 and abs(y - yc) < half_w - 0.06:
+                if all(math.hypot(x - ox, y - oy) > fr + 0.1 for ox, oy, fr, _ in objects):
+                    break
+        else:
+            continue
+        if float(torch.rand((), generator=gen)) < 0.5:
+            hx, hy, hz = _u(gen, 0.02, 0.07), _u(gen, 0.02, 0.07), _u(gen, 0.05, 0.2)
+            boxes.append(_box(x, y, top + hz, hx, hy, hz))
+            objects.append((x, y, math.hypot(hx, hy), top + 2 * hz))
+        else:
+            r = _u(gen, 0.03, 0.08)
+            spheres.append([x, y, top + r, r])
+            objects.append((x, y, r, top + 2 * r))
+    if len(objects) < 2:  # too crowded to place two objects: the caller draws another scene
+        return None
+    first = _randint(gen, 0, len(objects) - 1)
+    second = (first + _randint(gen, 1, len(objects) - 1)) % len(objects)
+
+    def behind(k: int, other: int):
+        x, y, footprint, height = objects[k]
+        away = math.atan2(y - objects[other][1], x - objects[other][0])
+
+        def sample(n: int, g: torch.Generator) -> torch.Tensor:
+            """Targets behind object k as seen from the other object (within ±60°), 7–14 cm from its
+            footprint, from 4 cm above the table to 5 cm above the object's top."""
+            ang = away + _u(g, -math.pi / 3, math.pi / 3, n)
+            off = footprint + _u(g, 0.07, 0.14, n)
+            z = top + 0.04 + (height - top + 0.01) * torch.rand(n, generator=g, dtype=_F64)
+            return torch.stack([x + off * torch.cos(ang), y + off * torch.sin(ang), z], dim=1)
+
+        return sample
+
+    return boxes, spheres, behind(first, second), behind(second, first)
+
+
+def _shelf(gen: torch.Generator):
+    t = 0.02  # board thickness (half: 0.01)
+    x_open = _u(gen, 0.5, 0.7)  # the shelf's open face, towards the robot
+    depth = _u(gen, 0.3, 0.4)
+    half_w = _u(gen, 0.3, 0.45)
+    yc = _u(gen, -0.15, 0.15)
+    bottom = _u(gen, 0.0, 0.3)
+    levels = _randint(gen, 2, 3)
+    level_h = _u(gen, 0.32, 0.42)
+    height = levels * level_h
+    xc = x_open + depth / 2
+    boxes = [
+        _box(x_open + depth - t / 2, yc, bottom + height / 2, t / 2, half_w, height / 2),  # back
+        _box(xc, yc - half_w + t / 2, bottom + height / 2, depth / 2, t / 2, height / 2),  # sides
+        _box(xc, yc + half_w - t / 2, bottom + height / 2, depth / 2, t / 2, height / 2),
+        _box(xc, yc, bottom + t / 2, depth / 2, half_w, t / 2),  # bottom
+        _box(xc, yc, bottom + height - t / 2, depth / 2, half_w, t / 2),  # top
+    ]
+    boxes += [_box(xc, yc, bottom + k * level_h, depth / 2, half_w, t / 2) for k in range(1, levels)]
+    divided = float(torch.rand((), generator=gen)) < 0.5
+    if divided:
+        boxes.append(_box(xc, yc, bottom + height / 2, depth / 2, t / 2, height / 2))
+    # Compartments: (level, column) → inner bounds.
+    columns = (
+        [(yc - half_w + t, yc - t / 2), (yc + t / 2, yc + half_w - t)]
+        if divided
+        else [(yc - half_w + t, yc + half_w - t)]
+    )
+    cells = [(k, c) for k in range(levels) for c in range(len(columns))]
+    goal_cell = cells[_randint(gen, 0, len(cells) - 1)]
+    others = [c for c in cells if c != goal_cell]
+    start_inside = float(torch.rand((), generator=gen)) < 0.5
+    start_cell = others[_randint(gen, 0, len(others) - 1)]
+
+    def inside(cell):
+        k, c = cell
+        lo, hi = columns[c]
+
+        def sample(n: int, g: torch.Generator) -> torch.Tensor:
+            x = x_open + _u(g, 0.05, 0.15, n)
+            y = lo + 0.09 + (hi - lo - 0.18) * torch.rand(n, generator=g, dtype=_F64)
+            z = bottom + k * level_h + 0.1 + (level_h - 0.2) * torch.rand(n, generator=g, dtype=_F64)
+            return torch.stack([x, y, z], dim=1)
+
+        return sample
+
+    def in_front(n: int, g: torch.Generator) -> torch.Tensor:
+        x = x_open - _u(g, 0.12, 0.3, n)
+        y = yc + _u(g, -half_w, half_w, n)
+        z = bottom + _u(g, 0.1, height, n)
+        return torch.stack([x, y, z], dim=1)
+
+    return boxes, [], (inside(start_cell) if start_inside else in_front), inside(goal_cell)
+
+
+def _barrier(gen: torch.Generator):
+    xc = _u(gen, 0.5, 0.65)
+    hx = _u(gen, 0.2, 0.3)
+    yc = _u(gen, -0.05, 0.05)
+    hy = _u(gen, 0.01, 0.03)
+    top = _u(gen, 0.35, 0.8)
+    boxes = [_box(xc, yc, top / 2, hx, hy, top / 2)]
+    side = 1.0 if float(torch.rand((), generator=gen)) < 0.5 else -1.0
+
+    def beside(sign: float):
+        def sample(n: int, g: torch.Generator) -> torch.Tensor:
+            x = xc + _u(g, -hx + 0.05, hx - 0.05, n)
+            y = yc + sign * (hy + _u(g, 0.12, 0.3, n))
+            z = _u(g, 0.1, max(0.15, top - 0.05), n)
+            return torch.stack([x, y, z], dim=1)
+
+        return sample
+
+    return boxes, [], beside(side), beside(-side)
+
+
+_BUILDERS: dict[str, Callable] = {"tabletop": _tabletop, "shelf": _shelf, "barrier": _barrier}
+
+
+def _turn(boxes: torch.Tensor, spheres: torch.Tensor, k: int):
+    """Rotate boxes and spheres by k · 90° about z (boxes stay axis-aligned: their x/y extents swap)."""
+    c, s = round(math.cos(k * math.pi / 2)), round(math.sin(k * math.pi / 2))
+    R = torch.tensor([[c, -s, 0], [s, c, 0], [0, 0, 1]], dtype=_F64)
+    b = boxes.clone()
+    b[:, :3] = boxes[:, :3] @ R.T
+    if k % 2:
+        b[:, 3], b[:, 4] = boxes[:, 4], boxes[:, 3]
+    sp = spheres.clone()
+    sp[:, :3] = spheres[:, :3] @ R.T
+    return b, sp, R
+
+
+# --------------------------------------------------------------------------------------------------
+# RRT-Connect on the same checker
+# --------------------------------------------------------------------------------------------------
+
+
+def _import_ompl():
+    try:
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
+    except ImportError as exc:
+        raise MissingDependencyError(
+            "verifying problems needs OMPL's Python bindings, which are not installed: `pip install ompl` "
+            "(or `pip install kinlearn[ompl]`), or pass ProblemConfig(verify=False)"
+        ) from exc
+    return ob, og, ou
+
+
+class RrtChecker:
+    """State and motion validity for OMPL on kinlearn's checker: one body, one unbatched scene.
+
+    A state is valid when its body–scene clearance and self-clearance are both > 0; a motion is valid
+    when :func:`~kinlearn.collision.check_path` finds the straight joint-space segment free
+    (``max_travel`` metres of sphere travel at most between checked configurations).
+    """
+
+    def __init__(self, body: BodySpheres, scene: Scene, max_travel: float = 0.01):
+        self.body, self.scene, self.max_travel = body, scene.to(_F64), max_travel
+        self.dof = body.robot.dof
+        self.states = 0
+        self.motions = 0
+
+    def state_valid(self, q: np.ndarray) -> bool:
+        self.states += 1
+        d, s = clearances(self.body, torch.as_tensor(q, dtype=_F64), self.scene, validate=False)
+        return bool(d > 0) and bool(s > 0)
+
+    def motion_valid(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """The configurations :func:`check_path` checks on segment a → b, every 8th one first (a
+        colliding motion is usually rejected without computing the rest)."""
+        self.motions += 1
+        path = torch.as_tensor(np.stack([a, b]), dtype=_F64)
+        n = int(segment_steps(self.body, path, self.max_travel)[0])
+        q = path[0] + torch.linspace(0.0, 1.0, n + 1, dtype=_F64).unsqueeze(-1) * (path[1] - path[0])
+        coarse = torch.zeros(n + 1, dtype=torch.bool)
+        coarse[::8] = True
+        coarse[-1] = True
+        for part in (q[coarse], q[~coarse]):
+            if part.shape[0]:
+                d, s = clearances(self.body, part, self.scene, validate=False)
+                if not (bool((d > 0).all()) and bool((s > 0).all())):
+                    return False
+        return True
+
+
+def rrt_connect_solve(
+    body: BodySpheres,
+    scene: Scene,
+    start: torch.Tensor,
+    goal: torch.Tensor,
+    time_limit: float = 5.0,
+    seed: int | None = 0,
+    max_travel: float = 0.01,
+) -> tuple[np.ndarray | None, float]:
+    """OMPL RRT-Connect from ``start`` to ``goal`` (joints ``(dof,)``) around ``scene``, on :class:`RrtChecker`.
+
+    Returns ``(path (K, dof) or None if no exact path within time_limit, wall time in seconds)``. The
+    path's vertices are joined by motions the checker found free. ``seed`` seeds OMPL's process-wide
+    random generator (``None`` leaves it alone).
+    """
+    ob, og, ou = _import_ompl()
+    robot = body.robot
+    checker = RrtChecker(body, scene, max_travel)
+    dof = robot.dof
+
+    def as_array(state) -> np.ndarray:
+        return np.fromiter((state[j] for j in range(dof)), dtype=np.float64, count=dof)
+
+    class _Valid(ob.StateValidityChecker):
+        def isValid(self, state) -> bool:  # OMPL's method name
+            return checker.state_valid(as_array(state))
+
+    class _Motion(ob.MotionValidator):
+        def checkMotion(self, s1, s2, *rest) -> bool:  # OMPL's method name
+            return checker.motion_valid(as_array(s1), as_array(s2))
+
+    previous = ou.getLogLevel()
+    ou.setLogLevel(ou.LOG_NONE)
+    try:
+        if seed is not None:
+            ou.RNG.setSeed(int(seed) % (1 << 31) or 1)
+        space = ob.RealVectorStateSpace(dof)
+        bounds = ob.RealVectorBounds(dof)
+        for j in range(dof):
+            bounds.setLow(j, float(robot.lower[j]))
+            bounds.setHigh(j, float(robot.upper[j]))
+        space.setBounds(bounds)
+        setup = og.SimpleSetup(space)
+        info = setup.getSpaceInformation()
+        valid, motion = _Valid(info), _Motion(info)
+        setup.setStateValidityChecker(valid)
+        info.setMotionValidator(motion)
+        setup.setPlanner(og.RRTConnect(info))
+        s, g = space.allocState(), space.allocState()
+        q0 = start.detach().double().cpu().numpy()
+        q1 = goal.detach().double().cpu().numpy()
+        for j in range(dof):
+            s[j], g[j] = float(q0[j]), float(q1[j])
+        t0 = time.perf_counter()
+        setup.setStartAndGoalStates(s, g)
+        setup.solve(ob.timedPlannerTerminationCondition(float(time_limit)))
+        elapsed = time.perf_counter() - t0
+        if not setup.haveExactSolutionPath():
+            return None, elapsed
+        path = setup.getSolutionPath()
+        return np.stack([as_array(path.getState(k)) for k in range(path.getStateCount())]), elapsed
+    finally:
+        ou.setLogLevel(previous)
+
+
+# --------------------------------------------------------------------------------------------------
+# Problem sets
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class ProblemSet:
+    """``N`` problems: joints ``start``/``goal`` ``(N, dof)`` (float64), ``scene`` of batch ``(N,)``
+    (padded, with masks), ``family`` ``(N,)`` (index into :data:`FAMILIES`), ``hard`` ``(N,)`` (the
+    straight joint-space line collides), ``seed`` ``(N,)`` (each problem's sub-seed), ``solve_time``
+    ``(N,)`` (RRT-Connect's verification time, s; NaN if not verified) and the generation ``config``."""
+
+    robot: str
+    start: torch.Tensor
+    goal: torch.Tensor
+    scene: Scene
+    family: torch.Tensor
+    hard: torch.Tensor
+    seed: torch.Tensor
+    solve_time: torch.Tensor
+    config: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.start.shape[0])
+
+    def __getitem__(self, index) -> ProblemSet:
+        """A subset (``problems[:10]``, ``problems[problems.hard]``, ``problems.of("shelf")``)."""
+        if isinstance(index, int):
+            index = [index]
+        return ProblemSet(
+            self.robot,
+            self.start[index],
+            self.goal[index],
+            self.scene[index],
+            self.family[index],
+            self.hard[index],
+            self.seed[index],
+            self.solve_time[index],
+            self.config,
+        )
+
+    def of(self, family: str) -> ProblemSet:
+        """The problems of one family."""
+        if family not in FAMILIES:
+            raise ConfigError(f"unknown problem family {family!r}; choose one of {', '.join(FAMILIES)}")
+        return self[self.family == FAMILIES.index(family)]
+
+    def problem(self, i: int) -> tuple[torch.Tensor, torch.Tensor, Scene]:
+        """Problem ``i`` as ``(start (dof,), goal (dof,), unbatched scene without padding)``."""
+        return self.start[i], self.goal[i], self.scene[i : i + 1].unstack()[0]
+
+    @staticmethod
+    def concat(sets: list[ProblemSet]) -> ProblemSet:
+        if not sets or len({s.robot for s in sets}) != 1:
+            raise ConfigError("ProblemSet.concat needs at least one set, all for the same robot")
+        scenes = [sc for s in sets for sc in s.scene.unstack()]
+        return ProblemSet(
+            sets[0].robot,
+            torch.cat([s.start for s in sets]),
+            torch.cat([s.goal for s in sets]),
+            Scene.stack(scenes),
+            torch.cat([s.family for s in sets]),
+            torch.cat([s.hard for s in sets]),
+            torch.cat([s.seed for s in sets]),
+            torch.cat([s.solve_time for s in sets]),
+            {"parts": [s.config for s in sets]},
+        )
+
+    def save(self, path: str | Path) -> Path:
+        """Write the set to ``path`` (``.npz``) atomically."""
+        arrays = {
+            "start": self.start.detach().cpu().double().numpy(),
+            "goal": self.goal.detach().cpu().double().numpy(),
+            "family": self.family.cpu().numpy().astype(np.int8),
+            "hard": self.hard.cpu().numpy(),
+            "seed": self.seed.cpu().numpy().astype(np.int64),
+            "solve_time": self.solve_time.cpu().numpy().astype(np.float32),
+        }
+        arrays.update({f"scene_{k}": v for k, v in self.scene.arrays().items()})
+        config = {"problem_format": PROBLEM_FORMAT, "families": list(FAMILIES), "generation": self.config}
+        return save_npz(path, kind="obstacle_problems", robot=self.robot, config=config, arrays=arrays)
+
+    @classmethod
+    def load(cls, path: str | Path, robot: str | None = None) -> ProblemSet:
+        """Read a set written by :meth:`save`. Raises :class:`~kinlearn.errors.DatasetError` for a missing
+        or unreadable file, a file of another kind, format or robot, or inconsistent contents."""
+        meta, arrays = load_npz(path, kind="obstacle_problems", robot=robot)
+        config = meta.get("config", {})
+        if config.get("problem_format") != PROBLEM_FORMAT:
+            raise DatasetError(
+                f"{path} holds problem format {config.get('problem_format')!r}; this kinlearn reads {PROBLEM_FORMAT}"
+            )
+        if list(config.get("families", [])) != list(FAMILIES):
+            raise DatasetError(
+                f"{path} numbers its families {config.get('families')}, this kinlearn {list(FAMILIES)}"
+            )
+        try:
+            scene = Scene.from_arrays({k[6:]: v for k, v in arrays.items() if k.startswith("scene_")})
+            start = torch.as_tensor(arrays["start"], dtype=_F64)
+            out = cls(
+                meta["robot"],
+                start,
+                torch.as_tensor(arrays["goal"], dtype=_F64),
+                scene,
+                torch.as_tensor(arrays["family"].astype(np.int64)),
+                torch.as_tensor(arrays["hard"]),
+                torch.as_tensor(arrays["seed"]),
+                torch.as_tensor(arrays["solve_time"].astype(np.float64)),
+                config.get("generation", {}),
+            )
+        except (KeyError, ObstacleError, ValueError, TypeError) as exc:
+            raise DatasetError(
+                f"{path} is not a consistent obstacle problem set ({type(exc).__name__}: {exc})"
+            ) from exc
+        n = len(out)
+        shapes_ok = (
+            out.start.ndim == 2
+            and out.goal.shape == out.start.shape
+            and out.scene.batch_shape == (n,)
+            and all(t.shape == (n,) for t in (out.family, out.hard, out.seed, out.solve_time))
+        )
+        if not shapes_ok:
+            raise DatasetError(f"{path}: arrays of inconsistent shapes (start {tuple(out.start.shape)})")
+        return out
+
+    def summary(self) -> dict:
+        """Per family: number of problems, share of hard ones, median verification time."""
+        out = {}
+        for name in FAMILIES:
+            sub = self.of(name)
+            if len(sub):
+                out[name] = {
+                    "n": len(sub),
+                    "hard": float(sub.hard.double().mean()),
+                    "median_solve_time_s": float(sub.solve_time.nanmedian())
+                    if bool(torch.isfinite(sub.solve_time).any())
+                    else None,
+                }
+        return out
+
+
+def _pick_valid(
+    body: BodySpheres, scene: Scene, sampler, gen: torch.Generator, cfg: ProblemConfig
+) -> torch.Tensor | None:
+    """IK from random joints towards targets drawn by ``sampler``; the first valid solution, or None."""
+    robot = body.robot
+    kin = kinematics(robot, "fast")
+    targets = sampler(cfg.ik_batch, gen)
+    q0 = robot.sample(cfg.ik_batch, gen, dtype=_F64, margin=cfg.joint_margin)
+    q = dls_step(kin, q0, targets, iterations=cfg.ik_iterations, damping=0.02, clamp=True)
+    lo, hi = robot.limits(_F64)
+    ok = (kin.position(q, validate=False) - targets).norm(dim=-1) <= cfg.ik_tolerance
+    ok &= ((q >= lo + cfg.joint_margin) & (q <= hi - cfg.joint_margin)).all(dim=-1)
+    if not bool(ok.any()):
+        return None
+    d, s = clearances(body, q[ok], scene, validate=False)
+    good = (d >= cfg.min_clearance) & (s >= cfg.min_clearance)
+    if not bool(good.any()):
+        return None
+    return q[ok][good][0]
+
+
+def _one_problem(family: str, body: BodySpheres, sub_seed: int, cfg: ProblemConfig):
+    gen = torch.Generator().manual_seed(sub_seed)
+    build = _BUILDERS[family]
+    kin = kinematics(body.robot, "fast")
+    for attempt in range(cfg.max_attempts):
+        built = build(gen)
+        if built is None:
+            continue
+        boxes, spheres, start_sampler, goal_sampler = built
+        turn = (0, 1, 3)[_randint(gen, 0, 2)]
+        bx = torch.tensor(boxes, dtype=_F64).reshape(-1, 6)
+        sp = torch.tensor(spheres, dtype=_F64).reshape(-1, 4)
+        bx, sp, R = _turn(bx, sp, turn)
+        scene = Scene(sp, bx, floor=torch.tensor(0.0, dtype=_F64))
+
+        def turned(sampler, R=R):
+            return lambda n, g: sampler(n, g) @ R.T
+
+        start = _pick_valid(body, scene, turned(start_sampler), gen, cfg)
+        if start is None:
+            continue
+        goal = _pick_valid(body, scene, turned(goal_sampler), gen, cfg)
+        if goal is None:
+            continue
+        if float((kin.position(start) - kin.position(goal)).norm()) < cfg.min_ee_distance:
+            continue
+        line = check_path(body, torch.stack([start, goal]), scene, max_travel=cfg.max_travel)
+        solve_time = math.nan
+        if cfg.verify:
+            path, solve_time = rrt_connect_solve(
+                body, scene, start, goal, cfg.time_limit, seed=sub_seed + attempt, max_travel=cfg.max_travel
+            )
+            if path is None:
+                continue
+        return start, goal, scene, not bool(line.collision_free), solve_time, attempt
+    raise PlanningError(
+        f"no valid {family} problem in {cfg.max_attempts} scenes for sub-seed {sub_seed}; raise max_attempts"
+    )
+
+
+def make_problems(
+    family: str,
+    n: int,
+    seed: int,
+    robot: Robot | None = None,
+    config: ProblemConfig | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    first: int = 0,
+) -> ProblemSet:
+    """``n`` verified problems of ``family`` (one of :data:`FAMILIES`) for the iiwa14, seeded by ``seed``.
+
+    Problem i depends on ``(seed, i)`` only (:func:`problem_seed`); ``first`` starts the set at problem
+    ``first`` of that sequence (to generate a long set in parts). ``progress(done, n)`` is called after
+    each problem. Raises :class:`~kinlearn.errors.ConfigError` for an unknown family or bad ``n``,
+    :class:`~kinlearn.errors.RobotDescriptionError` for a robot without a sphere model, and
+    :class:`~kinlearn.errors.MissingDependencyError` when verifying without OMPL.
+    """
+    if family not in FAMILIES:
+        raise ConfigError(f"unknown problem family {family!r}; choose one of {', '.join(FAMILIES)}")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ConfigError(f"n must be an integer >= 1, got {n!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
+    if isinstance(first, bool) or not isinstance(first, int) or first < 0:
+        raise ConfigError(f"first must be an integer >= 0, got {first!r}")
+    cfg = config or ProblemConfig()
+    robot = robot or load_robot("iiwa14")
+    body = body_spheres(robot, dense=cfg.dense_body).double()
+    if cfg.verify:
+        _import_ompl()
+    starts, goals, scenes, hard, seeds, times = [], [], [], [], [], []
+    for i in range(n):
+        sub = problem_seed(seed, first + i)
+        start, goal, scene, is_hard, solve_time, _ = _one_problem(family, body, sub, cfg)
+        starts.append(start)
+        goals.append(goal)
+        scenes.append(scene)
+        hard.append(is_hard)
+        seeds.append(sub)
+        times.append(solve_time)
+        if progress is not None:
+            progress(i + 1, n)
+    return ProblemSet(
+        robot.name,
+        torch.stack(starts),
+        torch.stack(goals),
+        Scene.stack(scenes),
+        torch.full((n,), FAMILIES.index(family), dtype=torch.int64),
+        torch.tensor(hard, dtype=torch.bool),
+        torch.tensor(seeds, dtype=torch.int64),
+        torch.tensor(times, dtype=_F64),
+        {"family": family, "n": n, "seed": seed, "first": first, **asdict(cfg)},
+    )

@@ -1,0 +1,149 @@
+"""Obstacle benchmark problems: generation (valid, seeded, verified by RRT-Connect on the same
+checker), files, and the committed held-out set."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from kinlearn import kinematics, load_robot
+from kinlearn.collision import Scene, body_spheres, check_path, clearances
+from kinlearn.collision.problems import (
+    FAMILIES,
+    ProblemConfig,
+    ProblemSet,
+    make_problems,
+    problem_seed,
+    rrt_connect_solve,
+)
+from kinlearn.errors import ConfigError, DatasetError
+from kinlearn.io import save_npz
+
+HELDOUT = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "obstacle_problems_heldout.npz"
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot("iiwa14")
+
+
+@pytest.fixture(scope="module")
+def body(robot):
+    return body_spheres(robot).double()
+
+
+def _assert_valid(problems: ProblemSet, body, margin: float = 0.05, clearance: float = 0.001) -> None:
+    robot = body.robot
+    lo, hi = robot.limits(torch.float64)
+    for q in (problems.start, problems.goal):
+        assert bool(((q >= lo + margin - 1e-12) & (q <= hi - margin + 1e-12)).all())
+        d, s = clearances(body, q, problems.scene)
+        assert bool((d >= clearance).all()) and bool((s >= clearance).all())
+    line = check_path(body, torch.stack([problems.start, problems.goal], dim=1), problems.scene)
+    assert torch.equal(problems.hard, ~line.collision_free)
+    kin = kinematics(robot, "fast")
+    apart = (kin.position(problems.start) - kin.position(problems.goal)).norm(dim=-1)
+    assert bool((apart >= 0.2).all())
+
+
+@pytest.mark.parametrize("family", ["tabletop", "barrier"])
+def test_generated_problems_are_valid_and_verified(body, family):
+    problems = make_problems(family, 2, seed=5)
+    assert len(problems) == 2 and problems.family.tolist() == [FAMILIES.index(family)] * 2
+    assert bool((problems.solve_time > 0).all() and (problems.solve_time < 5.0).all())
+    assert problems.seed.tolist() == [problem_seed(5, 0), problem_seed(5, 1)]
+    _assert_valid(problems, body)
+
+
+def test_generation_is_seeded_and_shelf_goals_are_inside(robot, body):
+    cfg = ProblemConfig(verify=False)
+    a = make_problems("shelf", 2, seed=3, config=cfg)
+    b = make_problems("shelf", 1, seed=3, config=cfg, first=1)  # problem 1 alone: the same
+    assert torch.equal(a.start[1:], b.start) and torch.equal(a.goal[1:], b.goal)
+    assert torch.equal(a.scene.boxes[1:], b.scene.boxes)
+    assert not torch.equal(a.start, make_problems("shelf", 2, seed=4, config=cfg).start)
+    assert bool(torch.isnan(a.solve_time).all())
+    _assert_valid(a, body)
+    # The goal's end effector lies inside the shelf's outer box (between its sides, under its top).
+    ee = kinematics(robot, "fast").position(a.goal)
+    for i in range(2):
+        boxes = a.problem(i)[2].boxes
+        lo = (boxes[:, :3] - boxes[:, 3:]).amin(0)
+        hi = (boxes[:, :3] + boxes[:, 3:]).amax(0)
+        assert bool(((ee[i] > lo) & (ee[i] < hi)).all())
+
+
+def test_rrt_connect_path_passes_the_dense_check(body):
+    problems = make_problems("barrier", 1, seed=11, config=ProblemConfig(verify=False))
+    start, goal, scene = problems.problem(0)
+    path, elapsed = rrt_connect_solve(body, scene, start, goal, time_limit=5.0, seed=0)
+    assert path is not None and 0 < elapsed < 5.0
+    assert np.allclose(path[0], start.numpy()) and np.allclose(path[-1], goal.numpy())
+    assert bool(check_path(body, torch.as_tensor(path), scene).collision_free)
+    # An unreachable goal (inside an obstacle's reach) is reported as no path, not an error.
+    blocked = Scene.from_spheres(
+        torch.cat([body(goal)[-1], torch.tensor([0.1], dtype=torch.float64)]).unsqueeze(0)
+    )
+    none, _ = rrt_connect_solve(body, blocked, start, goal, time_limit=0.2, seed=0)
+    assert none is None
+
+
+def test_bad_arguments(robot):
+    with pytest.raises(ConfigError, match="family"):
+        make_problems("kitchen", 1, 0)
+    with pytest.raises(ConfigError, match="n must be"):
+        make_problems("shelf", 0, 0)
+    with pytest.raises(ConfigError, match="seed"):
+        make_problems("shelf", 1, -1)
+    with pytest.raises(ConfigError):
+        ProblemConfig(time_limit=0.0)
+    with pytest.raises(ConfigError):
+        ProblemConfig(ik_batch=0)
+
+
+def test_save_load_subsets_and_bad_files(tmp_path, body):
+    cfg = ProblemConfig(verify=False)
+    problems = ProblemSet.concat([make_problems(f, 1, seed=2, config=cfg) for f in FAMILIES])
+    path = problems.save(tmp_path / "p.npz")
+    back = ProblemSet.load(path, robot="iiwa14")
+    assert len(back) == 3 and back.robot == "iiwa14"
+    assert torch.equal(back.start, problems.start) and torch.equal(back.goal, problems.goal)
+    assert torch.equal(back.scene.boxes, problems.scene.boxes) and torch.equal(back.hard, problems.hard)
+    assert len(back.of("shelf")) == 1 and len(back[back.hard]) == int(problems.hard.sum())
+    start, goal, scene = back.problem(1)
+    assert start.shape == goal.shape == (7,) and scene.batch_shape == ()
+    with pytest.raises(ConfigError):
+        back.of("kitchen")
+    corrupt = tmp_path / "corrupt.npz"
+    corrupt.write_bytes(b"\x00" * 64)
+    with pytest.raises(DatasetError):
+        ProblemSet.load(corrupt)
+    with pytest.raises(DatasetError, match="expected 'obstacle_problems'"):
+        ProblemSet.load(Scene().save(tmp_path / "scene.npz"))
+    arrays = {"start": np.zeros((2, 7))}
+    partial = save_npz(
+        tmp_path / "partial.npz",
+        kind="obstacle_problems",
+        robot="iiwa14",
+        config={"problem_format": 1, "families": list(FAMILIES)},
+        arrays=arrays,
+    )
+    with pytest.raises(DatasetError, match="consistent"):
+        ProblemSet.load(partial)
+    with pytest.raises(DatasetError, match="robot"):
+        ProblemSet.load(path, robot="panda")
+
+
+@pytest.mark.skipif(not HELDOUT.is_file(), reason="the held-out set has not been generated")
+def test_committed_heldout_set(body):
+    problems = ProblemSet.load(HELDOUT, robot="iiwa14")
+    assert HELDOUT.stat().st_size < 2e6
+    counts = [len(problems.of(f)) for f in FAMILIES]
+    assert min(counts) > 0 and len(set(counts)) == 1  # balanced: generated round-robin
+    assert len(problems) >= 900
+    assert bool((problems.solve_time < 5.0).all())
+    summary = problems.summary()
+    assert sorted(summary) == sorted(FAMILIES)
+    assert all(0.1 < summary[f]["hard"] < 1.0 and summary[f]["n"] == counts[0] for f in FAMILIES)
+    _assert_valid(problems, body)
