@@ -344,7 +344,7 @@ def _add_train_planner(sub) -> None:
     )
     p.add_argument(
         "--hidden",
-        type=_ints,
+        type=_int_list(1),
         default=(128, 128, 128),
         help="MLP hidden widths, comma-separated (default: 128,128,128)",
     )
@@ -361,14 +361,19 @@ def _add_train_planner(sub) -> None:
     add_run_options(p, resumable=True)
 
 
-def _ints(text: str) -> tuple[int, ...]:
-    try:
-        values = tuple(int(v) for v in text.replace(",", " ").split())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected integers separated by commas, got {text!r}") from None
-    if not values or min(values) < 1:
-        raise argparse.ArgumentTypeError(f"expected positive integers, got {text!r}")
-    return values
+def _int_list(low: int):
+    """An argparse ``type``: integers ≥ ``low`` separated by commas."""
+
+    def parse(text: str) -> tuple[int, ...]:
+        try:
+            values = tuple(int(v) for v in text.replace(",", " ").split())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected integers separated by commas, got {text!r}") from None
+        if not values or min(values) < low:
+            raise argparse.ArgumentTypeError(f"expected integers ≥ {low}, got {text!r}")
+        return values
+
+    return parse
 
 
 def _run_train_planner(args: argparse.Namespace) -> int:
@@ -435,21 +440,11 @@ def _add_model_error(sub) -> None:
         "--n-goals", type=POSITIVE_INT, default=2000, help="held-out position goals (default: 2000)"
     )
     p.add_argument(
-        "--seeds", type=_ints_nonneg, default=(0, 1, 2), help="perturbation seeds per level (default: 0,1,2)"
+        "--seeds", type=_int_list(0), default=(0, 1, 2), help="perturbation seeds per level (default: 0,1,2)"
     )
     p.add_argument("--no-rrt", action="store_true", help="leave out RRT-Connect")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_run_options(p, resumable=False)
-
-
-def _ints_nonneg(text: str) -> tuple[int, ...]:
-    try:
-        values = tuple(int(v) for v in text.replace(",", " ").split())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected integers separated by commas, got {text!r}") from None
-    if not values or min(values) < 0:
-        raise argparse.ArgumentTypeError(f"expected integers ≥ 0, got {text!r}")
-    return values
 
 
 def _run_model_error(args: argparse.Namespace) -> int:

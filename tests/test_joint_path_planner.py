@@ -371,7 +371,7 @@ def test_train_planner_command_makes_a_planner_folder(tmp_path, capsys):
     assert "--resume" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:  # argparse rejects the option before the command runs
         main([*args, "--hidden", "0", "--run-dir", str(tmp_path / "q")])
-    assert exc.value.code == 2 and "positive integers" in capsys.readouterr().err
+    assert exc.value.code == 2 and "integers ≥ 1" in capsys.readouterr().err
 
 
 def test_readme_quick_start_runs(tmp_path, monkeypatch):
