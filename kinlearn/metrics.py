@@ -31,6 +31,7 @@ import torch
 
 from .errors import ConfigError, ShapeError
 from .kinematics import kinematics
+from .path_model import densify
 from .plan import Plan
 from .robot import Robot, check_finite, check_last_dim
 from .state import StateLayout
@@ -325,13 +326,7 @@ def dense_path_length(robot: Robot, joints: torch.Tensor, max_step: float = 0.01
     ``max_step`` rad between samples, and the samples' exact FK positions are joined. ``(...)``, float64.
     """
     check_last_dim(joints, robot.dof, "joints")
-    q = joints.double().reshape(-1, *joints.shape[-2:])
-    step = float((q[:, 1:] - q[:, :-1]).abs().amax()) if q.shape[1] > 1 else 0.0
-    m = max(1, math.ceil(step / max_step))
-    f = torch.arange(m, dtype=q.dtype)[:, None] / m
-    dense = torch.cat(
-        ((q[:, :-1, None] + f * (q[:, 1:, None] - q[:, :-1, None])).flatten(1, 2), q[:, -1:]), 1
-    )
+    dense, _ = densify(joints.double().reshape(-1, *joints.shape[-2:]), max_step)
     kin = kinematics(robot)
     lengths = []
     for chunk in dense.split(max(1, 2_000_000 // dense.shape[1])):

@@ -169,7 +169,9 @@ class Planner:
             raise ConfigError(
                 f"{run_dir} holds no tm.pt; train one with `kinlearn train-tm --run-dir {run_dir}`"
             )
-        if _checkpoint_kind(run_dir / "tm.pt") == JointPathModel.kind:
+        # One verified read says which kind of TM the folder holds and what it records.
+        payload = load_checkpoint(run_dir / "tm.pt", kind=None, robot=name)
+        if payload["kind"] == JointPathModel.kind:
             tm, sources = load_path_model(run_dir / "tm.pt", robot=name, with_dependencies=True)
             fm = load_fm(sources["fm"], robot=tm.robot_name) if "fm" in sources else None
             im = load_im(sources["im"], robot=tm.robot_name) if "im" in sources else None
@@ -177,8 +179,7 @@ class Planner:
         from .train_tm import TMTrainConfig, build_fm_im, load_tm  # the waypoint TM's run format
 
         tm, config = load_tm(run_dir / "tm.pt", robot=name)
-        recorded = bool(load_checkpoint(run_dir / "tm.pt", kind="tm", robot=name)["depends"])
-        if not recorded and ((run_dir / "fm.pt").is_file() or (run_dir / "im.pt").is_file()):
+        if not payload["depends"] and ((run_dir / "fm.pt").is_file() or (run_dir / "im.pt").is_file()):
             # A run without recorded dependencies (checkpoint format 1): the models beside tm.pt.
             config = TMTrainConfig.from_dict({**config.to_dict(), "models_dir": str(run_dir)})
         fm, im = build_fm_im(config)
@@ -452,15 +453,6 @@ class Planner:
             e = self.fm(s, nxt - theta)[..., self.layout.ef]
             theta = nxt
         return theta.double().numpy()
-
-
-def _checkpoint_kind(path: Path) -> str | None:
-    """The ``kind`` a checkpoint file declares (None if unreadable: the loader then says why)."""
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception:  # torch raises many types for corrupt files; the real load reports it
-        return None
-    return payload.get("kind") if isinstance(payload, dict) else None
 
 
 def _robot(robot: str | Robot | None, name: str) -> Robot:
