@@ -13,17 +13,22 @@ from .distance import (
     sphere_plane_distance,
     sphere_sphere_distance,
 )
+from .fast import NumpyBody, NumpyScene, check_paths, first_free
 from .scene import Scene
 
 __all__ = [
     "BodySpheres",
+    "NumpyBody",
+    "NumpyScene",
     "PathCheck",
     "Scene",
     "body_obstacle_distance",
     "body_spheres",
     "check_path",
+    "check_paths",
     "clearances",
     "cover_cylinder",
+    "first_free",
     "in_collision",
     "segment_steps",
     "self_collision_distance",

@@ -78,7 +78,10 @@ def _obstacles(scene: Scene, like: torch.Tensor, batch: torch.Size, flat: bool) 
         if t is not None:
             t = t.to(device=like.device, dtype=like.dtype if t.is_floating_point() else t.dtype)
             if flat and t.ndim > tail:
-                t = t.expand(*batch, *t.shape[t.ndim - tail :]).reshape(-1, *t.shape[t.ndim - tail :])
+                tail_shape = t.shape[t.ndim - tail :]
+                t = t.expand(*batch, *tail_shape).reshape(
+                    batch.numel(), *tail_shape
+                )  # (n, …): works when empty
         out.append(t)
     return out
 

@@ -245,6 +245,27 @@ class Scene:
             ex(self.box_mask, 1),
         )
 
+    def reshape(self, *batch: int) -> Scene:
+        """The scene with its batch dimensions reshaped to ``batch`` (e.g. ``(2, 3)`` → ``(6,)``)."""
+        full = self.expand(*self.batch_shape)
+        n = len(self.batch_shape)
+
+        def rs(t, tail: int):
+            return None if t is None else t.reshape(*batch, *t.shape[n:])
+
+        try:
+            return Scene._unchecked(
+                rs(full.spheres, 2),
+                rs(full.boxes, 2),
+                rs(full.floor, 0),
+                rs(full.sphere_mask, 1),
+                rs(full.box_mask, 1),
+            )
+        except RuntimeError as exc:
+            raise ObstacleError(
+                f"cannot reshape a scene of batch {tuple(self.batch_shape)} to {batch}"
+            ) from exc
+
     def __getitem__(self, index) -> Scene:
         """Index the batch dimensions (``scene[3]``, ``scene[:10]``, ``scene[mask]``)."""
         if len(self.batch_shape) == 0:
