@@ -337,13 +337,27 @@ def rrt_connect_solve(
     time_limit: float = 5.0,
     seed: int | None = 0,
     max_travel: float = 0.01,
+    simplify: bool = False,
+    simplify_time: float | None = None,
 ) -> tuple[np.ndarray | None, float]:
     """OMPL RRT-Connect from ``start`` to ``goal`` (joints ``(dof,)``) around ``scene``, on :class:`RrtChecker`.
 
     Returns ``(path (K, dof) or None if no exact path within time_limit, wall time in seconds)``. The
     path's vertices are joined by motions the checker found free. ``seed`` seeds OMPL's process-wide
     random generator (``None`` leaves it alone).
+
+    ``simplify``: shorten a found path with OMPL's path simplifier (``SimpleSetup.simplifySolution``:
+    vertex reduction, shortcutting and B-spline smoothing, every new segment accepted only if the same
+    motion check finds it free), for at most ``simplify_time`` seconds: ``None`` gives it what the
+    search left of ``time_limit`` (nothing if the search used it all), so that search and
+    simplification together take ``time_limit``; ``math.inf`` lets it run until it stops on its own.
+    OMPL's simplifier checks that limit only between its steps and does at least one round, so a query
+    may overrun it. The wall time returned includes the simplification.
     """
+    if simplify_time is not None and not (simplify_time > 0):
+        raise ConfigError(
+            f"simplify_time must be a number of seconds > 0 (or inf, or None), got {simplify_time!r}"
+        )
     ob, og, ou = _import_ompl()
     robot = body.robot
     checker = RrtChecker(body, scene, max_travel)
@@ -385,9 +399,15 @@ def rrt_connect_solve(
         t0 = time.perf_counter()
         setup.setStartAndGoalStates(s, g)
         setup.solve(ob.timedPlannerTerminationCondition(float(time_limit)))
-        elapsed = time.perf_counter() - t0
         if not setup.haveExactSolutionPath():
-            return None, elapsed
+            return None, time.perf_counter() - t0
+        if simplify:
+            budget = time_limit - (time.perf_counter() - t0) if simplify_time is None else simplify_time
+            if math.isinf(budget):
+                setup.simplifySolution()
+            elif budget > 0:
+                setup.simplifySolution(ob.timedPlannerTerminationCondition(float(budget)))
+        elapsed = time.perf_counter() - t0
         path = setup.getSolutionPath()
         return np.stack([as_array(path.getState(k)) for k in range(path.getStateCount())]), elapsed
     finally:
