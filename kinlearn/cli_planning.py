@@ -272,6 +272,13 @@ def _add_plan(sub) -> None:
         help="goal end-effector position x,y,z (m, base frame), any configuration",
     )
     p.add_argument("--model", type=Path, default=None, help="a planner folder (default: the shipped planner)")
+    p.add_argument(
+        "--obstacles",
+        type=Path,
+        default=None,
+        metavar="SCENE",
+        help="plan around the obstacles of a scene file (.npz, kinlearn.collision.Scene.save)",
+    )
     p.add_argument("--strict", action="store_true", help="refuse a start or goal outside the training domain")
     p.add_argument("--joints", action="store_true", help="also print the joint path")
     p.add_argument(
@@ -292,12 +299,22 @@ def _add_plan(sub) -> None:
 def _run_plan(args: argparse.Namespace) -> int:
     planner = Planner.load(args.model, robot=args.robot) if args.model else Planner.default(args.robot)
     start = torch.tensor(args.start, dtype=torch.float64)
+    obstacles = None
+    if args.obstacles is not None:
+        from .collision.scene import Scene
+
+        obstacles = Scene.load(args.obstacles)
     if args.goal_position is not None:
         plan = planner.plan(
-            start, goal_position=torch.tensor(args.goal_position, dtype=torch.float64), strict=args.strict
+            start,
+            goal_position=torch.tensor(args.goal_position, dtype=torch.float64),
+            obstacles=obstacles,
+            strict=args.strict,
         )
     else:
-        plan = planner.plan(start, torch.tensor(args.goal, dtype=torch.float64), strict=args.strict)
+        plan = planner.plan(
+            start, torch.tensor(args.goal, dtype=torch.float64), obstacles=obstacles, strict=args.strict
+        )
     print(plan.summary())
     if args.joints:
         print("\njoint path (rad), one configuration per line:")
@@ -422,6 +439,97 @@ def _run_train_planner(args: argparse.Namespace) -> int:
         print(f"held-out workspace pairs ({args.heldout}, uniform within ±90% of the joint range):")
         print(workspace_table(res))
     print(f"trained planner in {run_dir}")
+    return 0
+
+
+@register_subcommand
+def _add_train_obstacle_planner(sub) -> None:
+    p = add_command(
+        sub,
+        "train-obstacle-planner",
+        "Train the obstacle-aware TM self-supervised through a frozen body model on generated scenes "
+        "(tabletop, shelf, barrier; seeds apart from the benchmark's); writes tm_obstacles.pt. Copy it into "
+        "a planner folder (or pass --planner) and plan(..., obstacles=...) uses it.",
+        _run_train_obstacle_planner,
+    )
+    p.add_argument(
+        "--problems-per-family",
+        type=POSITIVE_INT,
+        default=1000,
+        help="training problems per scene family, generated once into --problems-dir (default: 1000)",
+    )
+    p.add_argument(
+        "--problems-dir",
+        type=Path,
+        default=None,
+        help="where training problems are generated or found (default: RUN_DIR/problems)",
+    )
+    p.add_argument(
+        "--body-checkpoint",
+        type=Path,
+        default=None,
+        help="train through a learned body model (body.pt) instead of the analytic sphere body",
+    )
+    p.add_argument(
+        "--iterations", type=POSITIVE_INT, default=3000, help="training iterations (default: 3000)"
+    )
+    p.add_argument("--batch-size", type=POSITIVE_INT, default=64, help="problems per iteration (default: 64)")
+    p.add_argument(
+        "--lr", type=POSITIVE_FLOAT, default=2e-3, help="Adam learning rate, cosine decay (default: 2e-3)"
+    )
+    p.add_argument(
+        "--candidates", type=POSITIVE_INT, default=6, help="paths proposed per problem (default: 6)"
+    )
+    p.add_argument(
+        "--planner",
+        type=Path,
+        default=None,
+        help="a planner folder to copy the trained model into (as tm_obstacles.pt), e.g. a train-planner run",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_run_options(p, resumable=True)
+
+
+def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
+    from .obstacle_model import export_obstacle_model
+    from .train_obstacles import ObstacleTrainConfig, make_training_problems, train_obstacle_model
+
+    robot = load_robot(args.robot)
+    if args.planner is not None and not (args.planner / "tm.pt").is_file():
+        raise ConfigError(f"--planner {args.planner} is not a planner folder (it holds no tm.pt)")
+    run = open_command_run(
+        args,
+        ("tm_obstacles.pt", "metrics.jsonl", "tensorboard", "problems"),
+        resumable=True,
+        obstacle_planner={
+            "problems_per_family": args.problems_per_family,
+            "iterations": args.iterations,
+            "batch_size": args.batch_size,
+            "lr": args.lr,
+            "candidates": args.candidates,
+            "body": _file_identity(args.body_checkpoint) if args.body_checkpoint else "analytic",
+        },
+    )
+    run_dir = run.begin()
+    problems_dir = args.problems_dir or run_dir / "problems"
+    print(f"training problems in {problems_dir} ({args.problems_per_family} per family; generated once)")
+    paths = make_training_problems(problems_dir, args.problems_per_family, robot=robot)
+    cfg = ObstacleTrainConfig(
+        robot=robot.name,
+        problems=tuple(str(p) for p in paths),
+        body="learned" if args.body_checkpoint else "analytic",
+        body_checkpoint=str(args.body_checkpoint) if args.body_checkpoint else None,
+        iterations=args.iterations,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        model={"candidates": args.candidates},
+        seed=args.seed,
+    )
+    train_obstacle_model(cfg, run_dir, resume=run.resumed, progress=not args.no_progress, write_config=False)
+    if args.planner is not None:
+        export_obstacle_model(run_dir / "tm_obstacles.pt", args.planner / "tm_obstacles.pt")
+        print(f"copied the obstacle-aware TM into {args.planner}")
+    print(f"trained obstacle-aware TM in {run_dir / 'tm_obstacles.pt'}")
     return 0
 
 
@@ -611,7 +719,7 @@ def _run_export(args: argparse.Namespace) -> int:
         out,
         command="export",
         config={},
-        outputs=("tm.pt", "fm.pt", "im.pt"),
+        outputs=("tm.pt", "fm.pt", "im.pt", "tm_obstacles.pt"),
         overwrite=args.overwrite,
         resumable=False,
         write_config=False,
@@ -638,6 +746,10 @@ def _run_export(args: argparse.Namespace) -> int:
         state_dict=tm_payload["state_dict"],
         depends={kind: out / f"{kind}.pt" for kind in sources},
     )
+    if (args.model / "tm_obstacles.pt").is_file():
+        from .obstacle_model import export_obstacle_model
+
+        export_obstacle_model(args.model / "tm_obstacles.pt", out / "tm_obstacles.pt")
     Planner.load(out, robot=planner.robot.name)  # the exported folder loads on its own
     print(f"exported the planner of {args.model} to {out}")
     return 0

@@ -13,9 +13,28 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from .obstacle_model import ObstaclePathModel
 from .path_model import JointPathModel
 
-__all__ = ["NumpyFK", "NumpyPathModel"]
+__all__ = ["NumpyFK", "NumpyObstacleModel", "NumpyPathModel"]
+
+
+def _arr(t: torch.Tensor) -> np.ndarray:
+    return t.detach().cpu().double().numpy().copy()
+
+
+def _mlp_arrays(seq: torch.nn.Sequential, dtype) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    linears = [m for m in seq if isinstance(m, torch.nn.Linear)]
+    return [_arr(m.weight.T).astype(dtype) for m in linears], [_arr(m.bias).astype(dtype) for m in linears]
+
+
+def _run_mlp(h: np.ndarray, weights, biases, silu: bool, last_active: bool) -> np.ndarray:
+    last = len(weights) - 1
+    for k, (W, b) in enumerate(zip(weights, biases, strict=True)):
+        h = h @ W + b
+        if k < last or last_active:
+            h = h / (1.0 + np.exp(-h)) if silu else np.tanh(h)
+    return h
 
 
 class NumpyFK:
@@ -109,3 +128,49 @@ class NumpyPathModel:
         joints = theta0[:, None] + f * (thetaT - theta0)[:, None] + self.half_range * r
         ef = ef0[:, None] + f * (efT - ef0)[:, None] + self.ef_scale * h[:, nj:].reshape(n, self.W, 3)
         return joints, ef
+
+
+class NumpyObstacleModel:
+    """The obstacle-aware TM's forward pass in NumPy (:meth:`ObstaclePathModel.forward`): problems and
+    their scenes' primitive rows → every candidate's intermediate knots ``(N, C, T − 1, dof)``."""
+
+    def __init__(self, tm: ObstaclePathModel, dtype=np.float32):
+        self.dtype = np.dtype(dtype)
+        self.silu = tm.config.activation == "silu"
+        self.enc_w, self.enc_b = _mlp_arrays(tm.encoder, self.dtype)
+        self.trunk_w, self.trunk_b = _mlp_arrays(tm.trunk, self.dtype)
+        # Standardisation folded into the first layers (x − μ)/σ · W + b = x · (W/σ) + (b − (μ/σ) · W).
+        pm, ps = _arr(tm.prim_mean), _arr(tm.prim_std)
+        W = self.enc_w[0].astype(np.float64)
+        self.enc_b[0] = (self.enc_b[0] - (pm / ps) @ W).astype(self.dtype)
+        self.enc_w[0] = (W / ps[:, None]).astype(self.dtype)
+        n_prob = tm.n_problem_features
+        im, istd = _arr(tm.in_mean), _arr(tm.in_std)
+        W = self.trunk_w[0].astype(np.float64)
+        Wp = W[:n_prob] / istd[:, None]
+        self.trunk_b[0] = (self.trunk_b[0] - (im / istd) @ W[:n_prob]).astype(self.dtype)
+        self.trunk_w[0] = np.concatenate((Wp, W[n_prob:])).astype(self.dtype)
+        c = tm.config
+        self.C, self.modes, self.dof = c.candidates, c.modes, c.dof
+        self.half_range = _arr(tm.half_range)
+        self.fractions = _arr(tm.fractions)[:, None]
+        self.basis = _arr(tm.basis)
+        self.emb = c.encoder[-1]
+
+    def __call__(self, theta0, ef0, thetaT, efT, rows, mask, floor) -> np.ndarray:
+        """``theta0, thetaT (N, dof)``, ``ef0, efT (N, 3)``, ``rows (N, P, 7)``, ``mask (N, P)``,
+        ``floor (N, 2)`` (as :func:`~kinlearn.obstacle_model.scene_primitives`) → ``(N, C, T − 1, dof)``."""
+        n = theta0.shape[0]
+        if rows.shape[1]:
+            c = rows[..., :3]
+            p = np.concatenate((rows, c - ef0[:, None], c - efT[:, None]), axis=-1).astype(self.dtype)
+            h = _run_mlp(p, self.enc_w, self.enc_b, self.silu, last_active=True)
+            h = np.where(mask[..., None], h, -np.inf).max(axis=1)
+            emb = np.where(np.isfinite(h), h, 0.0)
+        else:
+            emb = np.zeros((n, self.emb))
+        x = np.concatenate((theta0, ef0, thetaT, efT, thetaT - theta0, floor, emb), axis=1).astype(self.dtype)
+        y = _run_mlp(x, self.trunk_w, self.trunk_b, self.silu, last_active=False).astype(np.float64)
+        coef = y.reshape(n, self.C, self.modes, self.dof)
+        line = theta0[:, None, None] + self.fractions * (thetaT - theta0)[:, None, None]
+        return line + self.half_range * (self.basis @ coef)

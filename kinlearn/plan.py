@@ -45,6 +45,10 @@ class Plan:
         tolerance: the :class:`Tolerance` used.
         robot: the name of the robot the plan is for (lets :meth:`timed`, :meth:`show` and
             :meth:`animate` find its limits and geometry).
+        collision_free: ``(...)`` bool where the plan was made among obstacles: no configuration of the
+            joint path, checked densely (at most 1 cm of body-sphere travel between checked
+            configurations, :func:`kinlearn.collision.check_path`), touches the scene or itself;
+            ``success`` then requires it. ``None`` where no obstacles were given (not checked).
 
     Derived: ``start`` ``(..., dof + 3)`` the start state [θ(0), ef(0)]; ``actions`` ``(..., T, dof)`` the
     joint changes a(0) … a(T−1).
@@ -60,8 +64,9 @@ class Plan:
     success: torch.Tensor
     tolerance: Tolerance = DEFAULT_TOLERANCE
     robot: str | None = None
+    collision_free: torch.Tensor | None = None
 
-    #: Fields holding per-plan tensors, indexed with the batch.
+    #: Fields holding per-plan tensors, indexed with the batch (``collision_free`` too, where set).
     _BATCHED = (
         "goal",
         "waypoints",
@@ -71,6 +76,7 @@ class Plan:
         "goal_error",
         "joint_error",
         "success",
+        "collision_free",
     )
 
     @classmethod
@@ -152,7 +158,9 @@ class Plan:
             probe[idx]
         except (IndexError, TypeError) as exc:
             raise ShapeError(f"index {idx!r} does not fit the plan's batch shape {self.batch_shape}") from exc
-        return dataclasses.replace(self, **{f: getattr(self, f)[idx] for f in self._BATCHED})
+        return dataclasses.replace(
+            self, **{f: getattr(self, f)[idx] for f in self._BATCHED if getattr(self, f) is not None}
+        )
 
     def _robot(self, robot):
         from .robot import Robot, load_robot
@@ -209,15 +217,18 @@ class Plan:
         ge = self.goal_error.reshape(-1)
         je = self.joint_error.reshape(-1)
         ok = self.success.reshape(-1)
+        free = None if self.collision_free is None else self.collision_free.reshape(-1)
         tol = self.tolerance
         lines = [
-            f"{'plan':>5}  {'success':>7}  {'goal error (mm)':>15}  {'joint error (rad)':>17}  {'ef path (m)':>11}",
+            f"{'plan':>5}  {'success':>7}  {'goal error (mm)':>15}  {'joint error (rad)':>17}  {'ef path (m)':>11}"
+            + ("  collision-free" if free is not None else ""),
         ]
         for i in range(ge.numel()):
             jtxt = "—" if bool(torch.isnan(je[i])) else f"{float(je[i]):.4f}"
             lines.append(
                 f"{i:>5}  {'yes' if bool(ok[i]) else 'NO':>7}  {1000 * float(ge[i]):>15.2f}  {jtxt:>17}  "
                 f"{float(length[i]):>11.3f}"
+                + (f"  {'yes' if bool(free[i]) else 'NO':>14}" if free is not None else "")
             )
         lines.append(
             f"success: end effector within {1000 * tol.position:g} mm of the target"
@@ -226,6 +237,7 @@ class Plan:
                 if not bool(torch.isnan(je).all())
                 else ""
             )
+            + ("; no collision under the dense check" if free is not None else "")
             + f"; {int(ok.sum())}/{ok.numel()} plans succeeded"
         )
         return "\n".join(lines)

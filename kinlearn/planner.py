@@ -31,18 +31,24 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from .collision.body import BodySpheres, body_spheres
+from .collision.check import check_path
+from .collision.fast import NumpyBody, NumpyScene, check_paths, first_free
+from .collision.scene import Scene
 from .errors import (
     ConfigError,
     DomainError,
     DomainWarning,
     DTypeError,
+    ObstacleError,
     ShapeError,
     StateError,
 )
-from .inference import NumpyFK, NumpyPathModel
+from .inference import NumpyFK, NumpyObstacleModel, NumpyPathModel
 from .io import load_checkpoint
 from .kinematics import kinematics
 from .models import ForwardModel, InverseModel, load_fm, load_im
+from .obstacle_model import ObstaclePathModel, load_obstacle_model, scene_primitives
 from .path_model import JointPathModel, load_path_model
 from .plan import DEFAULT_TOLERANCE, Plan, Tolerance
 from .rectify import rectify
@@ -63,6 +69,10 @@ LIMIT_TOLERANCE = 1e-6
 SMALL_BATCH = 16
 #: The babbling step bound (rad per joint and step, REFERENCE #4): the largest action the IM takes.
 MAX_STEP = 0.083
+#: The obstacle-aware TM's file in a planner folder.
+OBSTACLE_TM = "tm_obstacles.pt"
+#: Sphere travel (m) allowed between two configurations the dense collision check looks at.
+CHECK_TRAVEL = 0.01
 
 
 def _as_array(x, what: str) -> tuple[np.ndarray, torch.dtype, torch.device]:
@@ -102,8 +112,18 @@ class Planner:
         exact_joints: bool = True,
         tolerance: Tolerance = DEFAULT_TOLERANCE,
         max_step: float = MAX_STEP,
+        obstacle_tm: ObstaclePathModel | None = None,
+        body: BodySpheres | None = None,
+        refine_steps: int = 0,
     ):
         """``fm``/``im``: needed by a waypoint TM, and by any planner for end-effector position goals.
+
+        ``obstacle_tm``: the obstacle-aware TM that plans when obstacles are given; ``body``: the arm's
+        collision spheres its plans are checked with (default: the robot's analytic sphere model).
+        ``refine_steps``: where no proposed path is collision-free, this many steps of the gradient
+        trajectory optimiser (:func:`kinlearn.obstacle_baselines.trajectory_optimiser`) from the least
+        colliding one, kept if the dense check then finds it free (0: none; the plan's time stays
+        bounded either way).
 
         ``refine`` and ``exact_joints`` set the IM/FM rollout (see :func:`~kinlearn.rectify.rectify`):
         by default one model-based correction of each action and the joints kept at θ(0) + Σ â.
@@ -136,6 +156,23 @@ class Planner:
         self.kin = kinematics(robot)
         self._fk = NumpyFK(self.kin)
         self._np_tm = NumpyPathModel(tm) if isinstance(tm, JointPathModel) else None
+        if obstacle_tm is not None:
+            if not isinstance(obstacle_tm, ObstaclePathModel):
+                raise ConfigError(
+                    f"obstacle_tm must be an ObstaclePathModel, got {type(obstacle_tm).__name__}"
+                )
+            if obstacle_tm.robot_name != robot.name:
+                raise ConfigError(
+                    f"the obstacle TM was trained for {obstacle_tm.robot_name!r}, the planner is for {robot.name!r}"
+                )
+            obstacle_tm = obstacle_tm.eval().requires_grad_(False)
+        self.obstacle_tm = obstacle_tm
+        self._np_obstacle_tm = NumpyObstacleModel(obstacle_tm) if obstacle_tm is not None else None
+        self._body = body
+        if isinstance(refine_steps, bool) or not isinstance(refine_steps, int) or refine_steps < 0:
+            raise ConfigError(f"refine_steps must be an integer ≥ 0, got {refine_steps!r}")
+        self.refine_steps = refine_steps
+        self._np_body_cache = None
         self._core = self._rollout
         self._lo, self._hi = robot.limits(torch.float64)
         self._lo_np, self._hi_np = self._lo.numpy(), self._hi.numpy()
@@ -175,6 +212,8 @@ class Planner:
             tm, sources = load_path_model(run_dir / "tm.pt", robot=name, with_dependencies=True)
             fm = load_fm(sources["fm"], robot=tm.robot_name) if "fm" in sources else None
             im = load_im(sources["im"], robot=tm.robot_name) if "im" in sources else None
+            if "obstacle_tm" not in options and (run_dir / OBSTACLE_TM).is_file():
+                options["obstacle_tm"] = load_obstacle_model(run_dir / OBSTACLE_TM, robot=tm.robot_name)
             return cls(_robot(robot, tm.robot_name), tm, fm, im, **options)
         from .train_tm import TMTrainConfig, build_fm_im, load_tm  # the waypoint TM's run format
 
@@ -287,14 +326,22 @@ class Planner:
     # Planning
     # ----------------------------------------------------------------------------------------------
 
-    def plan(self, start, goal=None, *, goal_position=None, strict: bool = False) -> Plan:
-        """Plan from ``start`` to ``goal``.
+    def plan(self, start, goal=None, *, goal_position=None, obstacles=None, strict: bool = False) -> Plan:
+        """Plan from ``start`` to ``goal``, around ``obstacles`` if given.
 
         ``start``: joint values ``(..., dof)`` or a state ``(..., dof + 3)``. ``goal``: likewise — the plan
         ends at its joints — or an end-effector position ``(..., 3)`` (also as ``goal_position=``), reached
         in whatever configuration the learned models find. Tensors, arrays or sequences of numbers;
         leading batch dimensions broadcast. Deterministic: the same input gives the same plan bit for
         bit. Outputs have the input's floating dtype and device.
+
+        ``obstacles``: spheres ``[x, y, z, radius]`` (m, the robot's base frame) as ``(K, 4)`` (one scene
+        for every plan) or ``(..., K, 4)`` (a scene per plan), or a :class:`~kinlearn.collision.Scene`
+        (spheres, boxes, a floor) of batch shape ``()`` or the plans'. The obstacle-aware TM proposes
+        several joint paths, the straight joint line joins them, and the shortest (in joint space) that
+        the dense check finds collision-free is the plan; the plan's ``collision_free`` says whether
+        one was (``success`` requires it). A start or goal that already collides gives a plan with
+        ``collision_free`` False. Bad obstacles raise :class:`~kinlearn.errors.ObstacleError`.
 
         Raises :class:`ShapeError`, :class:`DTypeError`, :class:`NonFiniteError`,
         :class:`JointLimitError` or :class:`StateError` for bad input; warns with
@@ -316,7 +363,13 @@ class Planner:
             self._check_states(ef_given, [ef0, efT])
             thetaT, target = goal_arr, efT
             self._check_domain(np.concatenate((theta0, ef0), -1), np.concatenate((thetaT, efT), -1), strict)
-        if self._np_tm is not None:
+        free = None
+        if obstacles is not None:
+            scene = self._scene(obstacles, batch, n)
+            joints, free = self._plan_around(theta0, ef0, thetaT, efT, scene)
+            ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(n, -1, 3)
+            waypoints = ef[:, 1:-1]
+        elif self._np_tm is not None:
             joints, waypoints, ef = self._joint_path(theta0, ef0, thetaT, efT)
         else:
             joints, waypoints, ef = self._waypoint_rollout(theta0, ef0, thetaT, efT)
@@ -329,15 +382,18 @@ class Planner:
         else:
             joint_error = np.abs(joints[:, -1] - thetaT).max(-1)
             success = within & (goal_error <= tol.position) & (joint_error <= tol.joints)
+        if free is not None:
+            success = success & free
         np_dtype = _NUMPY_FLOATS.get(dtype, np.float64)
         single = batch == ()
 
         def out(a: np.ndarray) -> torch.Tensor:
-            a = a[0] if single else a.reshape((*batch, *a.shape[1:]))
+            # A single plan's per-plan values are 0-d (np.ascontiguousarray would make them 1-d).
+            a = np.array(a[0]) if single else np.ascontiguousarray(a.reshape((*batch, *a.shape[1:])))
             if a.dtype == bool:
-                t = torch.from_numpy(np.ascontiguousarray(a))
+                t = torch.from_numpy(a)
                 return t if device.type == "cpu" else t.to(device)
-            t = torch.from_numpy(np.ascontiguousarray(a, dtype=np_dtype))
+            t = torch.from_numpy(a.astype(np_dtype, copy=False))
             return t if t.dtype == dtype and device.type == "cpu" else t.to(device=device, dtype=dtype)
 
         return Plan(
@@ -351,9 +407,142 @@ class Planner:
             success=out(success),
             tolerance=tol,
             robot=self.robot.name,
+            collision_free=None if free is None else out(free),
         )
 
     __call__ = plan
+
+    # ----------------------------------------------------------------------------------------------
+    # Obstacles
+    # ----------------------------------------------------------------------------------------------
+
+    @property
+    def body(self) -> BodySpheres:
+        """The collision spheres plans are checked with (float64)."""
+        if self._body is None:
+            self._body = body_spheres(self.robot)
+        self._body = self._body.double()
+        return self._body
+
+    @property
+    def _np_body(self) -> NumpyBody:
+        if self._np_body_cache is None:
+            self._np_body_cache = NumpyBody(self.body)
+        return self._np_body_cache
+
+    def _scene(self, obstacles, batch: tuple, n: int) -> Scene:
+        """``obstacles`` as a float64 scene of batch shape ``()`` or ``(n,)``."""
+        if self.obstacle_tm is None:
+            raise ConfigError(
+                f"this planner has no obstacle-aware TM ({OBSTACLE_TM}); load a planner folder holding one, "
+                "or train one with kinlearn.train_obstacles"
+            )
+        if isinstance(obstacles, Scene):
+            scene = obstacles.to(dtype=torch.float64, device="cpu")
+        else:
+            if isinstance(obstacles, (str, bytes)):
+                raise ObstacleError("obstacles must be spheres (K, 4) [x, y, z, radius] or a kinlearn Scene")
+            try:
+                spheres = torch.as_tensor(np.asarray(obstacles, dtype=np.float64))
+            except (TypeError, ValueError) as exc:
+                raise ObstacleError(
+                    f"obstacles must be numbers of shape (K, 4) or (..., K, 4): {exc}"
+                ) from exc
+            if spheres.ndim < 2 or spheres.shape[-1] != 4:
+                raise ObstacleError(
+                    f"obstacle spheres must have shape (K, 4) or (..., K, 4) [x, y, z, radius], "
+                    f"got {tuple(spheres.shape)}"
+                )
+            scene = Scene(spheres=spheres)
+        shape = tuple(scene.batch_shape)
+        if shape == ():
+            return scene
+        if shape != tuple(batch):
+            raise ShapeError(
+                f"the obstacles' batch shape {shape} must be () (one scene for all plans) or the plans' {tuple(batch)}"
+            )
+        return scene.reshape(n) if len(shape) != 1 else scene
+
+    def _plan_around(self, theta0, ef0, thetaT, efT, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+        """Joint paths ``(N, T + 1, dof)`` around ``scene`` and whether each is collision-free ``(N,)``."""
+        n, dof = theta0.shape
+        rows, mask, floor = scene_primitives(scene, n, torch.float64)
+        if n <= SMALL_BATCH:
+            mid = self._np_obstacle_tm(theta0, ef0, thetaT, efT, rows.numpy(), mask.numpy(), floor.numpy())
+        else:
+            dtype = self.obstacle_tm.in_mean.dtype
+            s0 = torch.from_numpy(np.concatenate((theta0, ef0), -1)).to(dtype)
+            sT = torch.from_numpy(np.concatenate((thetaT, efT), -1)).to(dtype)
+            with torch.no_grad():
+                mid = self.obstacle_tm(s0, sT, rows.to(dtype), mask, floor.to(dtype)).double().numpy()
+        np.clip(mid, self._lo_np, self._hi_np, out=mid)
+        C = mid.shape[1]
+        f = self.obstacle_tm.fractions.double().numpy()[:, None]
+        line = theta0[:, None] + f * (thetaT - theta0)[:, None]  # the straight joint line's knots
+        inner = np.concatenate((line[:, None], mid), axis=1)  # (N, C + 1, T − 1, dof)
+        paths = np.concatenate(
+            (
+                np.broadcast_to(theta0[:, None, None], (n, C + 1, 1, dof)),
+                inner,
+                np.broadcast_to(thetaT[:, None, None], (n, C + 1, 1, dof)),
+            ),
+            axis=2,
+        )
+        length = np.linalg.norm(np.diff(paths, axis=2), axis=-1).sum(-1)  # (N, C + 1)
+        order = np.argsort(length, axis=1, kind="stable")  # shortest first: the straight line leads
+        batched = len(scene.batch_shape) > 0
+        if n <= SMALL_BATCH:
+            chosen, free = [], np.zeros(n, dtype=bool)
+            for i in range(n):
+                one = scene[i] if batched else scene
+                nscene = NumpyScene.from_scene(one)
+                k = first_free(self._np_body, paths[i], nscene, order[i], max_travel=CHECK_TRAVEL)
+                if k < 0:  # none is free: the shortest one, flagged (refined first, if asked)
+                    best = paths[i, order[i, 0]]
+                    if self.refine_steps:  # from the least colliding one
+                        _, clear, _ = check_paths(self._np_body, paths[i], nscene, max_travel=CHECK_TRAVEL)
+                        best = paths[i, int(np.argmax(clear))]
+                    best, ok = self._refine(best, one, nscene)
+                    chosen.append(best)
+                    free[i] = ok
+                else:
+                    chosen.append(paths[i, k])
+                    free[i] = True
+            return np.stack(chosen), free
+        check = check_path(
+            self.body,
+            torch.from_numpy(paths),
+            scene.unsqueeze(-1) if batched else scene,
+            max_travel=CHECK_TRAVEL,
+        )
+        free = check.collision_free.numpy()
+        clearance = torch.minimum(check.clearance, check.self_clearance).numpy()
+        ranked_free = np.take_along_axis(free, order, axis=1)
+        first = ranked_free.argmax(axis=1)
+        any_free = ranked_free.any(axis=1)
+        fallback = clearance.argmax(axis=1) if self.refine_steps else order[:, 0]
+        pick = np.where(any_free, np.take_along_axis(order, first[:, None], 1)[:, 0], fallback)
+        out = paths[np.arange(n), pick]
+        if self.refine_steps:
+            for i in np.flatnonzero(~any_free):
+                one = scene[int(i)] if batched else scene
+                out_i, any_free[i] = self._refine(out[i], one, NumpyScene.from_scene(one))
+                if any_free[i]:
+                    out[i] = out_i
+        return out, any_free
+
+    def _refine(self, path: np.ndarray, scene: Scene, nscene) -> tuple[np.ndarray, bool]:
+        """``refine_steps`` steps of the gradient trajectory optimiser from ``path`` (if asked); the
+        refined path and whether the dense check finds it free. Without steps: ``(path, False)``."""
+        if not self.refine_steps:
+            return path, False
+        from .obstacle_baselines import trajectory_optimiser
+
+        p = torch.from_numpy(path)
+        refined, _ = trajectory_optimiser(p[0], p[-1], scene, steps=self.refine_steps, body=self.body, init=p)
+        refined = refined.numpy()
+        free, _, _ = check_paths(self._np_body, refined[None], nscene, max_travel=CHECK_TRAVEL)
+        return (refined, True) if bool(free[0]) else (path, False)
 
     def _position(self, q: np.ndarray) -> np.ndarray:
         """FK of ``(N, dof)`` float64 configurations: NumPy for a few, torch's fast path for many."""

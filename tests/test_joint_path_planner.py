@@ -389,8 +389,9 @@ def test_readme_quick_start_runs(tmp_path, monkeypatch):
 
 
 def test_plan_takes_a_robot_object(iiwa, workspace_pairs):
-    """kinlearn.plan(..., robot=Robot) uses that robot's shipped planner; an unknown one is refused."""
+    """kinlearn.plan(..., robot=Robot) uses that robot's shipped planner."""
     plan = kinlearn.plan(workspace_pairs.start[:2, :7], workspace_pairs.goal[:2, :7], robot=iiwa)
     assert plan.joints.shape[0] == 2 and plan.robot == "iiwa14"
-    with pytest.raises(ConfigError, match="ships no planner"):
-        kinlearn.plan(torch.zeros(7), torch.zeros(7), robot=load_robot("panda"))
+    panda = load_robot("panda")
+    q = panda.sample(2, torch.Generator().manual_seed(0), dtype=torch.float64)
+    assert kinlearn.plan(q[0], q[1], robot=panda).robot == "panda"

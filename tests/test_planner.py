@@ -121,8 +121,19 @@ def test_shipped_checkpoint_loads_and_plans(pairs, iiwa):
     assert float(m["state_success"].mean()) >= 0.95 and bool(plan.success.all())
     assert float(m["limit_violation"].sum()) == 0
     assert float(m["executed_sharp_turn"].mean()) <= 0.1
-    with pytest.raises(ConfigError, match="ships no planner for 'panda'"):
-        kinlearn.plan(torch.zeros(7), torch.zeros(7), robot="panda")
+
+
+def test_a_robot_without_a_shipped_planner_is_told_so(tmp_path, monkeypatch):
+    import kinlearn.planner as planner_mod
+
+    (tmp_path / "iiwa14").mkdir()
+    monkeypatch.setattr(planner_mod, "DEFAULT_CHECKPOINTS", tmp_path)
+    planner_mod._default_planner.cache_clear()
+    try:
+        with pytest.raises(ConfigError, match="ships no planner for 'panda'"):
+            kinlearn.plan(torch.zeros(7), torch.full((7,), -1.0), robot="panda")
+    finally:
+        planner_mod._default_planner.cache_clear()
 
 
 def test_tiny_learned_pipeline_for_panda(tmp_path):

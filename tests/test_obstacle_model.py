@@ -1,0 +1,120 @@
+"""The obstacle-aware TM: shapes, the set encoder, NumPy inference, checkpoints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from kinlearn import load_robot
+from kinlearn.collision import Scene
+from kinlearn.errors import CheckpointError, ConfigError
+from kinlearn.inference import NumpyObstacleModel
+from kinlearn.kinematics import kinematics
+from kinlearn.obstacle_model import (
+    ObstaclePathConfig,
+    ObstaclePathModel,
+    load_obstacle_model,
+    save_obstacle_model,
+    scene_primitives,
+)
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot("iiwa14")
+
+
+def _model(robot, **fields) -> ObstaclePathModel:
+    torch.manual_seed(0)
+    tm = ObstaclePathModel(ObstaclePathConfig.for_robot(robot, hidden=(32, 32), encoder=(16, 24), **fields))
+    with torch.no_grad():  # weights of a trained size, so the candidates differ visibly
+        for p in tm.trunk[-1].parameters():
+            p.normal_(0.0, 0.1)
+    return tm.eval()
+
+
+def _states(robot, n, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    q = robot.sample(2 * n, g, dtype=torch.float64)
+    s = torch.cat((q, kinematics(robot).position(q)), -1).float()
+    return s[:n], s[n:]
+
+
+def _scene(n):
+    spheres = torch.tensor([[[0.5, 0.0, 0.4, 0.1], [0.3, 0.3, 0.2, 0.05]]]).repeat(n, 1, 1)
+    boxes = torch.tensor([[[0.6, 0.0, 0.1, 0.2, 0.3, 0.1]]]).repeat(n, 1, 1)
+    mask = torch.ones(n, 2, dtype=torch.bool)
+    mask[0, 1] = False
+    return Scene(spheres, boxes, floor=torch.zeros(n), sphere_mask=mask)
+
+
+def test_candidates_start_and_end_at_the_problem(robot):
+    tm = _model(robot, candidates=5, modes=4)
+    s0, sT = _states(robot, 3)
+    mid = tm(s0, sT, *scene_primitives(_scene(3), 3))
+    assert mid.shape == (3, 5, 10, 7)
+    # The sine modes vanish at t = 0 and t = T: extending the basis to the ends gives the endpoints.
+    t = torch.tensor([0.0, 1.0])
+    ends = torch.sin(torch.pi * t[:, None] * torch.arange(1, 5))
+    assert ends.abs().max() < 1e-6
+    # Candidates differ (else the planner had one candidate).
+    assert (mid[:, 0] - mid[:, 1]).abs().max() > 1e-3
+
+
+def test_padding_and_order_of_primitives_do_not_matter(robot):
+    tm = _model(robot)
+    s0, sT = _states(robot, 1)
+    a = Scene(torch.tensor([[0.5, 0.0, 0.4, 0.1], [0.3, 0.3, 0.2, 0.05]]))
+    b = Scene(torch.tensor([[0.3, 0.3, 0.2, 0.05], [0.5, 0.0, 0.4, 0.1]]))
+    padded = Scene(
+        torch.tensor([[[0.5, 0.0, 0.4, 0.1], [0.3, 0.3, 0.2, 0.05], [9.0, 9.0, 9.0, 1.0]]]),
+        sphere_mask=torch.tensor([[True, True, False]]),
+    )
+    outs = [tm(s0, sT, *scene_primitives(sc, 1)) for sc in (a, b, padded)]
+    assert torch.allclose(outs[0], outs[1], atol=1e-6)
+    assert torch.allclose(outs[0], outs[2], atol=1e-6)
+    # ... while the obstacles do matter.
+    moved = Scene(torch.tensor([[0.5, 0.2, 0.4, 0.1], [0.3, 0.3, 0.2, 0.05]]))
+    assert (tm(s0, sT, *scene_primitives(moved, 1)) - outs[0]).abs().max() > 1e-5
+
+
+def test_empty_scene_gives_a_finite_plan(robot):
+    tm = _model(robot)
+    s0, sT = _states(robot, 2)
+    out = tm(s0, sT, *scene_primitives(Scene(), 2))
+    assert torch.isfinite(out).all()
+
+
+def test_numpy_inference_matches_torch(robot):
+    tm = _model(robot)
+    s0, sT = _states(robot, 4, seed=1)
+    rows, mask, floor = scene_primitives(_scene(4), 4)
+    with torch.no_grad():
+        ref = tm(s0, sT, rows, mask, floor).double().numpy()
+    npm = NumpyObstacleModel(tm, dtype=np.float64)
+    a = [x.double().numpy() for x in (s0[:, :7], s0[:, 7:], sT[:, :7], sT[:, 7:])]
+    out = npm(*a, rows.double().numpy(), mask.numpy(), floor.double().numpy())
+    assert np.abs(out - ref).max() < 1e-4
+
+
+def test_checkpoint_round_trip_and_wrong_robot(robot, tmp_path):
+    tm = _model(robot)
+    save_obstacle_model(tm, tmp_path / "tm_obstacles.pt")
+    back = load_obstacle_model(tmp_path / "tm_obstacles.pt", robot="iiwa14")
+    s0, sT = _states(robot, 2)
+    prims = scene_primitives(_scene(2), 2)
+    assert torch.equal(back(s0, sT, *prims), tm(s0, sT, *prims))
+    with pytest.raises(CheckpointError):
+        load_obstacle_model(tmp_path / "tm_obstacles.pt", robot="panda")
+
+
+def test_bad_config(robot):
+    with pytest.raises(ConfigError):
+        ObstaclePathConfig.for_robot(robot, candidates=0)
+    with pytest.raises(ConfigError):
+        ObstaclePathConfig.for_robot(robot, encoder=())
+    with pytest.raises(ConfigError):
+        ObstaclePathConfig(dof=7)  # no limits
+    with pytest.raises(ConfigError):
+        scene_primitives(_scene(3), 2)  # a scene per problem, but for 3 problems

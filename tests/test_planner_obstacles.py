@@ -1,0 +1,136 @@
+"""Planning around obstacles: the plan's collision verdict, bad obstacles, colliding starts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from kinlearn import load_robot
+from kinlearn.collision import Scene, check_path
+from kinlearn.collision.problems import ProblemSet
+from kinlearn.errors import ConfigError, ObstacleError, ShapeError
+from kinlearn.kinematics import kinematics
+from kinlearn.obstacle_model import ObstaclePathConfig, ObstaclePathModel
+from kinlearn.planner import Planner
+
+BENCHMARK = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "obstacle_problems_heldout.npz"
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot("iiwa14")
+
+
+@pytest.fixture(scope="module")
+def planner(robot):
+    """The shipped planner's models with a small untrained obstacle TM: the verdicts must hold for any TM."""
+    base = Planner.default("iiwa14")
+    torch.manual_seed(0)
+    otm = ObstaclePathModel(
+        ObstaclePathConfig.for_robot(robot, hidden=(32, 32), encoder=(16, 16), candidates=4)
+    )
+    with torch.no_grad():
+        for p in otm.trunk[-1].parameters():
+            p.normal_(0.0, 0.2)
+    return Planner(robot, base.tm, base.fm, base.im, obstacle_tm=otm)
+
+
+@pytest.fixture(scope="module")
+def problems():
+    ps = ProblemSet.load(BENCHMARK)
+    return ps[torch.arange(0, len(ps), 51)]  # 20 problems from every family
+
+
+def test_collision_free_agrees_with_the_dense_check(planner, problems):
+    plan = planner.plan(problems.start, problems.goal, obstacles=problems.scene)
+    check = check_path(planner.body, plan.joints.double(), problems.scene)
+    assert torch.equal(plan.collision_free, check.collision_free)
+    assert not (plan.success & ~plan.collision_free).any()
+    assert plan.collision_free.any()  # the straight line is among the candidates; easy problems pass
+    # The plan starts and ends at the given joints.
+    assert torch.allclose(plan.joints[:, 0], problems.start)
+    assert torch.allclose(plan.joints[:, -1], problems.goal)
+
+
+def test_batch_one_gives_the_batch_verdict(planner, problems):
+    plan = planner.plan(problems.start, problems.goal, obstacles=problems.scene)
+    for i in (0, 7, 13):
+        start, goal, scene = problems.problem(i)
+        one = planner.plan(start, goal, obstacles=scene)
+        assert one.collision_free.shape == ()
+        assert bool(one.collision_free) == bool(plan.collision_free[i])
+        assert bool(check_path(planner.body, one.joints, scene).collision_free) == bool(one.collision_free)
+
+
+def test_deterministic(planner, problems):
+    start, goal, scene = problems.problem(3)
+    a = planner.plan(start, goal, obstacles=scene)
+    b = planner.plan(start, goal, obstacles=scene)
+    assert torch.equal(a.joints, b.joints)
+
+
+def test_start_in_collision_is_a_failed_plan(planner, robot):
+    start = torch.zeros(7, dtype=torch.float64)
+    goal = torch.tensor([0.5, 0.3, 0.0, -1.0, 0.0, 0.5, 0.0], dtype=torch.float64)
+    ee = kinematics(robot).position(start)
+    plan = planner.plan(start, goal, obstacles=torch.cat((ee, torch.tensor([0.05]))).unsqueeze(0))
+    assert not bool(plan.collision_free)
+    assert not bool(plan.success)
+    assert "NO" in plan.summary()
+
+
+def test_spheres_as_tensors_and_per_plan_scenes(planner, robot):
+    g = torch.Generator().manual_seed(1)
+    q = robot.sample(6, g, dtype=torch.float64)
+    far = torch.tensor([[3.0, 3.0, 3.0, 0.1], [-3.0, 3.0, 3.0, 0.2]])
+    one = planner.plan(q[:3], q[3:], obstacles=far)  # one scene for all plans
+    per = planner.plan(q[:3], q[3:], obstacles=far.expand(3, 2, 4))  # a scene per plan
+    assert torch.equal(one.joints, per.joints)
+    assert one.collision_free.shape == (3,)
+    empty = planner.plan(q[:3], q[3:], obstacles=torch.zeros(0, 4))
+    assert empty.collision_free.shape == (3,)
+
+
+@pytest.mark.parametrize(
+    "obstacles",
+    [
+        [[0.5, 0.0, 0.5, -0.1]],  # negative radius
+        [[0.5, 0.0, 0.5, 0.0]],  # zero radius
+        [[0.5, float("nan"), 0.5, 0.1]],  # NaN
+        [[0.5, 0.0, 0.5]],  # three numbers
+        [0.5, 0.0, 0.5, 0.1],  # no obstacle axis
+        "a box",
+    ],
+)
+def test_bad_obstacles_raise(planner, obstacles):
+    with pytest.raises(ObstacleError):
+        planner.plan(torch.zeros(7), torch.full((7,), 0.3), obstacles=obstacles)
+
+
+def test_scene_of_another_batch_raises(planner):
+    with pytest.raises(ShapeError):
+        planner.plan(torch.zeros(2, 7), torch.full((2, 7), 0.3), obstacles=torch.ones(3, 1, 4) * 0.1)
+
+
+def test_planner_without_obstacle_model_says_so(robot):
+    base = Planner.default("iiwa14")
+    plain = Planner(robot, base.tm, base.fm, base.im)
+    with pytest.raises(ConfigError, match="obstacle"):
+        plain.plan(torch.zeros(7), torch.full((7,), 0.3), obstacles=[[0.5, 0.0, 0.5, 0.1]])
+
+
+def test_without_obstacles_nothing_changes(planner, robot):
+    base = Planner.default("iiwa14")
+    q = robot.sample(4, torch.Generator().manual_seed(2), dtype=torch.float64)
+    a, b = planner.plan(q[:2], q[2:]), base.plan(q[:2], q[2:])
+    assert torch.equal(a.joints, b.joints)
+    assert a.collision_free is None
+
+
+def test_a_scene_with_boxes_and_floor(planner, problems):
+    start, goal, scene = problems.problem(5)
+    assert isinstance(scene, Scene) and scene.num_boxes > 0 and scene.floor is not None
+    plan = planner.plan(start, goal, obstacles=scene)
+    assert bool(check_path(planner.body, plan.joints, scene).collision_free) == bool(plan.collision_free)

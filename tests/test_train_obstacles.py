@@ -1,0 +1,127 @@
+"""Self-supervised training of the obstacle-aware TM: its loss, its clearance, learning, resuming."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+
+from kinlearn import load_robot
+from kinlearn.collision import body_obstacle_distance, body_spheres
+from kinlearn.collision.problems import ProblemConfig, make_problems
+from kinlearn.errors import CheckpointError, ConfigError
+from kinlearn.io import load_checkpoint
+from kinlearn.obstacle_model import ObstaclePathConfig, ObstaclePathModel
+from kinlearn.train_obstacles import (
+    ObstacleLossConfig,
+    ObstacleTrainConfig,
+    _scene_clearance,
+    candidate_losses,
+    train_obstacle_model,
+)
+
+
+@pytest.fixture(scope="module")
+def problems(tmp_path_factory):
+    """Six unverified problems (two per family) in one file."""
+    from kinlearn.collision.problems import ProblemSet
+
+    cfg = ProblemConfig(verify=False)
+    sets = [make_problems(f, 2, 4242, config=cfg) for f in ("tabletop", "shelf", "barrier")]
+    path = tmp_path_factory.mktemp("problems") / "train.npz"
+    ProblemSet.concat(sets).save(path)
+    return path, ProblemSet.concat(sets)
+
+
+def _tiny(problems, **fields) -> ObstacleTrainConfig:
+    base = dict(
+        problems=(str(problems[0]),),
+        iterations=12,
+        batch_size=6,
+        checkpoint_every=4,
+        lr=3e-3,
+        model={"hidden": [32, 32], "encoder": [16, 16], "candidates": 3, "modes": 3},
+    )
+    base.update(fields)
+    return ObstacleTrainConfig(**base)
+
+
+def test_lean_clearance_matches_the_library(problems):
+    _, ps = problems
+    body = body_spheres(load_robot("iiwa14")).double()
+    q = torch.stack((ps.start, ps.goal), dim=1)  # (N, 2, dof)
+    centres = body(q)
+    mine = _scene_clearance(centres, body.radii, ps.scene, body.floor_mask)
+    _, ref = body_obstacle_distance(
+        centres.transpose(0, 1), body.radii, ps.scene, per_sphere=True, floor_mask=body.floor_mask
+    )
+    assert torch.allclose(mine, ref.transpose(0, 1), atol=1e-9)
+
+
+def test_collision_term_sees_a_colliding_candidate(problems):
+    _, ps = problems
+    robot = load_robot("iiwa14")
+    body = body_spheres(robot).float()
+    tm = ObstaclePathModel(ObstaclePathConfig.for_robot(robot, hidden=(16,), encoder=(8,), candidates=2))
+    from kinlearn.kinematics import kinematics
+
+    kin = kinematics(robot)
+    s0 = torch.cat((ps.start, kin.position(ps.start)), -1).float()
+    sT = torch.cat((ps.goal, kin.position(ps.goal)), -1).float()
+    scene = ps.scene.to(dtype=torch.float32)
+    per, terms = candidate_losses(tm, body, s0, sT, scene, ObstacleLossConfig(), torch.tensor([0.0, 0.5]))
+    assert per.shape == (len(ps), 2)
+    # A hard problem's straight line collides; the untrained candidates stay near it and pay for that.
+    hard = ps.hard
+    assert hard.any()
+    assert (terms["collision"][hard] > 0).any()
+    assert torch.isfinite(per).all()
+
+
+def test_training_lowers_the_loss_and_resumes_bit_identically(problems, tmp_path, monkeypatch):
+    cfg = _tiny(problems)
+    full = train_obstacle_model(cfg, tmp_path / "full", progress=False)
+    records = [json.loads(line) for line in (tmp_path / "full" / "metrics.jsonl").read_text().splitlines()]
+    assert records[-1]["train/loss"] < records[0]["train/loss"]
+    # The same run, killed in its ninth iteration (after the checkpoint at 8), then resumed.
+    import kinlearn.train_obstacles as mod
+
+    real, calls = mod.candidate_losses, {"n": 0}
+
+    def failing(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 9:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(mod, "candidate_losses", failing)
+    with pytest.raises(KeyboardInterrupt):
+        train_obstacle_model(cfg, tmp_path / "part", progress=False)
+    monkeypatch.setattr(mod, "candidate_losses", real)
+    assert (
+        load_checkpoint(tmp_path / "part" / "tm_obstacles.pt", kind=ObstaclePathModel.kind)["extra"][
+            "iteration"
+        ]
+        == 8
+    )
+    resumed = train_obstacle_model(cfg, tmp_path / "part", progress=False)
+    for a, b in zip(full.state_dict().values(), resumed.state_dict().values(), strict=True):
+        assert torch.equal(a, b)
+
+
+def test_resume_refuses_another_configuration(problems, tmp_path):
+    train_obstacle_model(_tiny(problems, iterations=4), tmp_path, progress=False)
+    with pytest.raises(CheckpointError):
+        train_obstacle_model(_tiny(problems, iterations=4, lr=1e-3), tmp_path, progress=False)
+
+
+def test_bad_configs(problems):
+    with pytest.raises(ConfigError):
+        ObstacleTrainConfig()  # no problems
+    with pytest.raises(ConfigError):
+        _tiny(problems, body="learned")  # without a checkpoint
+    with pytest.raises(ConfigError):
+        _tiny(problems, points=0)
+    with pytest.raises(ConfigError):
+        ObstacleLossConfig(margin=-0.01)
