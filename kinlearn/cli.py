@@ -168,6 +168,7 @@ def add_run_options(p: argparse.ArgumentParser, resumable: bool) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered subcommand."""
+    _load_subcommand_modules()
     parser = argparse.ArgumentParser(
         prog="kinlearn", description="Learn robot kinematics and trajectory planning from motor babbling."
     )
@@ -468,8 +469,19 @@ def _run_validate(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------------------------------
 
 
-# The planning stage's subcommands register themselves on import.
-from . import cli_planning  # noqa: E402, F401
+#: Modules holding further subcommands, imported when the parser is built (not when this module is
+#: imported: they import this module's helpers, so importing them here would be a circle).
+SUBCOMMAND_MODULES = ("cli_planning", "cli_body", "cli_view")
+
+
+def _load_subcommand_modules() -> None:
+    import importlib
+
+    for name in SUBCOMMAND_MODULES:
+        module = importlib.import_module(f".{name}", __package__)
+        register = getattr(module, "register", None)
+        if register is not None and register not in _SUBCOMMANDS:
+            register_subcommand(register)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,0 +1,91 @@
+"""``kinlearn view``: plan from a start to a goal and look at the plan.
+
+By default the plan opens in the browser viewer (:meth:`kinlearn.Plan.show`, viser) on localhost; the
+command prints the address and serves until Ctrl-C. With ``--gif PATH`` it writes an animation of the
+arm moving along the plan (:meth:`kinlearn.Plan.animate`, matplotlib) and returns. Start and goal are
+read as ``kinlearn plan`` reads them. Exit status: 0 when the plan reaches its goal, 1 when it misses it
+(it is shown all the same), 2 for bad input.
+
+The subcommand is added to a parser by :func:`register`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import torch
+
+from .cli import add_command, number_type
+from .cli_planning import _NEGATIVE_VALUES, _floats
+from .errors import ConfigError
+from .planner import Planner
+
+__all__ = ["register"]
+
+PORT = number_type(int, low=1, high=65535)
+FPS = number_type(float, low=0.5, high=100)
+
+
+def register(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add the ``view`` subcommand to ``subparsers`` (the object ``add_subparsers()`` returns)."""
+    p = add_command(
+        subparsers,
+        "view",
+        "Plan from a start to a goal and show the plan: in the browser (viser, on localhost, until Ctrl-C), "
+        "or as a GIF with --gif. Exit status 0 when the plan reaches its goal, 1 when it misses it, 2 for "
+        "bad input.",
+        _run_view,
+        seed=False,
+        run_dir=False,
+    )
+    p._negative_number_matcher = _NEGATIVE_VALUES
+    p.add_argument(
+        "--start",
+        type=_floats,
+        required=True,
+        help="start joints (rad) or a full state [θ, ef], comma-separated",
+    )
+    goal = p.add_mutually_exclusive_group(required=True)
+    goal.add_argument("--goal", type=_floats, help="goal joints (rad) or a full state, comma-separated")
+    goal.add_argument(
+        "--goal-position",
+        type=_floats,
+        help="goal end-effector position x,y,z (m, base frame), any configuration",
+    )
+    p.add_argument("--model", type=Path, default=None, help="a planner folder (default: the shipped planner)")
+    p.add_argument(
+        "--gif",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="write an animation of the plan to this .gif file instead of opening the viewer",
+    )
+    p.add_argument(
+        "--port",
+        type=PORT,
+        default=8080,
+        help="viewer port on localhost (default: 8080; the next free one if it is taken)",
+    )
+    p.add_argument(
+        "--fps", type=FPS, default=10.0, help="configurations per second when playing (default: 10)"
+    )
+    return p
+
+
+def _run_view(args: argparse.Namespace) -> int:
+    if args.gif is not None and args.gif.suffix.lower() != ".gif":
+        raise ConfigError(f"--gif must name a .gif file, got {args.gif}")
+    planner = Planner.load(args.model, robot=args.robot) if args.model else Planner.default(args.robot)
+    start = torch.tensor(args.start, dtype=torch.float64)
+    if args.goal_position is not None:
+        plan = planner.plan(start, goal_position=torch.tensor(args.goal_position, dtype=torch.float64))
+    else:
+        plan = planner.plan(start, torch.tensor(args.goal, dtype=torch.float64))
+    print(plan.summary())
+    if args.gif is not None:
+        path = plan.animate(args.gif, planner.robot, fps=args.fps)
+        print(f"animation: {plan.joints.shape[0]} frames → {path}")
+    else:
+        plan.show(planner.robot, host="127.0.0.1", port=args.port, fps=args.fps, block=True)
+    return 0 if bool(plan.success) else 1
