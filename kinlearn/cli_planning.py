@@ -279,6 +279,13 @@ def _add_plan(sub) -> None:
         metavar="SCENE",
         help="plan around the obstacles of a scene file (.npz, kinlearn.collision.Scene.save)",
     )
+    p.add_argument(
+        "--refine-steps",
+        type=NONNEGATIVE_INT,
+        default=0,
+        help="with --obstacles: gradient steps refining the least colliding proposal when none is free "
+        "(bounded time; default 0)",
+    )
     p.add_argument("--strict", action="store_true", help="refuse a start or goal outside the training domain")
     p.add_argument("--joints", action="store_true", help="also print the joint path")
     p.add_argument(
@@ -309,11 +316,16 @@ def _run_plan(args: argparse.Namespace) -> int:
             start,
             goal_position=torch.tensor(args.goal_position, dtype=torch.float64),
             obstacles=obstacles,
+            refine_steps=args.refine_steps,
             strict=args.strict,
         )
     else:
         plan = planner.plan(
-            start, torch.tensor(args.goal, dtype=torch.float64), obstacles=obstacles, strict=args.strict
+            start,
+            torch.tensor(args.goal, dtype=torch.float64),
+            obstacles=obstacles,
+            refine_steps=args.refine_steps,
+            strict=args.strict,
         )
     print(plan.summary())
     if args.joints:
@@ -516,7 +528,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
     paths = make_training_problems(problems_dir, args.problems_per_family, robot=robot)
     cfg = ObstacleTrainConfig(
         robot=robot.name,
-        problems=tuple(str(p) for p in paths),
+        problems=tuple(sorted(str(p) for p in paths)),
         body="learned" if args.body_checkpoint else "analytic",
         body_checkpoint=str(args.body_checkpoint) if args.body_checkpoint else None,
         iterations=args.iterations,

@@ -169,9 +169,7 @@ class Planner:
         self.obstacle_tm = obstacle_tm
         self._np_obstacle_tm = NumpyObstacleModel(obstacle_tm) if obstacle_tm is not None else None
         self._body = body
-        if isinstance(refine_steps, bool) or not isinstance(refine_steps, int) or refine_steps < 0:
-            raise ConfigError(f"refine_steps must be an integer ≥ 0, got {refine_steps!r}")
-        self.refine_steps = refine_steps
+        self.refine_steps = _check_steps(refine_steps)
         self._np_body_cache = None
         self._core = self._rollout
         self._lo, self._hi = robot.limits(torch.float64)
@@ -326,7 +324,16 @@ class Planner:
     # Planning
     # ----------------------------------------------------------------------------------------------
 
-    def plan(self, start, goal=None, *, goal_position=None, obstacles=None, strict: bool = False) -> Plan:
+    def plan(
+        self,
+        start,
+        goal=None,
+        *,
+        goal_position=None,
+        obstacles=None,
+        refine_steps: int | None = None,
+        strict: bool = False,
+    ) -> Plan:
         """Plan from ``start`` to ``goal``, around ``obstacles`` if given.
 
         ``start``: joint values ``(..., dof)`` or a state ``(..., dof + 3)``. ``goal``: likewise — the plan
@@ -340,8 +347,11 @@ class Planner:
         (spheres, boxes, a floor) of batch shape ``()`` or the plans'. The obstacle-aware TM proposes
         several joint paths, the straight joint line joins them, and the shortest (in joint space) that
         the dense check finds collision-free is the plan; the plan's ``collision_free`` says whether
-        one was (``success`` requires it). A start or goal that already collides gives a plan with
-        ``collision_free`` False. Bad obstacles raise :class:`~kinlearn.errors.ObstacleError`.
+        one was (``success`` requires it); if none is, the shortest, flagged. A start or goal that
+        already collides gives a plan with ``collision_free`` False. Bad obstacles raise
+        :class:`~kinlearn.errors.ObstacleError`. ``refine_steps``: overrides the planner's (see
+        :meth:`__init__`) for this call: where no proposal is free, this many gradient steps refine the
+        least colliding one (bounded time; 25 lifts the held-out success from 80% to 92%).
 
         Raises :class:`ShapeError`, :class:`DTypeError`, :class:`NonFiniteError`,
         :class:`JointLimitError` or :class:`StateError` for bad input; warns with
@@ -366,7 +376,8 @@ class Planner:
         free = None
         if obstacles is not None:
             scene = self._scene(obstacles, batch, n)
-            joints, free = self._plan_around(theta0, ef0, thetaT, efT, scene)
+            steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
+            joints, free = self._plan_around(theta0, ef0, thetaT, efT, scene, steps)
             ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(n, -1, 3)
             waypoints = ef[:, 1:-1]
         elif self._np_tm is not None:
@@ -463,7 +474,9 @@ class Planner:
             )
         return scene.reshape(n) if len(shape) != 1 else scene
 
-    def _plan_around(self, theta0, ef0, thetaT, efT, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    def _plan_around(
+        self, theta0, ef0, thetaT, efT, scene: Scene, steps: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Joint paths ``(N, T + 1, dof)`` around ``scene`` and whether each is collision-free ``(N,)``."""
         n, dof = theta0.shape
         rows, mask, floor = scene_primitives(scene, n, torch.float64)
@@ -499,10 +512,10 @@ class Planner:
                 k = first_free(self._np_body, paths[i], nscene, order[i], max_travel=CHECK_TRAVEL)
                 if k < 0:  # none is free: the shortest one, flagged (refined first, if asked)
                     best = paths[i, order[i, 0]]
-                    if self.refine_steps:  # from the least colliding one
+                    if steps:  # from the least colliding one
                         _, clear, _ = check_paths(self._np_body, paths[i], nscene, max_travel=CHECK_TRAVEL)
                         best = paths[i, int(np.argmax(clear))]
-                    best, ok = self._refine(best, one, nscene)
+                    best, ok = self._refine(best, one, nscene, steps)
                     chosen.append(best)
                     free[i] = ok
                 else:
@@ -520,26 +533,26 @@ class Planner:
         ranked_free = np.take_along_axis(free, order, axis=1)
         first = ranked_free.argmax(axis=1)
         any_free = ranked_free.any(axis=1)
-        fallback = clearance.argmax(axis=1) if self.refine_steps else order[:, 0]
+        fallback = clearance.argmax(axis=1) if steps else order[:, 0]
         pick = np.where(any_free, np.take_along_axis(order, first[:, None], 1)[:, 0], fallback)
         out = paths[np.arange(n), pick]
-        if self.refine_steps:
+        if steps:
             for i in np.flatnonzero(~any_free):
                 one = scene[int(i)] if batched else scene
-                out_i, any_free[i] = self._refine(out[i], one, NumpyScene.from_scene(one))
+                out_i, any_free[i] = self._refine(out[i], one, NumpyScene.from_scene(one), steps)
                 if any_free[i]:
                     out[i] = out_i
         return out, any_free
 
-    def _refine(self, path: np.ndarray, scene: Scene, nscene) -> tuple[np.ndarray, bool]:
-        """``refine_steps`` steps of the gradient trajectory optimiser from ``path`` (if asked); the
-        refined path and whether the dense check finds it free. Without steps: ``(path, False)``."""
-        if not self.refine_steps:
+    def _refine(self, path: np.ndarray, scene: Scene, nscene, steps: int) -> tuple[np.ndarray, bool]:
+        """``steps`` steps of the gradient trajectory optimiser from ``path`` (if any); the refined path
+        and whether the dense check finds it free. Without steps: ``(path, False)``."""
+        if not steps:
             return path, False
         from .obstacle_baselines import trajectory_optimiser
 
         p = torch.from_numpy(path)
-        refined, _ = trajectory_optimiser(p[0], p[-1], scene, steps=self.refine_steps, body=self.body, init=p)
+        refined, _ = trajectory_optimiser(p[0], p[-1], scene, steps=steps, body=self.body, init=p)
         refined = refined.numpy()
         free, _, _ = check_paths(self._np_body, refined[None], nscene, max_travel=CHECK_TRAVEL)
         return (refined, True) if bool(free[0]) else (path, False)
@@ -644,6 +657,12 @@ class Planner:
         return theta.double().numpy()
 
 
+def _check_steps(steps) -> int:
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+        raise ConfigError(f"refine_steps must be an integer ≥ 0, got {steps!r}")
+    return steps
+
+
 def _robot(robot: str | Robot | None, name: str) -> Robot:
     if isinstance(robot, Robot):
         return robot
@@ -663,7 +682,21 @@ def _default_planner(robot: str) -> Planner:
 
 
 def plan(
-    start, goal=None, *, goal_position=None, robot: str | Robot = "iiwa14", strict: bool = False
+    start,
+    goal=None,
+    *,
+    goal_position=None,
+    obstacles=None,
+    refine_steps: int | None = None,
+    robot: str | Robot = "iiwa14",
+    strict: bool = False,
 ) -> Plan:
     """Plan with the planner shipped for ``robot`` (see :meth:`Planner.plan`)."""
-    return Planner.default(robot).plan(start, goal, goal_position=goal_position, strict=strict)
+    return Planner.default(robot).plan(
+        start,
+        goal,
+        goal_position=goal_position,
+        obstacles=obstacles,
+        refine_steps=refine_steps,
+        strict=strict,
+    )

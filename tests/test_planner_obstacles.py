@@ -134,3 +134,54 @@ def test_a_scene_with_boxes_and_floor(planner, problems):
     assert isinstance(scene, Scene) and scene.num_boxes > 0 and scene.floor is not None
     plan = planner.plan(start, goal, obstacles=scene)
     assert bool(check_path(planner.body, plan.joints, scene).collision_free) == bool(plan.collision_free)
+
+
+def test_shipped_planner_plans_around_an_obstacle_and_refines(robot, tmp_path):
+    """The shipped obstacle-aware planner: a hard problem (the straight line collides) solved, through
+    kinlearn.plan and the CLI, and refinement steps only ever add collision-free plans."""
+    import kinlearn
+    from kinlearn.cli import main
+
+    ps = ProblemSet.load(BENCHMARK)
+    hard = torch.nonzero(ps.hard).reshape(-1)[:12]
+    sub = ps[hard]
+    plain = kinlearn.plan(sub.start, sub.goal, obstacles=sub.scene)
+    assert plain.collision_free.float().mean() >= 0.5  # the straight line collides on every one
+    refined = kinlearn.plan(sub.start, sub.goal, obstacles=sub.scene, refine_steps=10)
+    assert (refined.collision_free | ~plain.collision_free).all()
+    assert torch.equal(refined.joints[plain.collision_free], plain.joints[plain.collision_free])
+    check = check_path(Planner.default("iiwa14").body, refined.joints.double(), sub.scene)
+    assert torch.equal(refined.collision_free, check.collision_free)
+    with pytest.raises(ConfigError):
+        kinlearn.plan(sub.start, sub.goal, obstacles=sub.scene, refine_steps=-1)
+    i = int(torch.nonzero(plain.collision_free)[0])
+    start, goal, scene = sub.problem(i)
+    scene.save(tmp_path / "scene.npz")
+    fmt = ",".join
+    code = main(
+        [
+            "plan",
+            "--start",
+            fmt(f"{v:.10f}" for v in start.tolist()),
+            "--goal",
+            fmt(f"{v:.10f}" for v in goal.tolist()),
+            "--obstacles",
+            str(tmp_path / "scene.npz"),
+        ]
+    )
+    assert code == 0
+
+
+def test_readme_ball_example():
+    """The README's example: a lone ball across the straight joint line, cleared with refinement."""
+    import kinlearn
+
+    start = torch.tensor([-1.2, 0.9, 0.5, -1.6, 0.3, 1.2, -2.0])
+    goal = torch.tensor([1.5, -0.4, -0.8, 1.1, -1.9, -0.6, 2.4])
+    ball = [[0.58, -0.11, 1.03, 0.12]]
+    line = check_path(
+        Planner.default("iiwa14").body, torch.stack((start, goal)).double(), Scene(torch.tensor(ball))
+    )
+    assert not bool(line.collision_free)
+    plan = kinlearn.plan(start, goal, obstacles=ball, refine_steps=25)
+    assert bool(plan.collision_free) and bool(plan.success)
