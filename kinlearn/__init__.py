@@ -11,6 +11,8 @@ Quick start::
 
 from .babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
 from .baselines import cartesian_dls, joint_interpolation, rrt_connect
+from .body_model import LearnedBody, load_body_model
+from .collision import BodySpheres, Scene, body_spheres, check_path
 from .endpoints import EndpointConfig, EndpointPairs, load_endpoints, make_endpoints, save_endpoints
 from .errors import (
     CheckpointError,
@@ -45,6 +47,7 @@ from .models import (
     load_im,
     save_model,
 )
+from .obstacle_model import ObstaclePathConfig, ObstaclePathModel, load_obstacle_model
 from .path_model import JointPathConfig, JointPathModel, load_path_model
 from .plan import Plan, Tolerance
 from .planner import Planner, plan
@@ -53,6 +56,7 @@ from .robot import ROBOTS, Robot, available_robots, load_robot
 from .state import StateLayout
 from .timing import TimedTrajectory, time_parameterize
 from .train import OptimConfig, TrainConfig, train_config, train_fm, train_im, validate_models
+from .train_obstacles import ObstacleLossConfig, ObstacleTrainConfig, train_obstacle_model
 from .train_path import PathLossConfig, PathTrainConfig, train_path_model
 from .train_tm import TMTrainConfig, load_tm, tm_preset, train_tm
 from .trajectory import TMConfig, TrajectoryModel
@@ -65,6 +69,7 @@ __all__ = [
     "AnalyticFM",
     "AnalyticIM",
     "BabblingConfig",
+    "BodySpheres",
     "CheckpointError",
     "ConfigError",
     "DTypeError",
@@ -82,11 +87,16 @@ __all__ = [
     "JointPathModel",
     "Kinematics",
     "KinlearnError",
+    "LearnedBody",
     "LearnedFM",
     "LearnedIM",
     "LossConfig",
     "MissingDependencyError",
     "NonFiniteError",
+    "ObstacleLossConfig",
+    "ObstaclePathConfig",
+    "ObstaclePathModel",
+    "ObstacleTrainConfig",
     "OptimConfig",
     "PathLossConfig",
     "PathTrainConfig",
@@ -96,6 +106,7 @@ __all__ = [
     "Robot",
     "RobotDescriptionError",
     "RunDirectoryError",
+    "Scene",
     "ShapeError",
     "StateError",
     "StateLayout",
@@ -110,13 +121,17 @@ __all__ = [
     "__version__",
     "available_robots",
     "babble",
+    "body_spheres",
     "cartesian_dls",
+    "check_path",
     "dls_step",
     "joint_interpolation",
     "kinematics",
+    "load_body_model",
     "load_endpoints",
     "load_fm",
     "load_im",
+    "load_obstacle_model",
     "load_path_model",
     "load_robot",
     "load_tm",
@@ -136,6 +151,7 @@ __all__ = [
     "train_config",
     "train_fm",
     "train_im",
+    "train_obstacle_model",
     "train_path_model",
     "train_tm",
     "trajectory_metrics",

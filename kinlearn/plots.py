@@ -73,7 +73,9 @@ def _flat(plan: Plan) -> Plan:
         x = x.detach().reshape(-1, *x.shape[lead:]).cpu()
         return x.double() if x.is_floating_point() else x
 
-    return dataclasses.replace(plan, **{f: flat(getattr(plan, f)) for f in Plan._BATCHED})
+    return dataclasses.replace(
+        plan, **{f: flat(getattr(plan, f)) for f in Plan._BATCHED if getattr(plan, f) is not None}
+    )
 
 
 def _check_indices(indices: Sequence[int], n: int) -> list[int]:
