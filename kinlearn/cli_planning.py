@@ -493,6 +493,12 @@ def _add_train_obstacle_planner(sub) -> None:
         "--candidates", type=POSITIVE_INT, default=6, help="paths proposed per problem (default: 6)"
     )
     p.add_argument(
+        "--init-checkpoint",
+        type=Path,
+        default=None,
+        help="fine-tune a trained tm_obstacles.pt (same architecture) instead of starting afresh",
+    )
+    p.add_argument(
         "--planner",
         type=Path,
         default=None,
@@ -520,6 +526,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
             "lr": args.lr,
             "candidates": args.candidates,
             "body": _file_identity(args.body_checkpoint) if args.body_checkpoint else "analytic",
+            "init": _file_identity(args.init_checkpoint) if args.init_checkpoint else None,
         },
     )
     run_dir = run.begin()
@@ -535,6 +542,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         batch_size=args.batch_size,
         lr=args.lr,
         model={"candidates": args.candidates},
+        init_checkpoint=str(args.init_checkpoint) if args.init_checkpoint else None,
         seed=args.seed,
     )
     train_obstacle_model(cfg, run_dir, resume=run.resumed, progress=not args.no_progress, write_config=False)

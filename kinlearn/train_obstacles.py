@@ -39,7 +39,13 @@ from .collision.problems import FAMILIES, ProblemConfig, ProblemSet, make_proble
 from .errors import CheckpointError, ConfigError, TrainingDivergedError
 from .io import load_checkpoint, write_json
 from .kinematics import kinematics
-from .obstacle_model import ObstaclePathConfig, ObstaclePathModel, save_obstacle_model, scene_primitives
+from .obstacle_model import (
+    ObstaclePathConfig,
+    ObstaclePathModel,
+    load_obstacle_model,
+    save_obstacle_model,
+    scene_primitives,
+)
 from .robot import Robot, load_robot
 from .train import RunLogger, seed_everything
 
@@ -83,7 +89,9 @@ class ObstacleTrainConfig:
     ``problems``: ``.npz`` problem sets (:meth:`ProblemSet.save`) to train on, e.g. from
     :func:`make_training_problems`. ``body``: ``"analytic"`` (the sphere model) or ``"learned"``
     (``body_checkpoint``, a learned body model). ``points``: configurations per segment at which the
-    loss looks at the body. Adam with cosine decay to zero.
+    loss looks at the body. ``init_checkpoint``: start from a trained model's weights and input
+    standardisation (fine-tuning, e.g. on more problems) instead of a fresh one; its architecture must
+    match ``model``. Adam with cosine decay to zero.
     """
 
     robot: str = "iiwa14"
@@ -95,6 +103,7 @@ class ObstacleTrainConfig:
     lr: float = 1e-3
     points: int = 2
     checkpoint_every: int = 100
+    init_checkpoint: str | None = None
     loss: ObstacleLossConfig = field(default_factory=ObstacleLossConfig)
     model: dict = field(default_factory=dict)
     seed: int = 0
@@ -306,14 +315,21 @@ def train_obstacle_model(
     rows_all, mask_all, floor_all = scene_primitives(pool.scene, n_pool, torch.float64)
     s0_all = torch.cat((pool.start, ef_all[0]), -1)
     sT_all = torch.cat((pool.goal, ef_all[1]), -1)
-    # Both directions, as training draws them.
-    tm.fit_normalization(
-        torch.cat((s0_all, sT_all)),
-        torch.cat((sT_all, s0_all)),
-        rows_all.repeat(2, 1, 1),
-        mask_all.repeat(2, 1),
-        floor_all.repeat(2, 1),
-    )
+    if config.init_checkpoint:
+        init = load_obstacle_model(config.init_checkpoint, robot=robot.name)
+        if init.config.to_dict() != tm.config.to_dict():
+            raise ConfigError(
+                f"init_checkpoint {config.init_checkpoint} has another architecture than the run's model"
+            )
+        tm.load_state_dict(init.state_dict())
+    else:  # standardise with both directions, as training draws them
+        tm.fit_normalization(
+            torch.cat((s0_all, sT_all)),
+            torch.cat((sT_all, s0_all)),
+            rows_all.repeat(2, 1, 1),
+            mask_all.repeat(2, 1),
+            floor_all.repeat(2, 1),
+        )
     opt = torch.optim.Adam(tm.parameters(), lr=config.lr)
     total = config.iterations
     sched = torch.optim.lr_scheduler.LambdaLR(

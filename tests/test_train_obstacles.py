@@ -125,3 +125,43 @@ def test_bad_configs(problems):
         _tiny(problems, points=0)
     with pytest.raises(ConfigError):
         ObstacleLossConfig(margin=-0.01)
+
+
+def test_fine_tuning_starts_from_the_given_weights(problems, tmp_path):
+    first = train_obstacle_model(_tiny(problems, iterations=4), tmp_path / "a", progress=False)
+    cfg = _tiny(problems, iterations=1, lr=1e-9, init_checkpoint=str(tmp_path / "a" / "tm_obstacles.pt"))
+    tuned = train_obstacle_model(cfg, tmp_path / "b", progress=False)
+    for a, b in zip(first.state_dict().values(), tuned.state_dict().values(), strict=True):
+        assert torch.allclose(a, b, atol=1e-6)
+    other = _tiny(
+        problems,
+        iterations=1,
+        init_checkpoint=str(tmp_path / "a" / "tm_obstacles.pt"),
+        model={"hidden": [16], "encoder": [8], "candidates": 3, "modes": 3},
+    )
+    with pytest.raises(ConfigError, match="architecture"):
+        train_obstacle_model(other, tmp_path / "c", progress=False)
+
+
+def test_train_obstacle_planner_command(tmp_path):
+    """The command generates its problems, trains, records its run and copies the model into a planner."""
+    import shutil
+
+    from kinlearn.cli import main
+    from kinlearn.planner import DEFAULT_CHECKPOINTS, Planner
+
+    planner_dir = tmp_path / "planner"
+    shutil.copytree(DEFAULT_CHECKPOINTS / "iiwa14", planner_dir)
+    (planner_dir / "tm_obstacles.pt").unlink()
+    run = tmp_path / "run"
+    args = ["train-obstacle-planner", "--problems-per-family", "1", "--iterations", "2", "--batch-size", "3"]
+    code = main(
+        [*args, "--candidates", "2", "--run-dir", str(run), "--planner", str(planner_dir), "--no-progress"]
+    )
+    assert code == 0
+    assert (run / "tm_obstacles.pt").is_file() and (run / "config.json").is_file()
+    assert len(list((run / "problems").glob("*.npz"))) == 3
+    planner = Planner.load(planner_dir)
+    assert planner.obstacle_tm is not None and planner.obstacle_tm.config.candidates == 2
+    # The same run directory is refused without --resume or --overwrite.
+    assert main([*args, "--run-dir", str(run), "--no-progress"]) == 2
