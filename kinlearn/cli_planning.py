@@ -246,17 +246,8 @@ def _floats(text: str) -> list[float]:
 _NEGATIVE_VALUES = re.compile(r"^-\.?\d[\d.,eE+\- ]*$")
 
 
-@register_subcommand
-def _add_plan(sub) -> None:
-    p = add_command(
-        sub,
-        "plan",
-        "Plan from a start to a goal and print how it went. Exit status 0 when every plan reaches its "
-        "goal, 1 when one misses it (the table says by how much), 2 for bad input.",
-        _run_plan,
-        seed=False,
-        run_dir=False,
-    )
+def add_plan_inputs(p: argparse.ArgumentParser) -> None:
+    """The options that say what to plan (start, goal, planner, obstacles), shared by ``plan`` and ``view``."""
     p._negative_number_matcher = _NEGATIVE_VALUES
     p.add_argument(
         "--start",
@@ -286,6 +277,38 @@ def _add_plan(sub) -> None:
         help="with --obstacles: gradient steps refining the least colliding proposal when none is free "
         "(bounded time; default 0)",
     )
+
+
+def plan_from_args(args: argparse.Namespace, strict: bool = False):
+    """``(planner, plan, scene or None)`` for the options of :func:`add_plan_inputs`."""
+    planner = Planner.load(args.model, robot=args.robot) if args.model else Planner.default(args.robot)
+    start = torch.tensor(args.start, dtype=torch.float64)
+    obstacles = None
+    if args.obstacles is not None:
+        from .collision.scene import Scene
+
+        obstacles = Scene.load(args.obstacles)
+    options = {"obstacles": obstacles, "refine_steps": args.refine_steps, "strict": strict}
+    if args.goal_position is not None:
+        goal = torch.tensor(args.goal_position, dtype=torch.float64)
+        plan = planner.plan(start, goal_position=goal, **options)
+    else:
+        plan = planner.plan(start, torch.tensor(args.goal, dtype=torch.float64), **options)
+    return planner, plan, obstacles
+
+
+@register_subcommand
+def _add_plan(sub) -> None:
+    p = add_command(
+        sub,
+        "plan",
+        "Plan from a start to a goal and print how it went. Exit status 0 when every plan reaches its "
+        "goal, 1 when one misses it (the table says by how much), 2 for bad input.",
+        _run_plan,
+        seed=False,
+        run_dir=False,
+    )
+    add_plan_inputs(p)
     p.add_argument("--strict", action="store_true", help="refuse a start or goal outside the training domain")
     p.add_argument("--joints", action="store_true", help="also print the joint path")
     p.add_argument(
@@ -304,29 +327,7 @@ def _add_plan(sub) -> None:
 
 
 def _run_plan(args: argparse.Namespace) -> int:
-    planner = Planner.load(args.model, robot=args.robot) if args.model else Planner.default(args.robot)
-    start = torch.tensor(args.start, dtype=torch.float64)
-    obstacles = None
-    if args.obstacles is not None:
-        from .collision.scene import Scene
-
-        obstacles = Scene.load(args.obstacles)
-    if args.goal_position is not None:
-        plan = planner.plan(
-            start,
-            goal_position=torch.tensor(args.goal_position, dtype=torch.float64),
-            obstacles=obstacles,
-            refine_steps=args.refine_steps,
-            strict=args.strict,
-        )
-    else:
-        plan = planner.plan(
-            start,
-            torch.tensor(args.goal, dtype=torch.float64),
-            obstacles=obstacles,
-            refine_steps=args.refine_steps,
-            strict=args.strict,
-        )
+    planner, plan, _ = plan_from_args(args, strict=args.strict)
     print(plan.summary())
     if args.joints:
         print("\njoint path (rad), one configuration per line:")

@@ -14,12 +14,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import torch
-
 from .cli import add_command, number_type
-from .cli_planning import _NEGATIVE_VALUES, _floats
+from .cli_planning import add_plan_inputs, plan_from_args
 from .errors import ConfigError
-from .planner import Planner
 
 __all__ = ["register"]
 
@@ -39,21 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
         seed=False,
         run_dir=False,
     )
-    p._negative_number_matcher = _NEGATIVE_VALUES
-    p.add_argument(
-        "--start",
-        type=_floats,
-        required=True,
-        help="start joints (rad) or a full state [θ, ef], comma-separated",
-    )
-    goal = p.add_mutually_exclusive_group(required=True)
-    goal.add_argument("--goal", type=_floats, help="goal joints (rad) or a full state, comma-separated")
-    goal.add_argument(
-        "--goal-position",
-        type=_floats,
-        help="goal end-effector position x,y,z (m, base frame), any configuration",
-    )
-    p.add_argument("--model", type=Path, default=None, help="a planner folder (default: the shipped planner)")
+    add_plan_inputs(p)
     p.add_argument(
         "--gif",
         type=Path,
@@ -76,16 +59,23 @@ def register(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def _run_view(args: argparse.Namespace) -> int:
     if args.gif is not None and args.gif.suffix.lower() != ".gif":
         raise ConfigError(f"--gif must name a .gif file, got {args.gif}")
-    planner = Planner.load(args.model, robot=args.robot) if args.model else Planner.default(args.robot)
-    start = torch.tensor(args.start, dtype=torch.float64)
-    if args.goal_position is not None:
-        plan = planner.plan(start, goal_position=torch.tensor(args.goal_position, dtype=torch.float64))
-    else:
-        plan = planner.plan(start, torch.tensor(args.goal, dtype=torch.float64))
+    planner, plan, scene = plan_from_args(args)
     print(plan.summary())
     if args.gif is not None:
-        path = plan.animate(args.gif, planner.robot, fps=args.fps)
+        path = plan.animate(args.gif, planner.robot, fps=args.fps, **_obstacles(scene))
         print(f"animation: {plan.joints.shape[0]} frames → {path}")
     else:
-        plan.show(planner.robot, host="127.0.0.1", port=args.port, fps=args.fps, block=True)
+        plan.show(
+            planner.robot, host="127.0.0.1", port=args.port, fps=args.fps, block=True, **_obstacles(scene)
+        )
     return 0 if bool(plan.success) else 1
+
+
+def _obstacles(scene) -> dict:
+    """A scene as the ``spheres=``/``boxes=`` of :meth:`Plan.show` and :meth:`Plan.animate`."""
+    if scene is None:
+        return {}
+    from .collision.fast import NumpyScene
+
+    unpadded = NumpyScene.from_scene(scene)
+    return {"spheres": unpadded.spheres, "boxes": unpadded.boxes}
