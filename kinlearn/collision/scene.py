@@ -212,6 +212,8 @@ class Scene:
 
     def to(self, dtype: torch.dtype | None = None, device=None) -> Scene:
         """The same scene with float tensors in ``dtype`` and everything on ``device``."""
+        if (dtype is None or dtype == self.dtype) and (device is None or torch.device(device) == self.device):
+            return self  # immutable: nothing to convert
 
         def cast(t, is_float=True):
             if t is None:
