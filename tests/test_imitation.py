@@ -69,9 +69,9 @@ def test_planner_plans_with_the_imitation_tm(pairs, trained):
     planner = Planner(robot, tm, AnalyticFM(robot), AnalyticIM(robot))
     plan = planner.plan(pairs.start[:5], pairs.goal[:5])
     assert plan.waypoints.shape == (5, 10, 3) and plan.joints.shape == (5, 12, 7)
-    with torch.no_grad():
-        assert torch.allclose(plan.waypoints, tm(pairs.start[:5], pairs.goal[:5]))
-    assert torch.isfinite(plan.ef).all()
+    # Through the exact FM/IM the rollout follows the imitated TM's waypoints.
+    tracking = (plan.ef[:, 1:-1] - plan.waypoints).norm(dim=-1)
+    assert float(tracking.median()) < 1e-3  # the executed path goes through the TM's waypoints
     assert torch.equal(plan.joints[:, 0], pairs.start[:5, :7])
 
 
