@@ -136,6 +136,7 @@ def test_save_load_subsets_and_bad_files(tmp_path, body):
 
 
 @pytest.mark.skipif(not HELDOUT.is_file(), reason="the held-out set has not been generated")
+@pytest.mark.slow
 def test_committed_heldout_set(body):
     problems = ProblemSet.load(HELDOUT, robot="iiwa14")
     assert HELDOUT.stat().st_size < 2e6

@@ -17,6 +17,7 @@ def smoke(tmp_path_factory):
     return out, reproduce(cfg, out, progress=False)
 
 
+@pytest.mark.slow
 def test_reproduce_smoke_writes_tables_and_figures(smoke):
     out, res = smoke
     assert (out / "results.md").is_file() and (out / "results.json").is_file()
@@ -48,6 +49,7 @@ def test_reproduce_config_errors():
         _run_jobs([], 1, "slurm")
 
 
+@pytest.mark.slow
 def test_ray_backend_runs_or_says_what_is_missing(smoke):
     out, _ = smoke
     job = {

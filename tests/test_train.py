@@ -386,6 +386,7 @@ def _wait_for_write(run, alive, deadline, after_epoch=0):
     return False
 
 
+@pytest.mark.slow
 def test_kill_9_during_checkpoint_writes_then_resume_is_bit_identical(tmp_path):
     """Training is killed with SIGKILL (no clean-up can run) while it writes a checkpoint, three times,
     each time resumed with --resume; the final weights equal an uninterrupted run's bit for bit and
