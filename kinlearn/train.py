@@ -61,6 +61,7 @@ __all__ = [
     "TrainConfig",
     "TrainResult",
     "fit",
+    "fit_iterations",
     "format_validation_table",
     "make_optimizer",
     "seed_everything",
@@ -387,6 +388,103 @@ def fit(
             logger.close()
     model.eval()
     return history
+
+
+def fit_iterations(
+    model: nn.Module,
+    step: Callable[[int], tuple[torch.Tensor, dict[str, float]]],
+    save: Callable[[Path, dict], object],
+    *,
+    run_dir: str | Path,
+    checkpoint: str,
+    kind: str,
+    robot: str,
+    train_config: dict,
+    iterations: int,
+    lr: float,
+    checkpoint_every: int,
+    generator: torch.Generator,
+    resume: bool = True,
+    progress: bool = True,
+    desc: str = "train",
+    postfix: Sequence[str] = ("loss",),
+) -> nn.Module:
+    """The resumable loop of the self-supervised trainers, which draw fresh problems every iteration.
+
+    ``step(iteration)`` draws its batch with ``generator``, returns the loss (a tensor to minimise) and
+    the terms to log (floats). Adam with cosine decay to zero over ``iterations``. Every
+    ``checkpoint_every`` iterations and at the end, the mean of each term since the last record goes to
+    ``run_dir/metrics.jsonl`` and ``save(path, extra)`` writes ``run_dir/checkpoint`` atomically with
+    ``extra`` = the iteration, ``train_config``, the optimiser's, schedule's and generator's states.
+    ``resume``: continue from that checkpoint (``kind``, ``robot``), which must record the same
+    ``train_config`` (:class:`~kinlearn.CheckpointError` otherwise); the resumed run ends with the same
+    weights as an uninterrupted one. A non-finite or huge loss raises
+    :class:`~kinlearn.errors.TrainingDivergedError`.
+    """
+    run_dir = Path(run_dir)
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, iterations) / iterations))
+    )
+    path = run_dir / checkpoint
+    start = 0
+    if resume and path.exists():
+        payload = load_checkpoint(path, kind=kind, robot=robot)
+        if payload["extra"].get("train_config") != train_config:
+            raise CheckpointError(f"{path} was trained with another configuration; use a new run directory")
+        model.load_state_dict(payload["state_dict"])
+        extra = payload["extra"]
+        opt.load_state_dict(extra["optimizer"])
+        sched.load_state_dict(extra["scheduler"])
+        generator.set_state(extra["generator"])
+        start = extra["iteration"]
+    run_dir.mkdir(parents=True, exist_ok=True)
+
+    def write(iteration: int) -> None:
+        save(
+            path,
+            {
+                "iteration": iteration,
+                "train_config": train_config,
+                "optimizer": opt.state_dict(),
+                "scheduler": sched.state_dict(),
+                "generator": generator.get_state(),
+            },
+        )
+
+    t0 = time.perf_counter()
+    with RunLogger(run_dir) as logger:
+        bar = tqdm(range(start, iterations), desc=desc, disable=not progress, initial=start, total=iterations)
+        sums: dict[str, float] = {}
+        for it in bar:
+            model.train()
+            loss, terms = step(it)
+            value = float(loss.detach())
+            if not math.isfinite(value) or value > 1e6:
+                raise TrainingDivergedError(
+                    f"{desc}: diverged at iteration {it + 1} (loss {value:.3g}); lower the learning rate"
+                )
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+            for k, v in {"loss": value, **terms}.items():
+                sums[k] = sums.get(k, 0.0) + float(v)
+            done = it + 1
+            if done % checkpoint_every == 0 or done == iterations:
+                n = done - (done - 1) // checkpoint_every * checkpoint_every
+                record = {
+                    "iteration": done,
+                    "lr": sched.get_last_lr()[0],
+                    "seconds": time.perf_counter() - t0,
+                }
+                record.update({f"train/{k}": v / max(n, 1) for k, v in sums.items()})
+                logger.log(record)
+                bar.set_postfix({k: f"{record[f'train/{k}']:.3g}" for k in postfix if f"train/{k}" in record})
+                sums = {}
+                write(done)
+    model.eval()
+    return model
 
 
 def _check_divergence(loss: float, loss_ref: float | None, epoch: int, what: str = "training") -> None:

@@ -26,18 +26,16 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
 import torch
-from tqdm.auto import tqdm
 
 from .collision.body import BodySpheres, body_spheres
 from .collision.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
-from .errors import CheckpointError, ConfigError, TrainingDivergedError
-from .io import load_checkpoint, write_json
+from .errors import ConfigError
+from .io import write_json
 from .kinematics import kinematics
 from .obstacle_model import (
     ObstaclePathConfig,
@@ -47,7 +45,7 @@ from .obstacle_model import (
     scene_primitives,
 )
 from .robot import Robot, load_robot
-from .train import RunLogger, seed_everything
+from .train import fit_iterations, seed_everything
 
 __all__ = [
     "TRAINING_SEEDS",
@@ -283,7 +281,7 @@ def _load_pool(paths, robot: Robot) -> ProblemSet:
     return sets[0] if len(sets) == 1 else ProblemSet.concat(sets)
 
 
-def _batch(pool, rows_all, mask_all, floor_all, ef_all, idx, swap):
+def _batch(pool, ef_all, idx, swap):
     """Problems ``idx`` of the pool as float32 states and scene, start and goal swapped where ``swap``."""
     q0, q1 = pool.start[idx], pool.goal[idx]
     e0, e1 = ef_all[0][idx], ef_all[1][idx]
@@ -330,87 +328,40 @@ def train_obstacle_model(
             mask_all.repeat(2, 1),
             floor_all.repeat(2, 1),
         )
-    opt = torch.optim.Adam(tm.parameters(), lr=config.lr)
-    total = config.iterations
-    sched = torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, total) / total))
-    )
-    ckpt = run_dir / "tm_obstacles.pt"
-    cfg_dict = copy.deepcopy(config.to_dict())
-    start = 0
-    if resume and ckpt.exists():
-        payload = load_checkpoint(ckpt, kind=ObstaclePathModel.kind, robot=robot.name)
-        if payload["extra"].get("train_config") != cfg_dict:
-            raise CheckpointError(f"{ckpt} was trained with another configuration; use a new run directory")
-        tm.load_state_dict(payload["state_dict"])
-        extra = payload["extra"]
-        opt.load_state_dict(extra["optimizer"])
-        sched.load_state_dict(extra["scheduler"])
-        gen.set_state(extra["generator"])
-        start = extra["iteration"]
     run_dir.mkdir(parents=True, exist_ok=True)
-    if write_config:
+    cfg_dict = copy.deepcopy(config.to_dict())
+    if write_config and not (resume and (run_dir / "tm_obstacles.pt").exists()):
         write_json(run_dir / "config.json", cfg_dict)
 
-    def save(iteration: int) -> None:
-        save_obstacle_model(
-            tm,
-            ckpt,
-            extra={
-                "iteration": iteration,
-                "train_config": cfg_dict,
-                "optimizer": opt.state_dict(),
-                "scheduler": sched.state_dict(),
-                "generator": gen.get_state(),
-            },
-        )
+    def step(it: int):
+        idx = torch.randint(n_pool, (config.batch_size,), generator=gen)
+        swap = torch.rand(config.batch_size, generator=gen) < 0.5
+        s0, sT, scene = _batch(pool, ef_all, idx, swap)
+        # Stratified: each segment is looked at once per stretch of 1/points, at a random place in it.
+        fractions = (torch.arange(config.points) + torch.rand(config.points, generator=gen)) / config.points
+        per, terms = candidate_losses(tm, body, s0, sT, scene, config.loss, fractions)
+        best = per.min(dim=1)
+        loss = best.values.mean() + config.loss.spread * per.mean()
+        rows = torch.arange(per.shape[0])
+        logged = {f"best_{k}": float(v.detach()[rows, best.indices].mean()) for k, v in terms.items()}
+        logged["best_free"] = float((terms["collision"].detach()[rows, best.indices] == 0).float().mean())
+        return loss, logged
 
-    t0 = time.perf_counter()
-    with RunLogger(run_dir) as logger:
-        bar = tqdm(
-            range(start, total), desc="train obstacle TM", disable=not progress, initial=start, total=total
-        )
-        sums: dict[str, float] = {}
-        for it in bar:
-            tm.train()
-            idx = torch.randint(n_pool, (config.batch_size,), generator=gen)
-            swap = torch.rand(config.batch_size, generator=gen) < 0.5
-            s0, sT, scene = _batch(pool, rows_all, mask_all, floor_all, ef_all, idx, swap)
-            # Stratified: each segment is looked at once per stretch of 1/points, at a random place in it.
-            fractions = (
-                torch.arange(config.points) + torch.rand(config.points, generator=gen)
-            ) / config.points
-            per, terms = candidate_losses(tm, body, s0, sT, scene, config.loss, fractions)
-            best = per.min(dim=1)
-            loss = best.values.mean() + config.loss.spread * per.mean()
-            if not torch.isfinite(loss) or float(loss.detach()) > 1e6:
-                raise TrainingDivergedError(
-                    f"obstacle TM training diverged at iteration {it + 1} (loss {float(loss):.3g}); "
-                    "lower the learning rate"
-                )
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            sched.step()
-            arange = torch.arange(per.shape[0])
-            record_now = {"loss": float(loss.detach())}
-            for k, v in terms.items():
-                record_now[f"best_{k}"] = float(v.detach()[arange, best.indices].mean())
-            record_now["best_free"] = float((terms["collision"][arange, best.indices] == 0).float().mean())
-            for k, v in record_now.items():
-                sums[k] = sums.get(k, 0.0) + v
-            done = it + 1
-            if done % config.checkpoint_every == 0 or done == total:
-                n = done - (done - 1) // config.checkpoint_every * config.checkpoint_every
-                record = {
-                    "iteration": done,
-                    "lr": sched.get_last_lr()[0],
-                    "seconds": time.perf_counter() - t0,
-                }
-                record.update({f"train/{k}": v / max(n, 1) for k, v in sums.items()})
-                logger.log(record)
-                bar.set_postfix(loss=f"{record['train/loss']:.3g}", free=f"{record['train/best_free']:.2f}")
-                sums = {}
-                save(done)
-    tm.eval()
-    return tm
+    return fit_iterations(
+        tm,
+        step,
+        lambda path, extra: save_obstacle_model(tm, path, extra=extra),
+        run_dir=run_dir,
+        checkpoint="tm_obstacles.pt",
+        kind=ObstaclePathModel.kind,
+        robot=robot.name,
+        train_config=cfg_dict,
+        iterations=config.iterations,
+        lr=config.lr,
+        checkpoint_every=config.checkpoint_every,
+        generator=gen,
+        resume=resume,
+        progress=progress,
+        desc="train obstacle TM",
+        postfix=("loss", "best_free"),
+    )

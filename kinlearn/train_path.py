@@ -29,22 +29,20 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
 import torch
-from tqdm.auto import tqdm
 
 from .endpoints import workspace_box
-from .errors import CheckpointError, ConfigError, TrainingDivergedError
-from .io import load_checkpoint, write_json
+from .errors import ConfigError
+from .io import write_json
 from .kinematics import kinematics
 from .models import AnalyticFM, ForwardModel, load_fm
 from .path_model import JointPathConfig, JointPathModel, densify, save_path_model
 from .robot import Robot, load_robot
-from .train import RunLogger, seed_everything
+from .train import fit_iterations, seed_everything
 
 __all__ = ["PathLossConfig", "PathTrainConfig", "build_fm", "path_loss", "train_path_model"]
 
@@ -245,77 +243,31 @@ def train_path_model(
     for k in (0, S):  # the joints of start and goal; the end effector follows from them
         box_lo[k : k + robot.dof], box_hi[k : k + robot.dof] = lo, hi
     tm.fit_normalization(s0, sT, domain=(box_lo, box_hi))
-    opt = torch.optim.Adam(tm.parameters(), lr=config.lr)
-    total = config.iterations
-    sched = torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, total) / total))
-    )
-    ckpt = run_dir / "tm.pt"
-    cfg_dict = copy.deepcopy(config.to_dict())
-    start = 0
-    if resume and ckpt.exists():
-        payload = load_checkpoint(ckpt, kind=JointPathModel.kind, robot=robot.name)
-        if payload["extra"].get("train_config") != cfg_dict:
-            raise CheckpointError(f"{ckpt} was trained with another configuration; use a new run directory")
-        tm.load_state_dict(payload["state_dict"])
-        extra = payload["extra"]
-        opt.load_state_dict(extra["optimizer"])
-        sched.load_state_dict(extra["scheduler"])
-        gen.set_state(extra["generator"])
-        start = extra["iteration"]
     run_dir.mkdir(parents=True, exist_ok=True)
-    if write_config:
+    cfg_dict = copy.deepcopy(config.to_dict())
+    if write_config and not (resume and (run_dir / "tm.pt").exists()):
         write_json(run_dir / "config.json", cfg_dict)
 
-    def save(iteration: int) -> None:
-        save_path_model(
-            tm,
-            ckpt,
-            depends=depends,
-            extra={
-                "iteration": iteration,
-                "train_config": cfg_dict,
-                "optimizer": opt.state_dict(),
-                "scheduler": sched.state_dict(),
-                "generator": gen.get_state(),
-            },
-        )
+    def step(it: int):
+        s0, sT = _sample_problems(robot, lo, hi, config.batch_size, gen, kin)
+        loss, terms = path_loss(tm, fm, s0, sT, config.loss, config.max_step)
+        return loss, {k: float(v) for k, v in terms.items()}
 
-    t0 = time.perf_counter()
-    with RunLogger(run_dir) as logger:
-        bar = tqdm(
-            range(start, total), desc="train joint-path TM", disable=not progress, initial=start, total=total
-        )
-        sums: dict[str, float] = {}
-        for it in bar:
-            tm.train()
-            s0, sT = _sample_problems(robot, lo, hi, config.batch_size, gen, kin)
-            loss, terms = path_loss(tm, fm, s0, sT, config.loss, config.max_step)
-            if not torch.isfinite(loss) or float(loss.detach()) > 1e6:
-                raise TrainingDivergedError(
-                    f"joint-path TM training diverged at iteration {it + 1} (loss {float(loss):.3g}); "
-                    "lower the learning rate"
-                )
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            sched.step()
-            for k, v in {"loss": loss.detach(), **terms}.items():
-                sums[k] = sums.get(k, 0.0) + float(v)
-            done = it + 1
-            if done % config.checkpoint_every == 0 or done == total:
-                n = done - (done - 1) // config.checkpoint_every * config.checkpoint_every
-                record = {
-                    "iteration": done,
-                    "lr": sched.get_last_lr()[0],
-                    "seconds": time.perf_counter() - t0,
-                }
-                record.update({f"train/{k}": v / max(n, 1) for k, v in sums.items()})
-                logger.log(record)
-                bar.set_postfix(
-                    loss=f"{record['train/loss']:.3g}", ratio=f"{record['train/length_ratio']:.3f}"
-                )
-                sums = {}
-                save(done)
-    tm.eval()
-    return tm
+    return fit_iterations(
+        tm,
+        step,
+        lambda path, extra: save_path_model(tm, path, depends=depends, extra=extra),
+        run_dir=run_dir,
+        checkpoint="tm.pt",
+        kind=JointPathModel.kind,
+        robot=robot.name,
+        train_config=cfg_dict,
+        iterations=config.iterations,
+        lr=config.lr,
+        checkpoint_every=config.checkpoint_every,
+        generator=gen,
+        resume=resume,
+        progress=progress,
+        desc="train joint-path TM",
+        postfix=("loss", "length_ratio"),
+    )
