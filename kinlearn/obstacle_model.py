@@ -18,7 +18,6 @@ Trained self-supervised (:mod:`kinlearn.train_obstacles`): no planner shows it a
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +29,7 @@ from torch import nn
 from .collision.scene import Scene
 from .errors import CheckpointError, ConfigError
 from .io import load_checkpoint, save_checkpoint
+from .path_model import RobotModelConfig
 from .state import StateLayout
 
 __all__ = [
@@ -48,7 +48,7 @@ PRIMITIVE_FEATURES = 13
 
 
 @dataclass(frozen=True)
-class ObstaclePathConfig:
+class ObstaclePathConfig(RobotModelConfig):
     """Architecture of the obstacle-aware TM.
 
     ``steps``: T (T − 1 intermediate knots). ``modes``: sine modes per joint and candidate.
@@ -81,31 +81,7 @@ class ObstaclePathConfig:
                 raise ConfigError(f"{name} must be a non-empty tuple of positive widths, got {widths!r}")
         if self.activation not in ("tanh", "silu"):
             raise ConfigError(f"activation must be 'tanh' or 'silu', got {self.activation!r}")
-        if len(self.lower) != self.dof or len(self.upper) != self.dof:
-            raise ConfigError(f"lower and upper must hold the {self.dof} joint limits (use for_robot)")
-        if any(lo >= hi for lo, hi in zip(self.lower, self.upper, strict=True)):
-            raise ConfigError("every lower joint limit must be below its upper limit")
-
-    @classmethod
-    def for_robot(cls, robot, **fields) -> ObstaclePathConfig:
-        return cls(
-            robot=robot.name,
-            dof=robot.dof,
-            lower=tuple(float(v) for v in robot.lower),
-            upper=tuple(float(v) for v in robot.upper),
-            **fields,
-        )
-
-    def to_dict(self) -> dict:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> ObstaclePathConfig:
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(d) - names
-        if unknown:
-            raise ConfigError(f"unknown ObstaclePathConfig field(s): {', '.join(sorted(unknown))}")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+        self._check_limits()
 
 
 def scene_primitives(

@@ -32,11 +32,55 @@ from .errors import CheckpointError, ConfigError
 from .io import load_checkpoint, resolve_dependency, save_checkpoint
 from .state import StateLayout
 
-__all__ = ["JointPathConfig", "JointPathModel", "PathOutput", "densify", "load_path_model", "save_path_model"]
+__all__ = [
+    "JointPathConfig",
+    "JointPathModel",
+    "PathOutput",
+    "RobotModelConfig",
+    "densify",
+    "load_path_model",
+    "save_path_model",
+]
+
+
+class RobotModelConfig:
+    """What the model configs that carry a robot's joint limits share (fields ``robot``, ``dof``,
+    ``lower``, ``upper``): building one for a robot, the limits' check, and a JSON-able dict."""
+
+    def _check_limits(self) -> None:
+        if len(self.lower) != self.dof or len(self.upper) != self.dof:
+            raise ConfigError(
+                f"lower and upper must hold the {self.dof} joint limits (use {type(self).__name__}.for_robot)"
+            )
+        if any(lo >= hi for lo, hi in zip(self.lower, self.upper, strict=True)):
+            raise ConfigError("every lower joint limit must be below its upper limit")
+
+    @classmethod
+    def for_robot(cls, robot, **fields):
+        """A config for a :class:`~kinlearn.robot.Robot`, its joint limits filled in (lists become tuples)."""
+        fields = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
+        return cls(
+            robot=robot.name,
+            dof=robot.dof,
+            lower=tuple(float(v) for v in robot.lower),
+            upper=tuple(float(v) for v in robot.upper),
+            **fields,
+        )
+
+    def to_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: dict):
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise ConfigError(f"unknown {cls.__name__} field(s): {', '.join(sorted(unknown))}")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
 @dataclass(frozen=True)
-class JointPathConfig:
+class JointPathConfig(RobotModelConfig):
     """Architecture of the joint-path TM.
 
     ``steps`` is T: T − 1 intermediate waypoints (the paper's T = 11). ``hidden``: widths of the MLP's
@@ -67,34 +111,7 @@ class JointPathConfig:
             raise ConfigError(f"modes must be an integer ≥ 0, got {self.modes!r}")
         if self.activation not in ("tanh", "silu"):
             raise ConfigError(f"activation must be 'tanh' or 'silu', got {self.activation!r}")
-        if len(self.lower) != self.dof or len(self.upper) != self.dof:
-            raise ConfigError(
-                f"lower and upper must hold the {self.dof} joint limits (use JointPathConfig.for_robot)"
-            )
-        if any(lo >= hi for lo, hi in zip(self.lower, self.upper, strict=True)):
-            raise ConfigError("every lower joint limit must be below its upper limit")
-
-    @classmethod
-    def for_robot(cls, robot, **fields) -> JointPathConfig:
-        """A config for a :class:`~kinlearn.robot.Robot`, its joint limits filled in."""
-        return cls(
-            robot=robot.name,
-            dof=robot.dof,
-            lower=tuple(float(v) for v in robot.lower),
-            upper=tuple(float(v) for v in robot.upper),
-            **fields,
-        )
-
-    def to_dict(self) -> dict:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> JointPathConfig:
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(d) - names
-        if unknown:
-            raise ConfigError(f"unknown JointPathConfig field(s): {', '.join(sorted(unknown))}")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+        self._check_limits()
 
 
 @dataclass(frozen=True)
