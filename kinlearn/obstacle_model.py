@@ -18,7 +18,6 @@ Trained self-supervised (:mod:`kinlearn.train_obstacles`): no planner shows it a
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -29,7 +28,7 @@ from torch import nn
 from .collision.scene import Scene
 from .errors import CheckpointError, ConfigError
 from .io import load_checkpoint, save_checkpoint
-from .path_model import RobotModelConfig
+from .path_model import RobotModelConfig, mlp_layers, register_path_buffers
 from .state import StateLayout
 
 __all__ = [
@@ -117,13 +116,6 @@ def scene_primitives(
     return rows, mask, floor
 
 
-def _mlp(sizes, act) -> list[nn.Module]:
-    layers: list[nn.Module] = []
-    for a, b in itertools.pairwise(sizes):
-        layers += [nn.Linear(a, b), act()]
-    return layers
-
-
 class ObstaclePathModel(nn.Module):
     """``forward(s0 (N, S), sT (N, S), rows, mask, floor) -> joints (N, C, T − 1, dof)``: the
     candidates' intermediate knots (not clamped). See the module docstring."""
@@ -134,9 +126,8 @@ class ObstaclePathModel(nn.Module):
         super().__init__()
         self.config = config
         self.layout = StateLayout(config.dof)
-        dof, S = config.dof, self.layout.size
-        act = {"tanh": nn.Tanh, "silu": nn.SiLU}[config.activation]
-        self.encoder = nn.Sequential(*_mlp((PRIMITIVE_FEATURES, *config.encoder), act))
+        dof = config.dof
+        self.encoder = nn.Sequential(*mlp_layers((PRIMITIVE_FEATURES, *config.encoder), config.activation))
         n_in = self.n_problem_features + config.encoder[-1]
         out = nn.Linear(config.hidden[-1], config.candidates * config.modes * dof)
         gen = torch.Generator().manual_seed(0)
@@ -146,21 +137,14 @@ class ObstaclePathModel(nn.Module):
             out.weight.mul_(0.01)
             out.bias.copy_(0.15 * torch.randn(out.bias.shape, generator=gen))
             out.bias.view(config.candidates, config.modes, dof)[0].zero_()
-        self.trunk = nn.Sequential(*_mlp((n_in, *config.hidden), act), out)
-        lower = torch.tensor(config.lower, dtype=torch.float64)
-        upper = torch.tensor(config.upper, dtype=torch.float64)
-        self.register_buffer("lower", lower.float())
-        self.register_buffer("upper", upper.float())
-        self.register_buffer("half_range", ((upper - lower) / 2).float())
-        self.register_buffer("fractions", torch.arange(1, config.steps, dtype=torch.float32) / config.steps)
-        t = torch.arange(1, config.steps, dtype=torch.float64) / config.steps
-        k = torch.arange(1, config.modes + 1, dtype=torch.float64)
-        self.register_buffer("basis", torch.sin(torch.pi * t[:, None] * k).float(), persistent=False)
+        # The trunk's hidden layers are made after its output layer (the order the shipped model was
+        # initialised in).
+        self.trunk = nn.Sequential(*mlp_layers((n_in, *config.hidden), config.activation), out)
+        register_path_buffers(self, config)
         self.register_buffer("in_mean", torch.zeros(self.n_problem_features))
         self.register_buffer("in_std", torch.ones(self.n_problem_features))
         self.register_buffer("prim_mean", torch.zeros(PRIMITIVE_FEATURES))
         self.register_buffer("prim_std", torch.ones(PRIMITIVE_FEATURES))
-        del S
 
     @property
     def robot_name(self) -> str:

@@ -20,6 +20,7 @@ obstacles) join by extending :meth:`JointPathModel.features`.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -123,6 +124,30 @@ class PathOutput:
     ef: torch.Tensor
 
 
+def mlp_layers(sizes, activation: str) -> list[nn.Module]:
+    """Linear layers between consecutive ``sizes``, each followed by the activation (``"tanh"``/``"silu"``)."""
+    act = {"tanh": nn.Tanh, "silu": nn.SiLU}[activation]
+    layers: list[nn.Module] = []
+    for a, b in itertools.pairwise(sizes):
+        layers += [nn.Linear(a, b), act()]
+    return layers
+
+
+def register_path_buffers(module: nn.Module, config) -> None:
+    """The buffers of a TM whose joint paths bend the straight joint line with sine modes: ``lower``,
+    ``upper`` and ``half_range`` of the joint limits, ``fractions`` t/T of the intermediate knots and
+    (not saved: derived from the config) ``basis`` ``(T − 1, modes)``, sin(jπt/T) at each knot."""
+    lower = torch.tensor(config.lower, dtype=torch.float64)
+    upper = torch.tensor(config.upper, dtype=torch.float64)
+    module.register_buffer("lower", lower.float())
+    module.register_buffer("upper", upper.float())
+    module.register_buffer("half_range", ((upper - lower) / 2).float())
+    module.register_buffer("fractions", torch.arange(1, config.steps, dtype=torch.float32) / config.steps)
+    t = torch.arange(1, config.steps, dtype=torch.float64) / config.steps
+    k = torch.arange(1, config.modes + 1, dtype=torch.float64)
+    module.register_buffer("basis", torch.sin(torch.pi * t[:, None] * k).float(), persistent=False)
+
+
 class JointPathModel(nn.Module):
     """``forward(s0 (N, S), sT (N, S)) -> PathOutput``; see the module docstring."""
 
@@ -135,26 +160,14 @@ class JointPathModel(nn.Module):
         self.layout = StateLayout(config.dof)
         dof, S, W = config.dof, self.layout.size, config.steps - 1
         n_in = self.n_features
-        act = {"tanh": nn.Tanh, "silu": nn.SiLU}[config.activation]
-        layers: list[nn.Module] = []
-        for a, b in zip((n_in, *config.hidden[:-1]), config.hidden, strict=True):
-            layers += [nn.Linear(a, b), act()]
+        layers = mlp_layers((n_in, *config.hidden), config.activation)
         n_joint_out = config.modes * dof if config.modes else W * dof
         out = nn.Linear(config.hidden[-1], n_joint_out + W * 3)
         with torch.no_grad():  # start as the straight joint line: small corrections only
             out.weight.mul_(0.01)
             out.bias.zero_()
         self.net = nn.Sequential(*layers, out)
-        lower = torch.tensor(config.lower, dtype=torch.float64)
-        upper = torch.tensor(config.upper, dtype=torch.float64)
-        self.register_buffer("lower", lower.float())
-        self.register_buffer("upper", upper.float())
-        self.register_buffer("half_range", ((upper - lower) / 2).float())
-        self.register_buffer("fractions", torch.arange(1, config.steps, dtype=torch.float32) / config.steps)
-        t = torch.arange(1, config.steps, dtype=torch.float64) / config.steps
-        k = torch.arange(1, config.modes + 1, dtype=torch.float64)
-        #: (T − 1, modes): sin(jπt/T) at each waypoint, the smooth joint correction's basis.
-        self.register_buffer("basis", torch.sin(torch.pi * t[:, None] * k).float(), persistent=False)
+        register_path_buffers(self, config)
         self.register_buffer("in_mean", torch.zeros(n_in))
         self.register_buffer("in_std", torch.ones(n_in))
         #: Box of the training problems' features [s(0), s(T)] (the domain the planner warns outside of).

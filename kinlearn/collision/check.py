@@ -150,7 +150,7 @@ def check_path(
         where = torch.zeros(n_paths, dtype=joints.dtype, device=dev)
 
     batched = len(scene.batch_shape) > 0
-    flat_scene = _flatten_scene(scene.expand(*batch), n_paths) if batched else scene
+    flat_scene = scene.expand(*batch).reshape(n_paths) if batched else scene
     d = torch.empty(q.shape[0], dtype=joints.dtype, device=dev)
     s = torch.empty_like(d)
     for lo in range(0, q.shape[0], chunk):
@@ -174,19 +174,4 @@ def check_path(
         self_clearance=self_clear.reshape(batch),
         first_collision=first.reshape(batch),
         checked=checked.reshape(batch),
-    )
-
-
-def _flatten_scene(scene: Scene, n: int) -> Scene:
-    """A scene expanded to batch ``(...)`` → the same scene with batch ``(n,)``."""
-
-    def fl(t, tail):
-        return None if t is None else t.reshape(n, *t.shape[t.ndim - tail :])
-
-    return Scene._unchecked(
-        fl(scene.spheres, 2),
-        fl(scene.boxes, 2),
-        fl(scene.floor, 0),
-        fl(scene.sphere_mask, 1),
-        fl(scene.box_mask, 1),
     )

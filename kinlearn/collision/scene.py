@@ -252,16 +252,12 @@ class Scene:
         full = self.expand(*self.batch_shape)
         n = len(self.batch_shape)
 
-        def rs(t, tail: int):
+        def rs(t):
             return None if t is None else t.reshape(*batch, *t.shape[n:])
 
         try:
             return Scene._unchecked(
-                rs(full.spheres, 2),
-                rs(full.boxes, 2),
-                rs(full.floor, 0),
-                rs(full.sphere_mask, 1),
-                rs(full.box_mask, 1),
+                rs(full.spheres), rs(full.boxes), rs(full.floor), rs(full.sphere_mask), rs(full.box_mask)
             )
         except RuntimeError as exc:
             raise ObstacleError(
