@@ -23,12 +23,25 @@ def _arr(t: torch.Tensor) -> np.ndarray:
     return t.detach().cpu().double().numpy().copy()
 
 
-def _mlp_arrays(seq: torch.nn.Sequential, dtype) -> tuple[list[np.ndarray], list[np.ndarray]]:
+def _folded_mlp(seq: torch.nn.Sequential, mean, std, dtype, rows: int | None = None):
+    """The Linear layers of ``seq`` as ``(weights (in, out), biases)`` arrays of ``dtype``, with the
+    input standardisation (x − μ)/σ folded into the first layer, x · (W/σ) + (b − (μ/σ) · W), in
+    float64 before the cast. ``rows``: only the first ``rows`` inputs are standardised (the rest pass
+    as they are)."""
     linears = [m for m in seq if isinstance(m, torch.nn.Linear)]
-    return [_arr(m.weight.T).astype(dtype) for m in linears], [_arr(m.bias).astype(dtype) for m in linears]
+    weights = [_arr(m.weight.T) for m in linears]
+    biases = [_arr(m.bias) for m in linears]
+    mean, std = _arr(mean), _arr(std)
+    rows = weights[0].shape[0] if rows is None else rows
+    W = weights[0]
+    biases[0] = biases[0] - (mean / std) @ W[:rows]
+    weights[0] = np.concatenate((W[:rows] / std[:, None], W[rows:]))
+    return [w.astype(dtype) for w in weights], [b.astype(dtype) for b in biases]
 
 
-def _run_mlp(h: np.ndarray, weights, biases, silu: bool, last_active: bool) -> np.ndarray:
+def _run_mlp(h: np.ndarray, weights, biases, silu: bool, last_active: bool = False) -> np.ndarray:
+    """The MLP on ``h``: every layer but the last followed by the activation (the last too if
+    ``last_active``)."""
     last = len(weights) - 1
     for k, (W, b) in enumerate(zip(weights, biases, strict=True)):
         h = h @ W + b
@@ -80,45 +93,24 @@ class NumpyPathModel:
     def __init__(self, tm: JointPathModel, dtype=np.float32):
         """``dtype``: of the network's weights and arithmetic (float32 halves a batch-1 pass's time; the
         waypoints are then assembled in float64)."""
-
-        def arr(t: torch.Tensor) -> np.ndarray:
-            return t.detach().cpu().double().numpy().copy()
-
-        linears = [m for m in tm.net if isinstance(m, torch.nn.Linear)]
-        self.weights = [arr(m.weight.T) for m in linears]
-        self.biases = [arr(m.bias) for m in linears]
-        # Standardisation folded into the first layer: (x − μ)/σ · W + b = x · (W/σ) + (b − (μ/σ) · W).
-        mean, std = arr(tm.in_mean), arr(tm.in_std)
-        self.biases[0] = self.biases[0] - (mean / std) @ self.weights[0]
-        self.weights[0] = self.weights[0] / std[:, None]
         self.dtype = np.dtype(dtype)
-        self.weights = [w.astype(self.dtype) for w in self.weights]
-        self.biases = [b.astype(self.dtype) for b in self.biases]
+        self.weights, self.biases = _folded_mlp(tm.net, tm.in_mean, tm.in_std, self.dtype)
         self.silu = tm.config.activation == "silu"
         self.dof = tm.config.dof
-        self.half_range = arr(tm.half_range)
-        self.fractions = arr(tm.fractions)[:, None]
+        self.half_range = _arr(tm.half_range)
+        self.fractions = _arr(tm.fractions)[:, None]
         self.ef_scale = float(tm.ef_scale)
         self.W = tm.config.steps - 1
         self.modes = tm.config.modes
-        self.basis = arr(tm.basis)
+        self.basis = _arr(tm.basis)
         self.n_joint_out = self.modes * self.dof if self.modes else self.W * self.dof
-
-    def _act(self, h: np.ndarray) -> np.ndarray:
-        if self.silu:
-            return h / (1.0 + np.exp(-h))
-        return np.tanh(h)
 
     def __call__(
         self, theta0: np.ndarray, ef0: np.ndarray, thetaT: np.ndarray, efT: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """Each input ``(N, ·)`` float64 → ``(joints (N, T − 1, dof), ef (N, T − 1, 3))``."""
         h = np.concatenate((theta0, ef0, thetaT, efT, thetaT - theta0), axis=1).astype(self.dtype)
-        last = len(self.weights) - 1
-        for k, (W, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            h = h @ W + b
-            if k < last:
-                h = self._act(h)
+        h = _run_mlp(h, self.weights, self.biases, self.silu)
         h = h.astype(np.float64)
         n, nj = h.shape[0], self.n_joint_out
         r = h[:, :nj].reshape(n, -1, self.dof)
@@ -137,19 +129,11 @@ class NumpyObstacleModel:
     def __init__(self, tm: ObstaclePathModel, dtype=np.float32):
         self.dtype = np.dtype(dtype)
         self.silu = tm.config.activation == "silu"
-        self.enc_w, self.enc_b = _mlp_arrays(tm.encoder, self.dtype)
-        self.trunk_w, self.trunk_b = _mlp_arrays(tm.trunk, self.dtype)
-        # Standardisation folded into the first layers (x − μ)/σ · W + b = x · (W/σ) + (b − (μ/σ) · W).
-        pm, ps = _arr(tm.prim_mean), _arr(tm.prim_std)
-        W = self.enc_w[0].astype(np.float64)
-        self.enc_b[0] = (self.enc_b[0] - (pm / ps) @ W).astype(self.dtype)
-        self.enc_w[0] = (W / ps[:, None]).astype(self.dtype)
-        n_prob = tm.n_problem_features
-        im, istd = _arr(tm.in_mean), _arr(tm.in_std)
-        W = self.trunk_w[0].astype(np.float64)
-        Wp = W[:n_prob] / istd[:, None]
-        self.trunk_b[0] = (self.trunk_b[0] - (im / istd) @ W[:n_prob]).astype(self.dtype)
-        self.trunk_w[0] = np.concatenate((Wp, W[n_prob:])).astype(self.dtype)
+        self.enc_w, self.enc_b = _folded_mlp(tm.encoder, tm.prim_mean, tm.prim_std, self.dtype)
+        # Only the problem features are standardised; the pooled scene embedding follows them.
+        self.trunk_w, self.trunk_b = _folded_mlp(
+            tm.trunk, tm.in_mean, tm.in_std, self.dtype, rows=tm.n_problem_features
+        )
         c = tm.config
         self.C, self.modes, self.dof = c.candidates, c.modes, c.dof
         self.half_range = _arr(tm.half_range)
@@ -170,7 +154,7 @@ class NumpyObstacleModel:
         else:
             emb = np.zeros((n, self.emb))
         x = np.concatenate((theta0, ef0, thetaT, efT, thetaT - theta0, floor, emb), axis=1).astype(self.dtype)
-        y = _run_mlp(x, self.trunk_w, self.trunk_b, self.silu, last_active=False).astype(np.float64)
+        y = _run_mlp(x, self.trunk_w, self.trunk_b, self.silu).astype(np.float64)
         coef = y.reshape(n, self.C, self.modes, self.dof)
         line = theta0[:, None, None] + self.fractions * (thetaT - theta0)[:, None, None]
         return line + self.half_range * (self.basis @ coef)
