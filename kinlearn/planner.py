@@ -24,6 +24,7 @@ with ``strict=True``.
 
 from __future__ import annotations
 
+import copy
 import warnings
 from functools import lru_cache
 from pathlib import Path
@@ -168,7 +169,7 @@ class Planner:
             obstacle_tm = obstacle_tm.eval().requires_grad_(False)
         self.obstacle_tm = obstacle_tm
         self._np_obstacle_tm = NumpyObstacleModel(obstacle_tm) if obstacle_tm is not None else None
-        self._body = body
+        self._body, self._body64 = body, None
         self.refine_steps = _check_steps(refine_steps)
         self._np_body_cache = None
         self._core = self._rollout
@@ -429,11 +430,11 @@ class Planner:
 
     @property
     def body(self) -> BodySpheres:
-        """The collision spheres plans are checked with (float64)."""
-        if self._body is None:
-            self._body = body_spheres(self.robot)
-        self._body = self._body.double()
-        return self._body
+        """The collision spheres plans are checked with (float64; made once, the given body untouched)."""
+        if self._body64 is None:
+            body = body_spheres(self.robot) if self._body is None else self._body
+            self._body64 = body if body.radii.dtype == torch.float64 else copy.deepcopy(body).double()
+        return self._body64
 
     @property
     def _np_body(self) -> NumpyBody:
@@ -506,9 +507,10 @@ class Planner:
         batched = len(scene.batch_shape) > 0
         if n <= SMALL_BATCH:
             chosen, free = [], np.zeros(n, dtype=bool)
+            shared = None if batched else NumpyScene.from_scene(scene)
             for i in range(n):
                 one = scene[i] if batched else scene
-                nscene = NumpyScene.from_scene(one)
+                nscene = NumpyScene.from_scene(one) if batched else shared
                 k = first_free(self._np_body, paths[i], nscene, order[i], max_travel=CHECK_TRAVEL)
                 if k < 0:  # none is free: the shortest one, flagged (refined first, if asked)
                     best = paths[i, order[i, 0]]

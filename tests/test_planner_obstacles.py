@@ -199,3 +199,14 @@ def test_view_draws_a_plan_among_obstacles(tmp_path, problems):
     code = main([*args, "--gif", str(tmp_path / "plan.gif")])
     assert code in (0, 1)  # 1: the plan collides (it is shown all the same)
     assert (tmp_path / "plan.gif").stat().st_size > 10_000
+
+
+def test_a_given_body_is_used_and_left_as_it_is(robot, planner):
+    from kinlearn.collision import body_spheres
+
+    body = body_spheres(robot).float()
+    mine = Planner(robot, planner.tm, obstacle_tm=planner.obstacle_tm, body=body)
+    plan = mine.plan(torch.zeros(7), torch.full((7,), 0.3), obstacles=[[3.0, 3.0, 3.0, 0.1]])
+    assert bool(plan.collision_free)
+    assert body.radii.dtype == torch.float32  # the planner checks with its own float64 copy
+    assert mine.body.radii.dtype == torch.float64 and mine.body is mine.body
