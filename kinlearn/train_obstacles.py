@@ -310,9 +310,6 @@ def train_obstacle_model(
     pool = _load_pool(config.problems, robot)
     ef_all = (kin.position(pool.start), kin.position(pool.goal))
     n_pool = len(pool)
-    rows_all, mask_all, floor_all = scene_primitives(pool.scene, n_pool, torch.float64)
-    s0_all = torch.cat((pool.start, ef_all[0]), -1)
-    sT_all = torch.cat((pool.goal, ef_all[1]), -1)
     if config.init_checkpoint:
         init = load_obstacle_model(config.init_checkpoint, robot=robot.name)
         if init.config.to_dict() != tm.config.to_dict():
@@ -321,6 +318,9 @@ def train_obstacle_model(
             )
         tm.load_state_dict(init.state_dict())
     else:  # standardise with both directions, as training draws them
+        rows_all, mask_all, floor_all = scene_primitives(pool.scene, n_pool, torch.float64)
+        s0_all = torch.cat((pool.start, ef_all[0]), -1)
+        sT_all = torch.cat((pool.goal, ef_all[1]), -1)
         tm.fit_normalization(
             torch.cat((s0_all, sT_all)),
             torch.cat((sT_all, s0_all)),
