@@ -210,3 +210,18 @@ def test_a_given_body_is_used_and_left_as_it_is(robot, planner):
     assert bool(plan.collision_free)
     assert body.radii.dtype == torch.float32  # the planner checks with its own float64 copy
     assert mine.body.radii.dtype == torch.float64 and mine.body is mine.body
+
+
+def test_scene_reshape_refuses_a_shape_that_does_not_fit(problems):
+    scene = problems.scene[:6]
+    assert scene.reshape(2, 3).batch_shape == (2, 3)
+    with pytest.raises(ObstacleError):
+        scene.reshape(4)
+
+
+def test_refinement_from_a_path_of_the_wrong_shape_raises():
+    from kinlearn.obstacle_baselines import trajectory_optimiser
+
+    scene = Scene(torch.tensor([[0.5, 0.0, 0.5, 0.1]], dtype=torch.float64))
+    with pytest.raises(ShapeError):
+        trajectory_optimiser(torch.zeros(7), torch.full((7,), 0.3), scene, steps=1, init=torch.zeros(5, 6))

@@ -165,3 +165,13 @@ def test_train_obstacle_planner_command(tmp_path):
     assert planner.obstacle_tm is not None and planner.obstacle_tm.config.candidates == 2
     # The same run directory is refused without --resume or --overwrite.
     assert main([*args, "--run-dir", str(run), "--no-progress"]) == 2
+
+
+def test_train_obstacle_planner_refuses_a_planner_folder_without_a_planner(tmp_path, capsys):
+    from kinlearn.cli import main
+
+    args = ["train-obstacle-planner", "--problems-per-family", "1", "--iterations", "1"]
+    code = main([*args, "--run-dir", str(tmp_path / "run"), "--planner", str(tmp_path), "--no-progress"])
+    assert code == 2
+    assert "no tm.pt" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()  # refused before anything was written
