@@ -37,6 +37,7 @@ from .planner import Planner
 from .robot import load_robot
 from .train import train_config, train_fm, train_im, train_im_distal, validate_models
 from .train_tm import TMTrainConfig, tm_preset, train_tm
+from .train_tm_seeds import train_tm_seeds
 
 __all__ = ["OPTIMIZER_SWEEP", "REPRODUCE_PRESETS", "ReproduceConfig", "evaluate_plans", "reproduce"]
 
@@ -108,8 +109,15 @@ REPRODUCE_PRESETS: dict[str, dict] = {
         "workspace_batch_size": 256,
         "workspace_pairs": 1_000,
     },
-    # Paper sizes: 500k babbling transitions (REFERENCE #4), 12,000 + 2,000 pairs, 50 epochs, 10 seeds.
-    "full": {},
+    # Paper sizes: 500k babbling transitions (REFERENCE #4), 12,000 + 2,000 pairs, 50 TM epochs,
+    # 10 seeds. Shortened to fit an hour on 2 cores: FM/IM epochs, the batch-1 reference-parity run
+    # (1,000 of the 12,000 pairs, all 50 epochs) and the workspace TMs' iterations.
+    "full": {
+        "model_epochs": 12,
+        "distal_epochs": 4,
+        "parity_pairs": 1_000,
+        "workspace_iterations": 1_500,
+    },
 }
 
 
@@ -118,32 +126,54 @@ def evaluate_plans(plan, robot) -> dict:
     return summarize(plan_metrics(plan, robot))
 
 
-def _job(job: dict) -> dict:
-    """Train one TM and evaluate it on the held-out pairs (runs in a worker process)."""
-    torch.set_num_threads(1)
-    run_dir = Path(job["run_dir"])
-    cfg = TMTrainConfig.from_dict(job["config"])
-    train = load_endpoints(job["train"], robot=cfg.robot)
-    if job.get("limit"):
-        train = train.split(job["limit"])[0]
-    heldout = load_endpoints(job["heldout"], robot=cfg.robot)
-    t0 = time.perf_counter()
-    try:
-        train_tm(cfg, run_dir, train, progress=False)
-    except TrainingDivergedError as exc:
-        return {"name": job["name"], "diverged": str(exc), "train_seconds": time.perf_counter() - t0}
-    wall = time.perf_counter() - t0
+def _evaluate_run(name: str, run_dir: Path, heldout, wall: float) -> dict:
     with open(run_dir / "metrics.jsonl") as fh:
         last = json.loads(fh.read().splitlines()[-1])
     planner = Planner.load(run_dir)
     summary = evaluate_plans(planner.plan(heldout.start, heldout.goal), planner.robot)
     return {
-        "name": job["name"],
+        "name": name,
         "final_l_tm": last["train/paper_l_tm"],
         "final_loss": last["train/loss"],
         "train_seconds": wall,
         "heldout": summary,
     }
+
+
+def _job(job: dict) -> list[dict]:
+    """Run one training job (in a worker process); returns one result per trained model.
+
+    Kinds: ``tm`` (one TM, evaluated on the held-out pairs), ``seeds`` (one TM configuration for
+    several seeds in lockstep, each evaluated) and ``path`` (a joint-path TM for the workspace task,
+    evaluated later by the caller)."""
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    if job["kind"] == "path":
+        from .train_path import PathTrainConfig, train_path_model
+
+        train_path_model(PathTrainConfig.from_dict(job["config"]), job["run_dir"], progress=False)
+        return [{"name": job["name"], "train_seconds": time.perf_counter() - t0}]
+    cfg = TMTrainConfig.from_dict(job["config"])
+    train = load_endpoints(job["train"], robot=cfg.robot)
+    if job.get("limit"):
+        train = train.split(job["limit"])[0]
+    heldout = load_endpoints(job["heldout"], robot=cfg.robot)
+    if job["kind"] == "seeds":
+        runs = train_tm_seeds(cfg, job["seeds"], job["run_dirs"], train, progress=False)
+        wall = (time.perf_counter() - t0) / len(runs)  # the lockstep run's time, shared out
+        out = []
+        for (seed, run), name, run_dir in zip(runs.items(), job["names"], job["run_dirs"], strict=True):
+            if isinstance(run, TrainingDivergedError):
+                out.append({"name": name, "seed": seed, "diverged": str(run), "train_seconds": wall})
+            else:
+                out.append({"seed": seed, **_evaluate_run(name, Path(run_dir), heldout, wall)})
+        return out
+    run_dir = Path(job["run_dir"])
+    try:
+        train_tm(cfg, run_dir, train, progress=False)
+    except TrainingDivergedError as exc:
+        return [{"name": job["name"], "diverged": str(exc), "train_seconds": time.perf_counter() - t0}]
+    return [_evaluate_run(job["name"], run_dir, heldout, time.perf_counter() - t0)]
 
 
 def _run_jobs(jobs: list[dict], workers: int, backend: str, progress: bool = True) -> list[dict]:
@@ -158,17 +188,21 @@ def _run_jobs(jobs: list[dict], workers: int, backend: str, progress: bool = Tru
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
         remote = ray.remote(num_cpus=1)(_job)
         refs = [remote.remote(j) for j in jobs]
-        return [ray.get(r) for r in tqdm(refs, desc="TM sweep (ray)", disable=not progress)]
+        return [
+            r for ref in tqdm(refs, desc="training jobs (ray)", disable=not progress) for r in ray.get(ref)
+        ]
     if backend != "local":
         raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
     if workers <= 1:
-        return [_job(j) for j in tqdm(jobs, desc="TM sweep", disable=not progress)]
+        return [r for j in tqdm(jobs, desc="training jobs", disable=not progress) for r in _job(j)]
     ctx = torch.multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         futures = [pool.submit(_job, j) for j in jobs]
-        for _ in tqdm(cf.as_completed(futures), total=len(futures), desc="TM sweep", disable=not progress):
+        for _ in tqdm(
+            cf.as_completed(futures), total=len(futures), desc="training jobs", disable=not progress
+        ):
             pass
-        return [f.result() for f in futures]
+        return [r for f in futures for r in f.result()]
 
 
 def _mean_std(values: list[float]) -> dict:
@@ -260,26 +294,21 @@ def reproduce(
         "epochs": config.tm_epochs,
         "batch_size": config.tm_batch_size,
     }
-    jobs = []
+    data = {"train": str(out / "endpoints_train.npz"), "heldout": str(out / "endpoints_heldout.npz")}
+    heavy, light = [], []  # the pool takes the long jobs first, so that the workers finish together
 
     def add(name: str, cfg: TMTrainConfig, limit: int | None = None) -> None:
-        jobs.append(
-            {
-                "name": name,
-                "config": cfg.to_dict(),
-                "run_dir": str(out / "tm" / name),
-                "train": str(out / "endpoints_train.npz"),
-                "heldout": str(out / "endpoints_heldout.npz"),
-                "limit": limit,
-            }
-        )
+        job = {"kind": "tm", "name": name, "config": cfg.to_dict(), "run_dir": str(out / "tm" / name), **data}
+        (heavy if cfg.fm == "learned" else light).append({**job, "limit": limit})
 
     for k, row in OPTIMIZER_SWEEP.items():
-        for seed in config.seeds:
-            add(
-                f"table1-{k}-seed{seed}",
-                tm_preset("paper", loss=config.sweep_loss, seed=seed, optim=_optim(row["optim"]), **common),
-            )
+        names = [f"table1-{k}-seed{seed}" for seed in config.seeds]
+        cfg = tm_preset("paper", loss=config.sweep_loss, seed=0, optim=_optim(row["optim"]), **common)
+        job = {"kind": "seeds", "name": f"table1-{k}", "config": cfg.to_dict(), "seeds": list(config.seeds)}
+        # SGD at the paper's rates diverges within steps (Table 1 #5–6): nothing to wait for
+        (light if row["optim"]["name"] == "sgd" else heavy).append(
+            {**job, "names": names, "run_dirs": [str(out / "tm" / n) for n in names], **data}
+        )
     for fm in ("learned", "analytic"):
         for im in ("learned", "analytic"):
             add(f"ablation-fm_{fm}-im_{im}", tm_preset("default", fm=fm, im=im, seed=config.seed, **common))
@@ -292,9 +321,17 @@ def reproduce(
         ),
         limit=config.parity_pairs,
     )
+    if config.workspace_iterations:
+        for kind in ("learned", "analytic"):
+            cfg = _workspace_config(config, robot, models, kind)
+            job = {"kind": "path", "name": f"workspace-{kind}", "config": cfg.to_dict()}
+            (heavy if kind == "learned" else light).append(
+                {**job, "run_dir": str(out / "workspace" / f"tm-fm_{kind}")}
+            )
+    jobs = heavy + light
     t0 = time.perf_counter()
     results = {r["name"]: r for r in _run_jobs(jobs, config.workers, config.backend, progress)}
-    timings["TM jobs"] = time.perf_counter() - t0
+    timings["training jobs"] = time.perf_counter() - t0
 
     # 4. baselines on the same held-out pairs
     t0 = time.perf_counter()
@@ -322,9 +359,7 @@ def reproduce(
 
     # 5. the workspace task
     t0 = time.perf_counter()
-    workspace = (
-        _workspace(config, robot, models, out / "workspace", progress) if config.workspace_iterations else {}
-    )
+    workspace = _workspace(config, robot, models, out / "workspace") if config.workspace_iterations else {}
     timings["workspace"] = time.perf_counter() - t0
 
     # 6. tables, figures, results
@@ -363,28 +398,33 @@ def reproduce(
     return res
 
 
-def _workspace(config: ReproduceConfig, robot, models: Path, out: Path, progress: bool) -> dict:
-    """Joint-path TMs through the learned and the analytic FM, judged on held-out workspace pairs."""
+def _workspace_config(config: ReproduceConfig, robot, models: Path, kind: str):
+    """The joint-path TM training of the workspace task, through the learned or the analytic FM."""
+    from .train_path import PathTrainConfig
+
+    return PathTrainConfig(
+        robot=robot.name,
+        fm=kind,
+        fm_checkpoint=str((models / "fm.pt").resolve()) if kind == "learned" else None,
+        iterations=config.workspace_iterations,
+        batch_size=config.workspace_batch_size,
+        seed=config.seed,
+    )
+
+
+def _workspace(config: ReproduceConfig, robot, models: Path, out: Path) -> dict:
+    """The joint-path TMs (trained by the jobs) judged on held-out workspace pairs."""
     from .baselines import rrt_connect
     from .models import AnalyticFM, AnalyticIM, load_fm, load_im
-    from .train_path import PathTrainConfig, train_path_model
+    from .path_model import load_path_model
     from .workspace import evaluate_workspace, heldout_pairs
 
     fm, im = load_fm(models / "fm.pt", robot=robot.name), load_im(models / "im.pt", robot=robot.name)
     afm, aim = AnalyticFM(robot), AnalyticIM(robot)
-    tms = {}
-    for kind in ("learned", "analytic"):
-        cfg = PathTrainConfig(
-            robot=robot.name,
-            fm=kind,
-            fm_checkpoint=str((models / "fm.pt").resolve()) if kind == "learned" else None,
-            iterations=config.workspace_iterations,
-            batch_size=config.workspace_batch_size,
-            seed=config.seed,
-        )
-        tms[kind] = train_path_model(
-            cfg, out / f"tm-fm_{kind}", fm=fm if kind == "learned" else afm, progress=progress
-        )
+    tms = {
+        kind: load_path_model(out / f"tm-fm_{kind}" / "tm.pt", robot=robot.name)
+        for kind in ("learned", "analytic")
+    }
     pairs = heldout_pairs(robot, n=config.workspace_pairs)
     dof = robot.dof
 

@@ -27,7 +27,7 @@ FLOORS: dict[str, int] = {
     # 4: models (and Algorithm 1's rollout)
     "models": 4, "path_model": 4, "obstacle_model": 4, "body_model": 4, "trajectory": 4, "rectify": 4,
     # 5: training
-    "train": 5, "train_tm": 5, "train_path": 5, "train_obstacles": 5, "imitation": 5,
+    "train": 5, "train_tm": 5, "train_tm_seeds": 5, "train_path": 5, "train_obstacles": 5, "imitation": 5,
     # 6: planning
     "plan": 6, "planner": 6, "inference": 6, "baselines": 6, "obstacle_baselines": 6, "timing": 6,
     # 7: evaluation and looking

@@ -53,6 +53,7 @@ def test_reproduce_config_errors():
 def test_ray_backend_runs_or_says_what_is_missing(smoke):
     out, _ = smoke
     job = {
+        "kind": "tm",
         "name": "ray-job",
         "config": json.loads((out / "tm" / "ablation-fm_analytic-im_analytic" / "config.json").read_text()),
         "run_dir": str(out / "tm" / "ray-job"),
