@@ -30,7 +30,7 @@ import torch
 
 from . import __version__
 from .babbling import BabblingConfig, babble, load_transitions, save_transitions
-from .errors import KinlearnError
+from .errors import ConfigError, KinlearnError
 from .io import atomic_copy, atomic_write, file_sha256, read_json, write_json
 from .models import FM_PRESETS, AnalyticFM, AnalyticIM, fm_config, im_config, load_fm, load_im
 from .robot import available_robots
@@ -301,6 +301,25 @@ def _add_train(sub, kind: str) -> None:
         "--data", type=Path, default=None, help="babbling.npz to train on (default: babble afresh)"
     )
     _add_babbling_options(p, None)
+    if kind == "fm":
+        p.add_argument(
+            "--fk-hidden",
+            type=POSITIVE_INT,
+            nargs="+",
+            default=None,
+            metavar="WIDTH",
+            help="hidden widths of the FM's g, its learned forward kinematics (presets whose FM is in "
+            "difference form: improved; default 256 256 256)",
+        )
+    else:
+        p.add_argument(
+            "--hidden",
+            type=POSITIVE_INT,
+            nargs="+",
+            default=None,
+            metavar="WIDTH",
+            help="hidden widths of the IM (default: the preset's)",
+        )
     p.add_argument("--epochs", type=POSITIVE_INT, default=None, help="override the preset's epochs")
     p.add_argument(
         "--lr", type=POSITIVE_FLOAT, default=None, help="override the preset's learning rate (> 0)"
@@ -342,7 +361,16 @@ register_subcommand(lambda sub: _add_train(sub, "im"))
 def _run_train(args: argparse.Namespace) -> int:
     kind = args.kind
     # Every check first (configs, data, the frozen FM): nothing is written before they pass.
-    model_cfg = (fm_config if kind == "fm" else im_config)(args.robot, args.preset)
+    widths = {}
+    if kind == "fm" and args.fk_hidden is not None:
+        if FM_PRESETS[args.preset].get("ef_mode") != "difference":
+            raise ConfigError(
+                f"--fk-hidden sizes the difference-form FM's g; the {args.preset!r} FM has none"
+            )
+        widths["fk_hidden"] = tuple(args.fk_hidden)
+    if kind == "im" and args.hidden is not None:
+        widths["hidden"] = tuple(args.hidden)
+    model_cfg = (fm_config if kind == "fm" else im_config)(args.robot, args.preset, **widths)
     overrides: dict = {"seed": args.seed, "val_fraction": args.val_fraction, "progress": not args.no_progress}
     if args.epochs is not None:
         overrides["epochs"] = args.epochs

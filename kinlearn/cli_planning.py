@@ -27,7 +27,7 @@ from .cli import (
 )
 from .endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
 from .errors import ConfigError, MissingDependencyError
-from .io import atomic_copy, file_sha256, load_checkpoint, resolve_dependency, save_checkpoint
+from .io import atomic_copy, file_sha256, half_weights, load_checkpoint, resolve_dependency, save_checkpoint
 from .metrics import plan_metrics, summarize
 from .models import load_fm, load_im
 from .planner import DEFAULT_CHECKPOINTS, Planner
@@ -703,6 +703,12 @@ def _add_export(sub) -> None:
         action="store_true",
         help=f"write into the package's {DEFAULT_CHECKPOINTS.name}/<robot>, the planner kinlearn.plan uses",
     )
+    p.add_argument(
+        "--half",
+        action="store_true",
+        help="store the layers' weights as float16 (half the size; plans change by rounding only: "
+        "measure the exported planner)",
+    )
     add_run_options(p, resumable=False)
 
 
@@ -747,6 +753,7 @@ def _run_export(args: argparse.Namespace) -> int:
         option="--out",
     )
     out = run.begin()
+    weights = half_weights if args.half else dict
     for kind, src in sources.items():
         payload = load_checkpoint(src, kind=kind, robot=planner.robot.name)
         save_checkpoint(
@@ -754,7 +761,7 @@ def _run_export(args: argparse.Namespace) -> int:
             kind=kind,
             robot=payload["robot"],
             config=payload["config"],
-            state_dict=payload["state_dict"],
+            state_dict=weights(payload["state_dict"]),
         )
     config = tm_payload["config"]
     if tm_payload["kind"] == "tm":  # the FM/IM are recorded by identity, not by a folder
@@ -764,13 +771,13 @@ def _run_export(args: argparse.Namespace) -> int:
         kind=tm_payload["kind"],
         robot=tm_payload["robot"],
         config=config,
-        state_dict=tm_payload["state_dict"],
+        state_dict=weights(tm_payload["state_dict"]),
         depends={kind: out / f"{kind}.pt" for kind in sources},
     )
     if (args.model / "tm_obstacles.pt").is_file():
         from .obstacle_model import export_obstacle_model
 
-        export_obstacle_model(args.model / "tm_obstacles.pt", out / "tm_obstacles.pt")
+        export_obstacle_model(args.model / "tm_obstacles.pt", out / "tm_obstacles.pt", half=args.half)
     Planner.load(out, robot=planner.robot.name)  # the exported folder loads on its own
     print(f"exported the planner of {args.model} to {out}")
     return 0

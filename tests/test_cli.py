@@ -95,6 +95,16 @@ def test_tiny_train_and_validate(tmp_path, capsys):
         torch.equal(a, b)
         for a, b in zip(refined.state_dict().values(), staged.state_dict().values(), strict=True)
     )
+    # the models' widths from the command line, recorded in the run and the checkpoint
+    narrow = ["--preset", "improved", "--epochs", "1", "--no-progress", "--validate", "0", *data]
+    assert main(["train-fm", *narrow, "--fk-hidden", "16", "8", "--run-dir", str(tmp_path / "fm16")]) == 0
+    assert main(["train-im", *narrow, "--hidden", "12", "--run-dir", str(tmp_path / "im12")]) == 0
+    assert load_fm(tmp_path / "fm16" / "fm.pt").config.fk_hidden == (16, 8)
+    assert load_im(tmp_path / "im12" / "im.pt").config.hidden == (12,)
+    assert json.loads((tmp_path / "fm16" / "config.json").read_text())["model"]["fk_hidden"] == [16, 8]
+    capsys.readouterr()
+    assert main(["train-fm", *common, *data, "--fk-hidden", "16", "--run-dir", str(tmp_path / "no")]) == 2
+    assert "has none" in capsys.readouterr().err and not (tmp_path / "no").exists()
 
 
 def test_errors_are_reported_not_raised(tmp_path, capsys):

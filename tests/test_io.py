@@ -19,6 +19,7 @@ from kinlearn.io import (
     atomic_write,
     content_sha256,
     file_sha256,
+    half_weights,
     load_checkpoint,
     remove_stale_tmp,
     resolve_dependency,
@@ -262,3 +263,19 @@ def test_kinematics_takes_numpy_arrays_and_refuses_bool_and_complex():
         with pytest.raises(DTypeError, match="real numbers"):
             kin.position(bad)
     assert issubclass(DTypeError, ShapeError)
+
+
+def test_half_weights_halve_layers_only_and_load_back_into_float32():
+    torch.manual_seed(0)
+    net = torch.nn.Sequential(torch.nn.Linear(4, 8), torch.nn.Tanh(), torch.nn.Linear(8, 2))
+    net.register_buffer("in_mean", torch.randn(4, dtype=torch.float64))
+    half = half_weights(net.state_dict())
+    assert half["0.weight"].dtype == half["2.bias"].dtype == torch.float16
+    assert half["in_mean"].dtype == torch.float64 and torch.equal(half["in_mean"], net.in_mean)
+    copy = torch.nn.Sequential(torch.nn.Linear(4, 8), torch.nn.Tanh(), torch.nn.Linear(8, 2))
+    copy.register_buffer("in_mean", torch.zeros(4, dtype=torch.float64))
+    copy.load_state_dict(half)
+    assert copy[0].weight.dtype == torch.float32
+    x = torch.randn(16, 4)
+    torch.testing.assert_close(copy(x), net(x), atol=5e-3, rtol=5e-3)
+    assert not torch.equal(copy(x), net(x))  # rounded, not the same numbers

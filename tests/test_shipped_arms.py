@@ -35,6 +35,24 @@ def test_every_bundled_arm_has_a_shipped_planner():
     assert shipped == sorted(ROBOTS) == sorted(ALL_ROBOTS)
 
 
+#: Largest shipped joint-space planner (tm.pt + fm.pt + im.pt) per arm, in KB: weights are float16.
+MAX_SHIPPED_KB = {"iiwa14": 480, "panda": 270, "ur5": 270, "xarm7": 270, "z1": 270}
+
+
+@pytest.mark.parametrize("robot", ALL_ROBOTS)
+def test_shipped_planners_are_small_and_store_float16_weights(robot):
+    folder = DEFAULT_CHECKPOINTS / robot
+    assert (
+        sum((folder / f).stat().st_size for f in ("tm.pt", "fm.pt", "im.pt")) <= MAX_SHIPPED_KB[robot] * 1024
+    )
+    for f in ("tm.pt", "fm.pt", "im.pt"):
+        state = load_checkpoint(folder / f, kind=None, robot=robot)["state_dict"]
+        for k, v in state.items():
+            if v.is_floating_point():  # layers in float16; normalisation and limits exact
+                assert v.dtype == (torch.float16 if k.rsplit(".", 1)[-1] in ("weight", "bias") else v.dtype)
+        assert any(v.dtype == torch.float16 for v in state.values())
+
+
 def test_checkpoints_carry_their_arm(shipped):
     planner, _ = shipped
     name = planner.robot.name
