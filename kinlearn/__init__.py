@@ -52,7 +52,7 @@ from .path_model import JointPathConfig, JointPathModel, load_path_model
 from .plan import Plan, Tolerance
 from .planner import Planner, plan
 from .rectify import LossConfig, rectify, tm_loss
-from .robot import ROBOTS, Robot, available_robots, load_robot
+from .robot import ROBOTS, Robot, available_robots, load_robot, register_robot, unregister_robot
 from .state import StateLayout
 from .timing import TimedTrajectory, time_parameterize
 from .train import OptimConfig, TrainConfig, train_config, train_fm, train_im, validate_models
@@ -140,6 +140,7 @@ __all__ = [
     "plan",
     "plan_metrics",
     "rectify",
+    "register_robot",
     "rrt_connect",
     "save_endpoints",
     "save_model",
@@ -155,5 +156,6 @@ __all__ = [
     "train_path_model",
     "train_tm",
     "trajectory_metrics",
+    "unregister_robot",
     "validate_models",
 ]

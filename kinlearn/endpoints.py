@@ -24,7 +24,7 @@ import torch
 from .errors import ConfigError
 from .io import load_npz, save_npz
 from .kinematics import kinematics
-from .robot import Robot, load_robot
+from .robot import ROBOTS, Robot, load_robot
 from .state import StateLayout
 
 __all__ = [
@@ -106,12 +106,18 @@ class EndpointPairs:
 
 
 def default_home(robot: Robot) -> torch.Tensor:
+    spec = ROBOTS.get(robot.name)
+    if spec is not None and spec.home is not None:
+        return torch.tensor(spec.home, dtype=torch.float64)
     if robot.name in HOMES:
         return torch.tensor(HOMES[robot.name], dtype=torch.float64)
     return torch.as_tensor((robot.lower + robot.upper) / 2)
 
 
 def default_region(robot: Robot) -> tuple[float, ...]:
+    spec = ROBOTS.get(robot.name)
+    if spec is not None and spec.region is not None:
+        return spec.region
     if robot.name == "iiwa14":
         return IIWA14_REGION
     q = robot.sample(50_000, torch.Generator().manual_seed(0), dtype=torch.float64)

@@ -26,17 +26,29 @@ from .errors import (
     UnknownRobotError,
 )
 
-__all__ = ["ROBOTS", "Joint", "Robot", "RobotSpec", "available_robots", "load_robot"]
+__all__ = [
+    "ROBOTS",
+    "Joint",
+    "Robot",
+    "RobotSpec",
+    "available_robots",
+    "load_robot",
+    "register_robot",
+    "unregister_robot",
+]
 
 
 @dataclass(frozen=True)
 class RobotSpec:
-    """Where a named robot's URDF lives and which frame is its end effector."""
+    """Where a named robot's URDF lives, which frame is its end effector, and optionally its home
+    configuration (rad) and the paper-task goal region (m: x_min, x_max, y_min, y_max, z_min, z_max)."""
 
-    source: str  # "bundled" (this package's robots/) or "example-robot-data"
-    relpath: str
+    source: str  # "bundled" (this package's robots/), "example-robot-data" or "file" (registered)
+    relpath: str  # under the source's folder; for "file", the URDF's absolute path
     ee_frame: str
     description: str
+    home: tuple[float, ...] | None = None
+    region: tuple[float, ...] | None = None
 
 
 ROBOTS: dict[str, RobotSpec] = {
@@ -50,6 +62,74 @@ ROBOTS: dict[str, RobotSpec] = {
         "example-robot-data", "z1_description/urdf/z1.urdf", "gripperStator", "Unitree Z1, 6-DoF"
     ),
 }
+
+
+#: The names kinlearn ships; :func:`register_robot` adds others, and cannot replace these.
+BUILTIN_ROBOTS = frozenset(ROBOTS)
+
+
+def register_robot(
+    name: str,
+    urdf: str | Path,
+    ee_frame: str,
+    *,
+    home=None,
+    region=None,
+    description: str = "",
+    overwrite: bool = False,
+) -> Robot:
+    """Make a robot from a URDF file known by ``name`` to every kinlearn function in this process.
+
+    After this, ``name`` goes wherever a bundled arm's name goes: babbling, FM/IM, endpoint pairs, TM
+    training, planners, checkpoints (which record it). ``home``: a configuration within the limits
+    (the paper-task starts spread around it; default: the middle of the joint range). ``region``: the
+    paper-task goal box (default: the iiwa14's, scaled by the arm's reach). The URDF is parsed now,
+    so a bad file, frame, home or region fails here. Registration lives in this process only: worker
+    processes (``kinlearn reproduce --workers``) must register it too. Returns the loaded robot.
+    """
+    from .errors import ConfigError
+
+    if not isinstance(name, str) or not name or name.strip() != name or name.lower().endswith(".urdf"):
+        raise ConfigError(f"a robot name must be a non-empty word, not a path; got {name!r}")
+    if name in BUILTIN_ROBOTS:
+        raise ConfigError(f"{name!r} is one of kinlearn's own robots; register yours under another name")
+    if name in ROBOTS and not overwrite:
+        raise ConfigError(f"a robot named {name!r} is registered already (overwrite=True replaces it)")
+    path = Path(urdf).resolve()
+    if not path.is_file():
+        raise UnknownRobotError(f"no URDF file at {path}")
+    robot = Robot(name, path.read_bytes(), ee_frame, path)
+    if home is not None:
+        h = np.asarray(home, dtype=float)
+        if h.shape != (robot.dof,) or not np.isfinite(h).all():
+            raise ConfigError(f"home must be {robot.dof} finite joint values, got {home!r}")
+        if ((h < robot.lower) | (h > robot.upper)).any():
+            raise JointLimitError(f"home {tuple(h)} leaves {name}'s joint limits")
+        home = tuple(float(v) for v in h)
+    if region is not None:
+        r = np.asarray(region, dtype=float)
+        if r.shape != (6,) or not np.isfinite(r).all() or (r[0::2] > r[1::2]).any():
+            raise ConfigError(
+                f"region must be 6 finite numbers x_min, x_max, y_min, y_max, z_min, z_max, each min ≤ max; got {region!r}"
+            )
+        region = tuple(float(v) for v in r)
+    unregister_robot(name)
+    ROBOTS[name] = RobotSpec(
+        "file", str(path), ee_frame, description or f"{path.name} ({robot.dof}-DoF)", home, region
+    )
+    _CACHE[(name, "")] = robot
+    return robot
+
+
+def unregister_robot(name: str) -> None:
+    """Forget a robot :func:`register_robot` added (kinlearn's own cannot be removed)."""
+    from .errors import ConfigError
+
+    if name in BUILTIN_ROBOTS:
+        raise ConfigError(f"{name!r} is one of kinlearn's own robots")
+    ROBOTS.pop(name, None)
+    for key in [k for k in _CACHE if k[0] == name]:
+        del _CACHE[key]
 
 
 def available_robots() -> list[str]:
@@ -318,8 +398,11 @@ def load_robot(name_or_path: str | Path, ee_frame: str | None = None) -> Robot:
     text = str(name_or_path)
     if text in ROBOTS:
         spec = ROBOTS[text]
-        base = _bundled_dir() if spec.source == "bundled" else _example_robot_data_dir()
-        path = base / spec.relpath
+        if spec.source == "file":
+            path = Path(spec.relpath)
+        else:
+            base = _bundled_dir() if spec.source == "bundled" else _example_robot_data_dir()
+            path = base / spec.relpath
         if not path.is_file():
             raise RobotDescriptionError(f"robot {text!r}: its URDF {path} is missing from the installation")
         robot = Robot(text, path.read_bytes(), ee_frame or spec.ee_frame, path)
