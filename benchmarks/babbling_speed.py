@@ -23,8 +23,8 @@ import torch
 from _common import header, markdown_table, time_call
 
 from kinlearn import kinematics, load_robot
-from kinlearn.babbling import BabblingConfig, _walk, babble
-from kinlearn.state import StateLayout
+from kinlearn.body.state import StateLayout
+from kinlearn.data.babbling import BabblingConfig, _walk, babble
 
 
 def per_step(robot, cfg: BabblingConfig, backend: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -4,7 +4,7 @@
                                         [--speed 0.4] [--hold 0.75]
 
 The plan is ``kinlearn.plan(START, GOAL)`` for the README's quick-start start and goal. Its joint path
-is time-parameterised (``kinlearn.timing.time_parameterize``) under the URDF's velocity limits scaled
+is time-parameterised (``kinlearn.planning.timing.time_parameterize``) under the URDF's velocity limits scaled
 by ``--speed`` and the default acceleration limits scaled by its square — the time-optimal motion
 played ``1 / speed`` times slower — and sampled at the GIF's frame rate; the last configuration is
 held for ``--hold`` seconds before the GIF loops. The planner's end-effector waypoints are drawn as orange dots.
@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 import kinlearn
-from kinlearn.timing import DEFAULT_ACCELERATION_TIME, time_parameterize
+from kinlearn.planning.timing import DEFAULT_ACCELERATION_TIME, time_parameterize
 from kinlearn.viz import animate_plan
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -19,7 +19,7 @@ from _common import header
 
 from kinlearn.collision import check_path
 from kinlearn.collision.problems import ProblemSet
-from kinlearn.planner import Planner
+from kinlearn.planning.planner import Planner
 
 HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"
 

@@ -16,7 +16,7 @@ both), the gradient trajectory optimiser at each ``--opt-steps`` (one curve in t
 learned planner through ``Planner.default("iiwa14").plan(start, goal, obstacles=scene)`` (skipped with a
 note where that call raises TypeError: a planner without the obstacle argument).
 
-Every path is judged by :func:`kinlearn.obstacle_eval.obstacle_outcome`: starts at the start, ends
+Every path is judged by :func:`kinlearn.evaluation.obstacles.obstacle_outcome`: starts at the start, ends
 within 0.05 rad and 1 cm (analytic FK) of the goal, stays within the joint limits, and passes the dense
 check (≤ 1 cm of sphere travel between checked configurations) against the scene, the floor and
 itself with the 12-sphere body. Writes into ``--out``: ``obstacle_benchmark.json`` (per problem and per
@@ -40,22 +40,22 @@ from _common import header
 
 from kinlearn.collision.problems import FAMILIES, ProblemSet
 from kinlearn.errors import KinlearnError, MissingDependencyError
-from kinlearn.io import atomic_write, write_json
-from kinlearn.obstacle_baselines import (
-    OptimiserConfig,
-    cartesian_line,
-    default_body,
-    joint_line,
-    rrt_connect,
-    trajectory_optimiser,
-)
-from kinlearn.obstacle_eval import (
+from kinlearn.evaluation.obstacles import (
     OUTCOME_KEYS,
     format_table,
     obstacle_outcome,
     plot_obstacle_plans,
     plot_success_latency,
     summarize_outcome,
+)
+from kinlearn.io import atomic_write, write_json
+from kinlearn.planning.obstacle_baselines import (
+    OptimiserConfig,
+    cartesian_line,
+    default_body,
+    joint_line,
+    rrt_connect,
+    trajectory_optimiser,
 )
 
 HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"
@@ -74,8 +74,9 @@ class LearnedPlanner:
 
     def __call__(self, start, goal, scene):
         if self.planner is None:
-            from kinlearn.obstacle_model import load_obstacle_model
-            from kinlearn.planner import Planner
+            from kinlearn.models.obstacle_path import load_obstacle_model
+
+            from kinlearn.planning.planner import Planner
 
             base = Planner.default(self.robot)
             otm = load_obstacle_model(self.obstacle_tm) if self.obstacle_tm else base.obstacle_tm

@@ -5,7 +5,7 @@
 The planner is ``Planner.load(--run-dir)``, else the one shipped with kinlearn. Every row is timed
 in this run, on one thread, on held-out workspace pairs (uniform within ±90% of the joint range):
 
-- ``kinlearn.plan``: the whole call a user makes (input checks, inference, joint path, clamp to the
+- ``kinlearn.planning.plan``: the whole call a user makes (input checks, inference, joint path, clamp to the
   limits, FK of every configuration, goal errors and success flags, the ``Plan`` of tensors);
 - the paper-size TM forward alone (GRU 20 → dense 20 → head 10 → 3, eager torch, batch 1): what the
   paper's planner costs before its rollout;
@@ -28,13 +28,13 @@ import time
 import numpy as np
 import torch
 from _common import header, markdown_table
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 
 from kinlearn import load_robot
-from kinlearn.baselines import joint_interpolation, rrt_connect_timed
 from kinlearn.errors import MissingDependencyError
-from kinlearn.planner import Planner
-from kinlearn.trajectory import TMConfig, TrajectoryModel
-from kinlearn.workspace import heldout_pairs
+from kinlearn.evaluation.workspace import heldout_pairs
+from kinlearn.planning.baselines import joint_interpolation, rrt_connect_timed
+from kinlearn.planning.planner import Planner
 
 
 def per_call(fn, args_list) -> np.ndarray:

@@ -24,14 +24,21 @@ import time
 
 import torch
 from _common import header, markdown_table
+from kinlearn.models.forward_inverse import (
+    AnalyticFM,
+    AnalyticIM,
+    FMConfig,
+    IMConfig,
+    LearnedFM,
+    LearnedIM,
+)
+from kinlearn.models.rollout import LossConfig, rectify, tm_loss
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 
 from kinlearn import load_robot
-from kinlearn.endpoints import EndpointConfig, make_endpoints
-from kinlearn.models import AnalyticFM, AnalyticIM, FMConfig, IMConfig, LearnedFM, LearnedIM
-from kinlearn.rectify import LossConfig, rectify, tm_loss
-from kinlearn.train import OptimConfig, make_optimizer
-from kinlearn.train_tm import tm_preset, train_tm
-from kinlearn.trajectory import TMConfig, TrajectoryModel
+from kinlearn.data.endpoints import EndpointConfig, make_endpoints
+from kinlearn.training.loop import OptimConfig, make_optimizer
+from kinlearn.training.tm import tm_preset, train_tm
 
 
 def per_sample_epoch(tm, fm, im, start, goal, loss_cfg, opt) -> float:

@@ -8,7 +8,7 @@ joint interpolation; a straight Cartesian line with damped-least-squares IK (it 
 configuration its IK reaches); OMPL RRT-Connect with its path simplification on the first ``--rrt``
 pairs; the planner with end-effector position goals (goal joints from its learned IM and FM).
 Then the same planner on held-out pairs of the paper's task. Every path is judged by the analytic FK
-of its own joints; the columns are those of :func:`kinlearn.workspace.evaluate_workspace`.
+of its own joints; the columns are those of :func:`kinlearn.evaluation.workspace.evaluate_workspace`.
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ import torch
 from _common import header
 
 from kinlearn import load_robot
-from kinlearn.baselines import cartesian_dls, joint_interpolation, rrt_connect
-from kinlearn.endpoints import EndpointConfig, make_endpoints
+from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.errors import MissingDependencyError
-from kinlearn.planner import Planner
-from kinlearn.workspace import POSITION_COLUMNS, evaluate_workspace, heldout_pairs, workspace_table
+from kinlearn.evaluation.workspace import POSITION_COLUMNS, evaluate_workspace, heldout_pairs, workspace_table
+from kinlearn.planning.baselines import cartesian_dls, joint_interpolation, rrt_connect
+from kinlearn.planning.planner import Planner
 
 
 def main() -> None:

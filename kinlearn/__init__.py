@@ -9,11 +9,12 @@ Quick start::
     plan.timed()                                       # times, velocities, accelerations within limits
 """
 
-from .babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
-from .baselines import cartesian_dls, joint_interpolation, rrt_connect
-from .body_model import LearnedBody, load_body_model
+from .body.kinematics import BACKENDS, Kinematics, dls_step, kinematics
+from .body.robot import ROBOTS, Robot, available_robots, load_robot, register_robot, unregister_robot
+from .body.state import StateLayout
 from .collision import BodySpheres, Scene, body_spheres, check_path
-from .endpoints import EndpointConfig, EndpointPairs, load_endpoints, make_endpoints, save_endpoints
+from .data.babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
+from .data.endpoints import EndpointConfig, EndpointPairs, load_endpoints, make_endpoints, save_endpoints
 from .errors import (
     CheckpointError,
     ConfigError,
@@ -32,9 +33,9 @@ from .errors import (
     StateError,
     UnknownRobotError,
 )
-from .kinematics import BACKENDS, Kinematics, dls_step, kinematics
-from .metrics import plan_metrics, summarize, trajectory_metrics
-from .models import (
+from .evaluation.metrics import plan_metrics, summarize, trajectory_metrics
+from .models.body import LearnedBody, load_body_model
+from .models.forward_inverse import (
     AnalyticFM,
     AnalyticIM,
     FMConfig,
@@ -47,19 +48,18 @@ from .models import (
     load_im,
     save_model,
 )
-from .obstacle_model import ObstaclePathConfig, ObstaclePathModel, load_obstacle_model
-from .path_model import JointPathConfig, JointPathModel, load_path_model
-from .plan import Plan, Tolerance
-from .planner import Planner, plan
-from .rectify import LossConfig, rectify, tm_loss
-from .robot import ROBOTS, Robot, available_robots, load_robot, register_robot, unregister_robot
-from .state import StateLayout
-from .timing import TimedTrajectory, time_parameterize
-from .train import OptimConfig, TrainConfig, train_config, train_fm, train_im, validate_models
-from .train_obstacles import ObstacleLossConfig, ObstacleTrainConfig, train_obstacle_model
-from .train_path import PathLossConfig, PathTrainConfig, train_path_model
-from .train_tm import TMTrainConfig, load_tm, tm_preset, train_tm
-from .trajectory import TMConfig, TrajectoryModel
+from .models.joint_path import JointPathConfig, JointPathModel, load_path_model
+from .models.obstacle_path import ObstaclePathConfig, ObstaclePathModel, load_obstacle_model
+from .models.rollout import LossConfig, rectify, tm_loss
+from .models.trajectory import TMConfig, TrajectoryModel
+from .planning.baselines import cartesian_dls, joint_interpolation, rrt_connect
+from .planning.plan import Plan, Tolerance
+from .planning.planner import Planner, plan
+from .planning.timing import TimedTrajectory, time_parameterize
+from .training.joint_path import PathLossConfig, PathTrainConfig, train_path_model
+from .training.loop import OptimConfig, TrainConfig, train_config, train_fm, train_im, validate_models
+from .training.obstacle_path import ObstacleLossConfig, ObstacleTrainConfig, train_obstacle_model
+from .training.tm import TMTrainConfig, load_tm, tm_preset, train_tm
 
 __version__ = "0.1.0"
 

@@ -5,9 +5,9 @@ import pytest
 import torch
 
 from kinlearn import ConfigError, DatasetError, ShapeError, kinematics, load_robot
-from kinlearn.babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
+from kinlearn.body.state import StateLayout
+from kinlearn.data.babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
 from kinlearn.io import save_npz
-from kinlearn.state import StateLayout
 
 
 @pytest.fixture(scope="module", params=["iiwa14", "panda", "ur5"])

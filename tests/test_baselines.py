@@ -8,13 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-from kinlearn.baselines import (
-    _resample,
-    cartesian_dls,
-    joint_interpolation,
-    rrt_connect,
-    rrt_connect_timed,
-)
+from kinlearn.body.kinematics import kinematics
+from kinlearn.body.robot import load_robot
+from kinlearn.body.state import StateLayout
 from kinlearn.errors import (
     ConfigError,
     JointLimitError,
@@ -22,10 +18,14 @@ from kinlearn.errors import (
     NonFiniteError,
     ShapeError,
 )
-from kinlearn.kinematics import kinematics
-from kinlearn.metrics import plan_metrics
-from kinlearn.robot import load_robot
-from kinlearn.state import StateLayout
+from kinlearn.evaluation.metrics import plan_metrics
+from kinlearn.planning.baselines import (
+    _resample,
+    cartesian_dls,
+    joint_interpolation,
+    rrt_connect,
+    rrt_connect_timed,
+)
 
 HOME = torch.tensor([0.0, 0.5, 0.0, -1.2, 0.0, 1.0, 0.0], dtype=torch.float64)
 

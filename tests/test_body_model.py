@@ -9,9 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-
-from kinlearn import load_robot
-from kinlearn.body_model import (
+from kinlearn.models.body import (
     BODY_KIND,
     HELDOUT_PROBLEMS,
     BodyModelConfig,
@@ -21,6 +19,8 @@ from kinlearn.body_model import (
     train_body_model,
     validate_body_model,
 )
+
+from kinlearn import load_robot
 from kinlearn.collision import body_obstacle_distance, body_spheres, check_path, clearances, in_collision
 from kinlearn.collision.problems import ProblemSet
 from kinlearn.errors import CheckpointError, ConfigError, DatasetError, NonFiniteError, ShapeError
@@ -161,7 +161,7 @@ def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch):
     cfg = BodyModelConfig(hidden=(16,), epochs=4, batch_size=256, lr=5e-3, samples=1000, seed=3)
     whole = train_body_model(cfg, tmp_path / "whole", progress=False)
 
-    import kinlearn.body_model as bm
+    import kinlearn.models.body as bm
 
     real_save, saves = bm.save_body_model, []
 
@@ -195,7 +195,7 @@ def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch):
 
 
 def test_training_data_sources(tmp_path, robot):
-    from kinlearn.babbling import BabblingConfig, babble
+    from kinlearn.data.babbling import BabblingConfig, babble
 
     data = babble(BabblingConfig(walkers=20, steps=40, seed=1))
     cfg = BodyModelConfig(hidden=(8,), epochs=1, samples=10, batch_size=64)
@@ -258,7 +258,7 @@ def test_validation_keys_and_values(trained, untrained, problems):
 
 
 def test_train_body_command(tmp_path, problems):
-    from kinlearn.cli_body import register
+    from kinlearn.cli.body import register
 
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers())

@@ -6,14 +6,14 @@ import json
 
 import pytest
 import torch
+from kinlearn.cli.main import add_command, build_parser, main, register_subcommand
+from kinlearn.models.forward_inverse import LearnedFM, LearnedIM, load_fm, load_im
 
 from kinlearn import ConfigError, DatasetError
-from kinlearn.babbling import BabblingConfig, load_transitions
-from kinlearn.cli import add_command, build_parser, main, register_subcommand
-from kinlearn.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
-from kinlearn.models import LearnedFM, LearnedIM, load_fm, load_im
-from kinlearn.planner import DEFAULT_CHECKPOINTS
-from kinlearn.train_tm import tm_preset, train_tm
+from kinlearn.data.babbling import BabblingConfig, load_transitions
+from kinlearn.data.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
+from kinlearn.planning.planner import DEFAULT_CHECKPOINTS
+from kinlearn.training.tm import tm_preset, train_tm
 
 COMMANDS = ("babble", "train-fm", "train-im", "validate")
 
@@ -130,7 +130,7 @@ def test_subcommands_can_be_added():
         assert main(["hello", "--robot", "panda", "--run-dir", "unused"]) == 0
         assert seen == ["panda"]
     finally:
-        from kinlearn import cli
+        from kinlearn.cli import main as cli
 
         cli._SUBCOMMANDS.remove(add)
 
@@ -417,6 +417,6 @@ def test_interrupted_commands_exit_with_130(capsys):
         assert main(["stop"]) == 130
         assert "interrupted" in capsys.readouterr().err
     finally:
-        from kinlearn import cli
+        from kinlearn.cli import main as cli
 
         cli._SUBCOMMANDS.remove(add)

@@ -2,15 +2,15 @@
 
 import pytest
 import torch
+from kinlearn.models.forward_inverse import AnalyticFM, AnalyticIM
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 
 from kinlearn import ConfigError, load_robot
-from kinlearn.baselines import joint_interpolation
-from kinlearn.endpoints import EndpointConfig, make_endpoints
-from kinlearn.imitation import imitation_loss, imitation_targets, train_imitation
-from kinlearn.models import AnalyticFM, AnalyticIM
-from kinlearn.planner import Planner
-from kinlearn.train import OptimConfig
-from kinlearn.trajectory import TMConfig, TrajectoryModel
+from kinlearn.data.endpoints import EndpointConfig, make_endpoints
+from kinlearn.planning.baselines import joint_interpolation
+from kinlearn.planning.planner import Planner
+from kinlearn.training.imitation import imitation_loss, imitation_targets, train_imitation
+from kinlearn.training.loop import OptimConfig
 
 FAST = OptimConfig(name="adam", lr=1e-2)
 

@@ -8,11 +8,12 @@ import sys
 import numpy as np
 import pytest
 import torch
+from kinlearn.models.forward_inverse import LearnedFM, fm_config, im_config, load_fm
 
 import kinlearn
 from kinlearn import CheckpointError, ConfigError, ShapeError, UnknownRobotError
-from kinlearn.babbling import BabblingConfig, babble
-from kinlearn.endpoints import EndpointConfig, make_endpoints
+from kinlearn.data.babbling import BabblingConfig, babble
+from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.errors import DTypeError
 from kinlearn.io import (
     CHECKPOINT_FORMAT,
@@ -25,10 +26,9 @@ from kinlearn.io import (
     resolve_dependency,
     save_checkpoint,
 )
-from kinlearn.models import LearnedFM, fm_config, im_config, load_fm
-from kinlearn.planner import DEFAULT_CHECKPOINTS, Planner
-from kinlearn.train import train_config, train_fm, train_im
-from kinlearn.train_tm import build_fm_im, load_tm, tm_preset, train_tm
+from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
+from kinlearn.training.loop import train_config, train_fm, train_im
+from kinlearn.training.tm import build_fm_im, load_tm, tm_preset, train_tm
 
 
 def _save_fm(path, **kw):

@@ -6,17 +6,23 @@ import warnings
 import numpy as np
 import pytest
 import torch
+from kinlearn.models.forward_inverse import (
+    AnalyticFM,
+    AnalyticIM,
+    ForwardModel,
+    LearnedFM,
+    fm_config,
+)
+from kinlearn.models.joint_path import JointPathConfig, JointPathModel, densify
 
 import kinlearn
 from kinlearn import kinematics, load_robot
-from kinlearn.endpoints import EndpointConfig, make_endpoints, workspace_box
+from kinlearn.data.endpoints import EndpointConfig, make_endpoints, workspace_box
 from kinlearn.errors import ConfigError, DomainError, DomainWarning, DTypeError, ShapeError
-from kinlearn.inference import NumpyFK, NumpyPathModel
-from kinlearn.models import AnalyticFM, AnalyticIM, ForwardModel, LearnedFM, fm_config
-from kinlearn.path_model import JointPathConfig, JointPathModel, densify
-from kinlearn.planner import MAX_STEP, Planner
-from kinlearn.train_path import PathTrainConfig, train_path_model
-from kinlearn.train_tm import tm_preset, train_tm
+from kinlearn.planning.inference import NumpyFK, NumpyPathModel
+from kinlearn.planning.planner import MAX_STEP, Planner
+from kinlearn.training.joint_path import PathTrainConfig, train_path_model
+from kinlearn.training.tm import tm_preset, train_tm
 
 ALL_ROBOTS = ("iiwa14", "panda", "ur5", "xarm7", "z1")
 
@@ -244,7 +250,7 @@ def test_parallel_ef_along_equals_the_step_by_step_rollout(iiwa):
 
 def test_training_resumes_bit_identically(tmp_path, monkeypatch):
     """Interrupted after its checkpoint at iteration 8, a run resumes and ends bit-identical."""
-    import kinlearn.train_path as tp
+    import kinlearn.training.joint_path as tp
 
     cfg = PathTrainConfig(
         fm="analytic", iterations=12, batch_size=32, checkpoint_every=4, model={"hidden": (16,)}
@@ -315,8 +321,8 @@ def test_plan_show_holds_the_plan(planner):
 
 
 def test_plan_command(trained, iiwa, tmp_path, capsys):
-    from kinlearn.cli import main
-    from kinlearn.models import save_model
+    from kinlearn.cli.main import main
+    from kinlearn.models.forward_inverse import save_model
 
     run, _ = trained
     folder = tmp_path / "planner"
@@ -357,7 +363,7 @@ def test_plan_command(trained, iiwa, tmp_path, capsys):
 
 
 def test_train_planner_command_makes_a_planner_folder(tmp_path, capsys):
-    from kinlearn.cli import main
+    from kinlearn.cli.main import main
 
     run = tmp_path / "p"
     args = ["train-planner", "--analytic-fm", "--iterations", "4", "--batch-size", "16", "--hidden", "16"]

@@ -7,8 +7,8 @@ import torch
 from conftest import ALL_ROBOTS
 
 from kinlearn import NonFiniteError, ShapeError, dls_step, kinematics, load_robot
+from kinlearn.body.kinematics import FastKinematics, PkKinematics
 from kinlearn.errors import ConfigError
-from kinlearn.kinematics import FastKinematics, PkKinematics
 
 
 @pytest.fixture(scope="module", params=ALL_ROBOTS)
@@ -180,7 +180,7 @@ def test_pk_backend_is_pytorch_kinematics():
 
 def test_kinematics_cache_never_serves_another_robot():
     """Robots built one after another (ids may be reused once one is freed) get their own kinematics."""
-    from kinlearn.kinematics import kinematics as kin_of
+    from kinlearn.body.kinematics import kinematics as kin_of
 
     seen = []
     for name in ("iiwa14", "panda", "ur5", "iiwa14"):

@@ -8,9 +8,11 @@ import math
 import pytest
 import torch
 
+from kinlearn.body.kinematics import kinematics
+from kinlearn.body.robot import load_robot
+from kinlearn.body.state import StateLayout
 from kinlearn.errors import ConfigError, NonFiniteError, ShapeError
-from kinlearn.kinematics import kinematics
-from kinlearn.metrics import (
+from kinlearn.evaluation.metrics import (
     INDICATORS,
     PAPER_TABLE2,
     TABLE2_COLUMNS,
@@ -20,9 +22,7 @@ from kinlearn.metrics import (
     summarize,
     trajectory_metrics,
 )
-from kinlearn.plan import Plan
-from kinlearn.robot import load_robot
-from kinlearn.state import StateLayout
+from kinlearn.planning.plan import Plan
 
 
 def metrics_of(points) -> dict[str, float]:

@@ -11,8 +11,9 @@ import pytest
 import torch
 
 from kinlearn import kinematics, load_robot
+from kinlearn.body.robot import ROBOTS
 from kinlearn.errors import ConfigError, UnknownRobotError
-from kinlearn.model_error import (
+from kinlearn.evaluation.model_error import (
     PLANNERS,
     believed_robot,
     draw_model_error,
@@ -25,8 +26,7 @@ from kinlearn.model_error import (
     true_goal_error,
     write_perturbed_urdf,
 )
-from kinlearn.robot import ROBOTS
-from kinlearn.workspace import heldout_pairs
+from kinlearn.evaluation.workspace import heldout_pairs
 
 TRUE = load_robot("iiwa14")
 
@@ -178,7 +178,7 @@ def test_sweep_table_and_figure(tmp_path):
 
 
 def test_model_error_command(tmp_path, capsys):
-    from kinlearn.cli import main
+    from kinlearn.cli.main import main
 
     out = tmp_path / "me"
     args = [

@@ -2,10 +2,7 @@
 
 import pytest
 import torch
-
-from kinlearn import CheckpointError, ConfigError, NonFiniteError, ShapeError, kinematics, load_robot
-from kinlearn.io import save_checkpoint
-from kinlearn.models import (
+from kinlearn.models.forward_inverse import (
     AnalyticFM,
     AnalyticIM,
     FMConfig,
@@ -20,7 +17,10 @@ from kinlearn.models import (
     load_im,
     save_model,
 )
-from kinlearn.state import StateLayout
+
+from kinlearn import CheckpointError, ConfigError, NonFiniteError, ShapeError, kinematics, load_robot
+from kinlearn.body.state import StateLayout
+from kinlearn.io import save_checkpoint
 
 
 def states(robot, shape, gen, dtype=torch.float64, margin=0.3):

@@ -8,7 +8,8 @@ import torch
 from kinlearn import kinematics, load_robot
 from kinlearn.collision import Scene, body_spheres, check_path, clearances
 from kinlearn.errors import ConfigError, JointLimitError, ShapeError
-from kinlearn.obstacle_baselines import (
+from kinlearn.evaluation.obstacles import obstacle_outcome
+from kinlearn.planning.obstacle_baselines import (
     OptimiserConfig,
     cartesian_line,
     default_body,
@@ -16,7 +17,6 @@ from kinlearn.obstacle_baselines import (
     rrt_connect,
     trajectory_optimiser,
 )
-from kinlearn.obstacle_eval import obstacle_outcome
 
 F64 = torch.float64
 

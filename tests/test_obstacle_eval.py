@@ -10,7 +10,7 @@ from kinlearn import kinematics, load_robot
 from kinlearn.collision import Scene, body_spheres, check_path, clearances
 from kinlearn.collision.problems import FAMILIES, ProblemSet
 from kinlearn.errors import ShapeError
-from kinlearn.obstacle_eval import (
+from kinlearn.evaluation.obstacles import (
     OUTCOME_KEYS,
     format_table,
     obstacle_outcome,

@@ -5,19 +5,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-
-from kinlearn import load_robot
-from kinlearn.collision import Scene
-from kinlearn.errors import CheckpointError, ConfigError
-from kinlearn.inference import NumpyObstacleModel
-from kinlearn.kinematics import kinematics
-from kinlearn.obstacle_model import (
+from kinlearn.models.obstacle_path import (
     ObstaclePathConfig,
     ObstaclePathModel,
     load_obstacle_model,
     save_obstacle_model,
     scene_primitives,
 )
+
+from kinlearn import load_robot
+from kinlearn.body.kinematics import kinematics
+from kinlearn.collision import Scene
+from kinlearn.errors import CheckpointError, ConfigError
+from kinlearn.planning.inference import NumpyObstacleModel
 
 
 @pytest.fixture(scope="module")

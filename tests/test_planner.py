@@ -2,17 +2,17 @@
 
 import pytest
 import torch
+from kinlearn.models.forward_inverse import AnalyticFM, AnalyticIM, fm_config, im_config
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 
 import kinlearn
 from kinlearn import JointLimitError, NonFiniteError, ShapeError, kinematics, load_robot
-from kinlearn.babbling import BabblingConfig, babble
-from kinlearn.endpoints import EndpointConfig, make_endpoints
+from kinlearn.data.babbling import BabblingConfig, babble
+from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.errors import CheckpointError, ConfigError, StateError
-from kinlearn.models import AnalyticFM, AnalyticIM, fm_config, im_config
-from kinlearn.planner import DEFAULT_CHECKPOINTS, Planner
-from kinlearn.train import train_config, train_fm, train_im
-from kinlearn.train_tm import tm_preset, train_tm
-from kinlearn.trajectory import TMConfig, TrajectoryModel
+from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
+from kinlearn.training.loop import train_config, train_fm, train_im
+from kinlearn.training.tm import tm_preset, train_tm
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +124,7 @@ def test_shipped_checkpoint_loads_and_plans(pairs, iiwa):
 
 
 def test_a_robot_without_a_shipped_planner_is_told_so(tmp_path, monkeypatch):
-    import kinlearn.planner as planner_mod
+    import kinlearn.planning.planner as planner_mod
 
     (tmp_path / "iiwa14").mkdir()
     monkeypatch.setattr(planner_mod, "DEFAULT_CHECKPOINTS", tmp_path)

@@ -6,14 +6,14 @@ from pathlib import Path
 
 import pytest
 import torch
+from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel
 
 from kinlearn import load_robot
+from kinlearn.body.kinematics import kinematics
 from kinlearn.collision import Scene, check_path
 from kinlearn.collision.problems import ProblemSet
 from kinlearn.errors import ConfigError, ObstacleError, ShapeError
-from kinlearn.kinematics import kinematics
-from kinlearn.obstacle_model import ObstaclePathConfig, ObstaclePathModel
-from kinlearn.planner import Planner
+from kinlearn.planning.planner import Planner
 
 BENCHMARK = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "obstacle_problems_heldout.npz"
 
@@ -139,8 +139,9 @@ def test_a_scene_with_boxes_and_floor(planner, problems):
 def test_shipped_planner_plans_around_an_obstacle_and_refines(robot, tmp_path):
     """The shipped obstacle-aware planner: a hard problem (the straight line collides) solved, through
     kinlearn.plan and the CLI, and refinement steps only ever add collision-free plans."""
+    from kinlearn.cli.main import main
+
     import kinlearn
-    from kinlearn.cli import main
 
     ps = ProblemSet.load(BENCHMARK)
     hard = torch.nonzero(ps.hard).reshape(-1)[:12]
@@ -189,7 +190,7 @@ def test_readme_ball_example():
 
 def test_view_draws_a_plan_among_obstacles(tmp_path, problems):
     pytest.importorskip("matplotlib")
-    from kinlearn.cli import main
+    from kinlearn.cli.main import main
 
     start, goal, scene = problems.problem(2)
     scene.save(tmp_path / "scene.npz")
@@ -220,7 +221,7 @@ def test_scene_reshape_refuses_a_shape_that_does_not_fit(problems):
 
 
 def test_refinement_from_a_path_of_the_wrong_shape_raises():
-    from kinlearn.obstacle_baselines import trajectory_optimiser
+    from kinlearn.planning.obstacle_baselines import trajectory_optimiser
 
     scene = Scene(torch.tensor([[0.5, 0.0, 0.5, 0.1]], dtype=torch.float64))
     with pytest.raises(ShapeError):

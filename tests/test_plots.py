@@ -8,16 +8,16 @@ import sys
 import pytest
 import torch
 
-from kinlearn.baselines import joint_interpolation
+from kinlearn.body.kinematics import kinematics
+from kinlearn.body.robot import load_robot
+from kinlearn.body.state import StateLayout
 from kinlearn.errors import ConfigError, MissingDependencyError, ShapeError
-from kinlearn.kinematics import kinematics
-from kinlearn.metrics import PAPER_TABLE2, plan_metrics, trajectory_metrics
-from kinlearn.robot import load_robot
-from kinlearn.state import StateLayout
+from kinlearn.evaluation.metrics import PAPER_TABLE2, plan_metrics, trajectory_metrics
+from kinlearn.planning.baselines import joint_interpolation
 
 pytest.importorskip("matplotlib")
 
-from kinlearn.plots import (
+from kinlearn.evaluation.plots import (
     plot_good_bad,
     plot_histograms,
     plot_trajectories,

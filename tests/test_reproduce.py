@@ -4,10 +4,10 @@ import json
 
 import pytest
 import torch
+from kinlearn.cli.main import main
 
-from kinlearn.cli import main
 from kinlearn.errors import ConfigError, MissingDependencyError
-from kinlearn.reproduce import OPTIMIZER_SWEEP, _run_jobs, preset_config, reproduce
+from kinlearn.evaluation.reproduce import OPTIMIZER_SWEEP, _run_jobs, preset_config, reproduce
 
 
 @pytest.fixture(scope="module")

@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 import torch
 from conftest import ALL_ROBOTS
+from kinlearn.cli.view import register
+from kinlearn.models.forward_inverse import load_fm, load_im
 
 import kinlearn
-from kinlearn.baselines import joint_interpolation
-from kinlearn.cli_view import register
+from kinlearn.body.robot import ROBOTS, load_robot
 from kinlearn.errors import CheckpointError, ConfigError
+from kinlearn.evaluation.metrics import plan_metrics
+from kinlearn.evaluation.workspace import evaluate_workspace, heldout_pairs
 from kinlearn.io import load_checkpoint
-from kinlearn.metrics import plan_metrics
-from kinlearn.models import load_fm, load_im
-from kinlearn.planner import DEFAULT_CHECKPOINTS, Planner
-from kinlearn.robot import ROBOTS, load_robot
-from kinlearn.workspace import evaluate_workspace, heldout_pairs
+from kinlearn.planning.baselines import joint_interpolation
+from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
 
 #: Held-out workspace pairs per arm (uniform within ±90% of the joint range, a seed no training used).
 N_PAIRS = 8

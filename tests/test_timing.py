@@ -8,6 +8,7 @@ import torch
 from conftest import ALL_ROBOTS
 
 import kinlearn
+from kinlearn.body.robot import Robot
 from kinlearn.errors import (
     ConfigError,
     DatasetError,
@@ -15,8 +16,7 @@ from kinlearn.errors import (
     NonFiniteError,
     ShapeError,
 )
-from kinlearn.robot import Robot
-from kinlearn.timing import DEFAULT_ACCELERATION_TIME, TimedTrajectory, time_parameterize
+from kinlearn.planning.timing import DEFAULT_ACCELERATION_TIME, TimedTrajectory, time_parameterize
 
 RTOL = 1e-5  # relative excess of a limit tolerated at dense samples
 DT = 1e-3

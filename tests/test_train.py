@@ -9,11 +9,19 @@ import time
 import numpy as np
 import pytest
 import torch
+from kinlearn.models.forward_inverse import (
+    AnalyticFM,
+    AnalyticIM,
+    LearnedFM,
+    fm_config,
+    im_config,
+    load_fm,
+    load_im,
+)
 
 from kinlearn import CheckpointError, ConfigError, DatasetError, kinematics, load_robot
-from kinlearn.babbling import BabblingConfig, babble
-from kinlearn.models import AnalyticFM, AnalyticIM, LearnedFM, fm_config, im_config, load_fm, load_im
-from kinlearn.train import (
+from kinlearn.data.babbling import BabblingConfig, babble
+from kinlearn.training.loop import (
     OptimConfig,
     RunLogger,
     TrainConfig,
@@ -353,7 +361,7 @@ _FORKER = """
 import os, sys, torch
 torch.set_num_threads(1)
 torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))])  # its first use imports torch._dynamo (seconds)
-from kinlearn.cli import main
+from kinlearn.cli.main import main
 for line in sys.stdin:
     pid = os.fork()
     if pid == 0:
@@ -396,7 +404,7 @@ def test_kill_9_during_checkpoint_writes_then_resume_is_bit_identical(tmp_path):
     import subprocess
     import sys
 
-    from kinlearn.cli import main
+    from kinlearn.cli.main import main
 
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     forker = subprocess.Popen(  # starts (imports) while the uninterrupted run trains

@@ -6,14 +6,14 @@ import json
 
 import pytest
 import torch
+from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel
 
 from kinlearn import load_robot
 from kinlearn.collision import body_obstacle_distance, body_spheres
 from kinlearn.collision.problems import ProblemConfig, make_problems
 from kinlearn.errors import CheckpointError, ConfigError
 from kinlearn.io import load_checkpoint
-from kinlearn.obstacle_model import ObstaclePathConfig, ObstaclePathModel
-from kinlearn.train_obstacles import (
+from kinlearn.training.obstacle_path import (
     ObstacleLossConfig,
     ObstacleTrainConfig,
     _scene_clearance,
@@ -64,7 +64,7 @@ def test_collision_term_sees_a_colliding_candidate(problems):
     robot = load_robot("iiwa14")
     body = body_spheres(robot).float()
     tm = ObstaclePathModel(ObstaclePathConfig.for_robot(robot, hidden=(16,), encoder=(8,), candidates=2))
-    from kinlearn.kinematics import kinematics
+    from kinlearn.body.kinematics import kinematics
 
     kin = kinematics(robot)
     s0 = torch.cat((ps.start, kin.position(ps.start)), -1).float()
@@ -85,7 +85,7 @@ def test_training_lowers_the_loss_and_resumes_bit_identically(problems, tmp_path
     records = [json.loads(line) for line in (tmp_path / "full" / "metrics.jsonl").read_text().splitlines()]
     assert records[-1]["train/loss"] < records[0]["train/loss"]
     # The same run, killed in its ninth iteration (after the checkpoint at 8), then resumed.
-    import kinlearn.train_obstacles as mod
+    import kinlearn.training.obstacle_path as mod
 
     real, calls = mod.candidate_losses, {"n": 0}
 
@@ -147,8 +147,9 @@ def test_train_obstacle_planner_command(tmp_path):
     """The command generates its problems, trains, records its run and copies the model into a planner."""
     import shutil
 
-    from kinlearn.cli import main
-    from kinlearn.planner import DEFAULT_CHECKPOINTS, Planner
+    from kinlearn.cli.main import main
+
+    from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
 
     planner_dir = tmp_path / "planner"
     shutil.copytree(DEFAULT_CHECKPOINTS / "iiwa14", planner_dir)
@@ -168,7 +169,7 @@ def test_train_obstacle_planner_command(tmp_path):
 
 
 def test_train_obstacle_planner_refuses_a_planner_folder_without_a_planner(tmp_path, capsys):
-    from kinlearn.cli import main
+    from kinlearn.cli.main import main
 
     args = ["train-obstacle-planner", "--problems-per-family", "1", "--iterations", "1"]
     code = main([*args, "--run-dir", str(tmp_path / "run"), "--planner", str(tmp_path), "--no-progress"])

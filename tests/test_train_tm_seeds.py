@@ -5,14 +5,14 @@ import json
 
 import pytest
 import torch
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 
-from kinlearn.endpoints import EndpointConfig, make_endpoints
+from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.errors import CheckpointError, ConfigError, TrainingDivergedError
-from kinlearn.planner import Planner
-from kinlearn.train import OptimConfig
-from kinlearn.train_tm import load_tm, tm_preset, train_tm
-from kinlearn.train_tm_seeds import stacked_forward, train_tm_seeds
-from kinlearn.trajectory import TMConfig, TrajectoryModel
+from kinlearn.planning.planner import Planner
+from kinlearn.training.loop import OptimConfig
+from kinlearn.training.tm import load_tm, tm_preset, train_tm
+from kinlearn.training.tm_seeds import stacked_forward, train_tm_seeds
 
 
 @pytest.fixture(scope="module")

@@ -5,15 +5,22 @@ import json
 
 import pytest
 import torch
+from kinlearn.models.forward_inverse import (
+    AnalyticFM,
+    AnalyticIM,
+    FMConfig,
+    IMConfig,
+    LearnedFM,
+    LearnedIM,
+)
+from kinlearn.models.rollout import LossConfig, rectify, tm_loss
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 
 from kinlearn import ConfigError, kinematics, load_robot
-from kinlearn.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
+from kinlearn.body.state import StateLayout
+from kinlearn.data.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
 from kinlearn.errors import CheckpointError, DatasetError
-from kinlearn.models import AnalyticFM, AnalyticIM, FMConfig, IMConfig, LearnedFM, LearnedIM
-from kinlearn.rectify import LossConfig, rectify, tm_loss
-from kinlearn.state import StateLayout
-from kinlearn.train_tm import load_tm, tm_preset, train_tm
-from kinlearn.trajectory import TMConfig, TrajectoryModel
+from kinlearn.training.tm import load_tm, tm_preset, train_tm
 
 
 @pytest.fixture(scope="module")
@@ -229,8 +236,8 @@ def test_rectify_refinement_and_exact_joints(pairs, iiwa):
 
 def test_divergence_is_a_typed_error_and_reproduce_records_it(pairs, tmp_path):
     from kinlearn.errors import TrainingDivergedError
-    from kinlearn.reproduce import _job
-    from kinlearn.train import OptimConfig
+    from kinlearn.evaluation.reproduce import _job
+    from kinlearn.training.loop import OptimConfig
 
     cfg = _tiny(optim=OptimConfig("sgd", 1e6), epochs=2)
     with pytest.raises(TrainingDivergedError, match="lower the learning rate"):
@@ -238,6 +245,7 @@ def test_divergence_is_a_typed_error_and_reproduce_records_it(pairs, tmp_path):
     # In a sweep, a diverged run is a result, not a crash.
     save_endpoints(pairs, tmp_path / "pairs.npz")
     job = {
+        "kind": "tm",
         "name": "sgd-huge",
         "config": cfg.to_dict(),
         "run_dir": str(tmp_path / "job"),
@@ -245,8 +253,13 @@ def test_divergence_is_a_typed_error_and_reproduce_records_it(pairs, tmp_path):
         "heldout": str(tmp_path / "pairs.npz"),
         "limit": None,
     }
-    result = _job(job)
+    (result,) = _job(job)
     assert result["name"] == "sgd-huge" and "diverged" in result["diverged"]
+    # the same for seeds trained in lockstep: each diverged seed is a result
+    seeds = {**job, "kind": "seeds", "seeds": [0, 1], "names": ["a", "b"]}
+    seeds["run_dirs"] = [str(tmp_path / "a"), str(tmp_path / "b")]
+    results = _job(seeds)
+    assert [r["name"] for r in results] == ["a", "b"] and all("diverged" in r for r in results)
 
 
 def test_endpoint_config_errors():

@@ -3,10 +3,13 @@ endpoint pairs → TM (the paper's, and the joint-path one) → plan, checked ag
 
 import pytest
 import torch
+from kinlearn.models.forward_inverse import fm_config, im_config, load_fm
 
 import kinlearn
-from kinlearn.babbling import BabblingConfig, babble
-from kinlearn.endpoints import EndpointConfig, default_home, make_endpoints
+from kinlearn.body.kinematics import kinematics
+from kinlearn.body.robot import load_robot, register_robot, unregister_robot
+from kinlearn.data.babbling import BabblingConfig, babble
+from kinlearn.data.endpoints import EndpointConfig, default_home, make_endpoints
 from kinlearn.errors import (
     CheckpointError,
     ConfigError,
@@ -14,14 +17,11 @@ from kinlearn.errors import (
     RobotDescriptionError,
     UnknownRobotError,
 )
-from kinlearn.kinematics import kinematics
-from kinlearn.models import fm_config, im_config, load_fm
-from kinlearn.planner import Planner
-from kinlearn.robot import load_robot, register_robot, unregister_robot
-from kinlearn.train import train_config, train_fm, train_im
-from kinlearn.train_path import PathTrainConfig, train_path_model
-from kinlearn.train_tm import tm_preset, train_tm
-from kinlearn.workspace import heldout_pairs
+from kinlearn.evaluation.workspace import heldout_pairs
+from kinlearn.planning.planner import Planner
+from kinlearn.training.joint_path import PathTrainConfig, train_path_model
+from kinlearn.training.loop import train_config, train_fm, train_im
+from kinlearn.training.tm import tm_preset, train_tm
 
 #: A 4-joint arm: a base yaw, then three pitch joints, links of 0.30, 0.25, 0.20 m and a 0.10 m tool.
 URDF = """<?xml version="1.0"?>

@@ -22,9 +22,9 @@ import numpy as np
 import torch
 from torch import nn
 
+from ..body.kinematics import FastKinematics, _snap, _z_to_axis, kinematics
+from ..body.robot import Robot, _bundled_dir
 from ..errors import ConfigError, RobotDescriptionError
-from ..kinematics import FastKinematics, _snap, _z_to_axis, kinematics
-from ..robot import Robot, _bundled_dir
 
 __all__ = ["SPHERE_FILE", "BodySpheres", "body_spheres", "cover_cylinder", "sphere_sets"]
 

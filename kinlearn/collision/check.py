@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import torch
 
+from ..body.robot import check_finite, check_last_dim
 from ..errors import ConfigError, ShapeError
-from ..robot import check_finite, check_last_dim
 from .body import BodySpheres
 from .distance import body_obstacle_distance, self_collision_distance
 from .scene import Scene

@@ -46,8 +46,8 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from ..body.kinematics import _z_to_axis
 from ..errors import ConfigError, DTypeError, NonFiniteError, ObstacleError, ShapeError
-from ..kinematics import _z_to_axis
 from .body import BodySpheres
 from .scene import Scene
 

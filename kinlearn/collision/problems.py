@@ -42,10 +42,10 @@ from typing import Literal
 import numpy as np
 import torch
 
+from ..body.kinematics import dls_step, kinematics
+from ..body.robot import Robot, load_robot
 from ..errors import ConfigError, DatasetError, MissingDependencyError, ObstacleError, PlanningError
 from ..io import load_npz, save_npz
-from ..kinematics import dls_step, kinematics
-from ..robot import Robot, load_robot
 from .body import BodySpheres, body_spheres
 from .check import check_path, clearances, segment_steps
 from .scene import Scene

@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..body.kinematics import kinematics
+from ..body.robot import Robot
 from ..errors import ConfigError, NonFiniteError, ObstacleError, ShapeError
-from ..kinematics import kinematics
-from ..robot import Robot
 
 
 @dataclass(frozen=True, eq=False)

@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from ..body.robot import Robot
 from ..errors import ConfigError, MissingDependencyError
 from ..io import atomic_write
-from ..robot import Robot
 from ._scene import PlanScene, plan_scene
 
 __all__ = ["animate_plan"]

@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from ..body.robot import Robot
 from ..errors import ConfigError, MissingDependencyError
-from ..robot import Robot
 from ._scene import PlanScene, plan_scene
 
 __all__ = ["PlanViewer", "show_plan"]

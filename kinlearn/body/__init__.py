@@ -1,0 +1,1 @@
+"""The robot: URDF → serial chain and limits, its kinematics, the state layout."""

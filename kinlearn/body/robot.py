@@ -1,0 +1,421 @@
+"""Robots by name or URDF path, parsed once into an exact float64 serial chain.
+
+The chain parsed here is the single description of a robot's geometry in kinlearn: the fast
+position path, the pytorch-kinematics backend (whose own float32 parse is overwritten with these
+values) and the joint limits all come from it. Pinocchio parses the same URDF independently, which
+is what makes it a useful cross-check.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..errors import (
+    DTypeError,
+    JointLimitError,
+    NonFiniteError,
+    RobotDescriptionError,
+    ShapeError,
+    UnknownRobotError,
+)
+
+__all__ = [
+    "ROBOTS",
+    "Joint",
+    "Robot",
+    "RobotSpec",
+    "available_robots",
+    "load_robot",
+    "register_robot",
+    "unregister_robot",
+]
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """Where a named robot's URDF lives, which frame is its end effector, and optionally its home
+    configuration (rad) and the paper-task goal region (m: x_min, x_max, y_min, y_max, z_min, z_max)."""
+
+    source: str  # "bundled" (this package's robots/), "example-robot-data" or "file" (registered)
+    relpath: str  # under the source's folder; for "file", the URDF's absolute path
+    ee_frame: str
+    description: str
+    home: tuple[float, ...] | None = None
+    region: tuple[float, ...] | None = None
+
+
+ROBOTS: dict[str, RobotSpec] = {
+    "iiwa14": RobotSpec("bundled", "iiwa14/iiwa14.urdf", "iiwa_link_ee", "KUKA LBR iiwa 14 R820, 7-DoF"),
+    "panda": RobotSpec(
+        "example-robot-data", "panda_description/urdf/panda.urdf", "panda_hand_tcp", "Franka Panda, 7-DoF"
+    ),
+    "ur5": RobotSpec("example-robot-data", "ur_description/urdf/ur5_robot.urdf", "tool0", "UR5, 6-DoF"),
+    "xarm7": RobotSpec("example-robot-data", "xarm_description/urdf/xarm7.urdf", "link_eef", "xArm 7, 7-DoF"),
+    "z1": RobotSpec(
+        "example-robot-data", "z1_description/urdf/z1.urdf", "gripperStator", "Unitree Z1, 6-DoF"
+    ),
+}
+
+
+#: The names kinlearn ships; :func:`register_robot` adds others, and cannot replace these.
+BUILTIN_ROBOTS = frozenset(ROBOTS)
+
+
+def register_robot(
+    name: str,
+    urdf: str | Path,
+    ee_frame: str,
+    *,
+    home=None,
+    region=None,
+    description: str = "",
+    overwrite: bool = False,
+) -> Robot:
+    """Make a robot from a URDF file known by ``name`` to every kinlearn function in this process.
+
+    After this, ``name`` goes wherever a bundled arm's name goes: babbling, FM/IM, endpoint pairs, TM
+    training, planners, checkpoints (which record it). ``home``: a configuration within the limits
+    (the paper-task starts spread around it; default: the middle of the joint range). ``region``: the
+    paper-task goal box (default: the iiwa14's, scaled by the arm's reach). The URDF is parsed now,
+    so a bad file, frame, home or region fails here. Registration lives in this process only: worker
+    processes (``kinlearn reproduce --workers``) must register it too. Returns the loaded robot.
+    """
+    from ..errors import ConfigError
+
+    if not isinstance(name, str) or not name or name.strip() != name or name.lower().endswith(".urdf"):
+        raise ConfigError(f"a robot name must be a non-empty word, not a path; got {name!r}")
+    if name in BUILTIN_ROBOTS:
+        raise ConfigError(f"{name!r} is one of kinlearn's own robots; register yours under another name")
+    if name in ROBOTS and not overwrite:
+        raise ConfigError(f"a robot named {name!r} is registered already (overwrite=True replaces it)")
+    path = Path(urdf).resolve()
+    if not path.is_file():
+        raise UnknownRobotError(f"no URDF file at {path}")
+    robot = Robot(name, path.read_bytes(), ee_frame, path)
+    if home is not None:
+        h = np.asarray(home, dtype=float)
+        if h.shape != (robot.dof,) or not np.isfinite(h).all():
+            raise ConfigError(f"home must be {robot.dof} finite joint values, got {home!r}")
+        if ((h < robot.lower) | (h > robot.upper)).any():
+            raise JointLimitError(f"home {tuple(h)} leaves {name}'s joint limits")
+        home = tuple(float(v) for v in h)
+    if region is not None:
+        r = np.asarray(region, dtype=float)
+        if r.shape != (6,) or not np.isfinite(r).all() or (r[0::2] > r[1::2]).any():
+            raise ConfigError(
+                f"region must be 6 finite numbers x_min, x_max, y_min, y_max, z_min, z_max, each min ≤ max; got {region!r}"
+            )
+        region = tuple(float(v) for v in r)
+    unregister_robot(name)
+    ROBOTS[name] = RobotSpec(
+        "file", str(path), ee_frame, description or f"{path.name} ({robot.dof}-DoF)", home, region
+    )
+    _CACHE[(name, "")] = robot
+    return robot
+
+
+def unregister_robot(name: str) -> None:
+    """Forget a robot :func:`register_robot` added (kinlearn's own cannot be removed)."""
+    from ..errors import ConfigError
+
+    if name in BUILTIN_ROBOTS:
+        raise ConfigError(f"{name!r} is one of kinlearn's own robots")
+    ROBOTS.pop(name, None)
+    for key in [k for k in _CACHE if k[0] == name]:
+        del _CACHE[key]
+
+
+def available_robots() -> list[str]:
+    """Names accepted by :func:`load_robot`."""
+    return sorted(ROBOTS)
+
+
+def _bundled_dir() -> Path:
+    here = Path(__file__).resolve().parents[1]  # the package folder
+    for candidate in (here / "_robots", here.parent / "robots"):  # installed wheel, source checkout
+        if candidate.is_dir():
+            return candidate
+    raise RobotDescriptionError(f"kinlearn's bundled robots/ folder is missing (looked in {here})")
+
+
+def _example_robot_data_dir() -> Path:
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError as exc:
+        raise RobotDescriptionError(
+            "example-robot-data is not installed; `pip install example-robot-data` to load its arms"
+        ) from exc
+    marker = "share/example-robot-data/robots/"
+    for f in dist.files or ():
+        text = str(f).replace("\\", "/")
+        if marker in text:
+            root = text[: text.index(marker) + len(marker)]
+            path = Path(dist.locate_file(root))
+            if path.is_dir():
+                return path
+    raise RobotDescriptionError(f"example-robot-data {dist.version} is installed but holds no {marker}")
+
+
+def _rpy_matrix(r: float, p: float, y: float) -> np.ndarray:
+    """URDF fixed-axis roll-pitch-yaw: R = Rz(y) Ry(p) Rx(r)."""
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def _floats(text: str | None, n: int, default: float, what: str) -> list[float]:
+    if text is None:
+        return [default] * n
+    values = [float(v) for v in text.split()]
+    if len(values) != n:
+        raise RobotDescriptionError(f"{what}: expected {n} numbers, got {text!r}")
+    return values
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One movable joint of the serial chain, with the fixed transform that precedes it.
+
+    ``T_prev`` maps the previous movable joint's frame (or the chain's root) to this joint's frame
+    at zero displacement: the product of any fixed joints in between and this joint's origin.
+    """
+
+    name: str
+    kind: str  # "revolute" or "prismatic"
+    axis: np.ndarray  # unit vector in the joint frame
+    T_prev: np.ndarray  # (4, 4) float64
+    lower: float
+    upper: float
+    velocity: float
+
+
+class Robot:
+    """A serial kinematic chain from a URDF's root link to an end-effector frame.
+
+    Attributes: ``name``, ``urdf`` (the file's bytes), ``urdf_path``, ``root_link``, ``ee_frame``,
+    ``joints`` (movable joints, base to tip), ``T_tip`` (last joint frame → end effector, float64),
+    ``dof``, ``joint_names``, ``lower``/``upper``/``velocity_limits`` (float64 numpy arrays),
+    ``path_origins`` (every joint on the root → end-effector path, fixed ones too: name → exact origin).
+    """
+
+    def __init__(self, name: str, urdf: bytes, ee_frame: str, urdf_path: Path | None = None):
+        self.name = name
+        self.urdf = urdf
+        self.urdf_path = urdf_path
+        self.ee_frame = ee_frame
+        self.root_link, self.joints, self.T_tip, self.path_origins = _parse_chain(urdf, ee_frame, name)
+        self.dof = len(self.joints)
+        self.joint_names = tuple(j.name for j in self.joints)
+        self.lower = np.array([j.lower for j in self.joints])
+        self.upper = np.array([j.upper for j in self.joints])
+        self.velocity_limits = np.array([j.velocity for j in self.joints])
+        self.state_dim = self.dof + 3
+
+    def __repr__(self) -> str:
+        return f"Robot({self.name!r}, dof={self.dof}, ee_frame={self.ee_frame!r})"
+
+    def limits(self, dtype: torch.dtype = torch.float32, device=None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Position limits as tensors ``(lower, upper)``, each of shape ``(dof,)``."""
+        return (
+            torch.as_tensor(self.lower, dtype=dtype, device=device),
+            torch.as_tensor(self.upper, dtype=dtype, device=device),
+        )
+
+    def sample(
+        self,
+        shape: int | tuple[int, ...],
+        generator: torch.Generator | None = None,
+        dtype: torch.dtype = torch.float32,
+        device=None,
+        margin: float = 0.0,
+    ) -> torch.Tensor:
+        """Joint configurations drawn uniformly within the limits (shrunk by ``margin`` rad on each side).
+
+        Pass a seeded ``torch.Generator`` for reproducible samples.
+        """
+        shape = (shape,) if isinstance(shape, int) else tuple(shape)
+        lo, hi = self.limits(dtype, device)
+        lo, hi = lo + margin, hi - margin
+        u = torch.rand((*shape, self.dof), generator=generator, dtype=dtype, device=device)
+        return lo + (hi - lo) * u
+
+    def check_joints(self, q: torch.Tensor, tol: float = 1e-6, what: str = "joint angles") -> None:
+        """Raise :class:`JointLimitError` where ``q`` leaves the position limits by more than ``tol``."""
+        check_last_dim(q, self.dof, what)
+        check_finite(q, what)
+        lo, hi = self.limits(q.dtype, q.device)
+        bad = (q < lo - tol) | (q > hi + tol)
+        if bool(bad.any()):
+            idx = torch.nonzero(bad)[0].tolist()
+            j = idx[-1]
+            raise JointLimitError(
+                f"{what} outside {self.name}'s limits: joint {self.joint_names[j]} = {float(q[tuple(idx)]):.6g} "
+                f"rad at index {tuple(idx[:-1])}; allowed [{self.lower[j]:.6g}, {self.upper[j]:.6g}] rad"
+            )
+
+
+def check_last_dim(x: torch.Tensor, n: int | tuple[int, ...], what: str) -> None:
+    """Raise :class:`ShapeError` unless ``x`` is a tensor of shape ``(..., n)`` (n may be a tuple of options)."""
+    options = (n,) if isinstance(n, int) else tuple(n)
+    if not isinstance(x, torch.Tensor):
+        raise ShapeError(f"{what} must be a torch.Tensor of shape (..., {n}), got {type(x).__name__}")
+    if x.ndim == 0 or x.shape[-1] not in options:
+        allowed = " or ".join(f"(..., {k})" for k in options)
+        raise ShapeError(f"{what} must have shape {allowed}, got {tuple(x.shape)}")
+    if not x.is_floating_point():
+        raise DTypeError(f"{what} must be a real floating-point tensor, got {x.dtype}")
+
+
+def check_real_dtype(x: torch.Tensor, what: str) -> None:
+    """Raise :class:`DTypeError` if ``x`` is a bool or complex tensor (or no tensor): such values are not
+    angles or lengths, and converting them would silently turn True into 1 rad or drop an imaginary part.
+    Integer tensors pass (callers convert or reject them)."""
+    if not isinstance(x, torch.Tensor):
+        raise ShapeError(f"{what} must be a torch.Tensor, got {type(x).__name__}")
+    if x.dtype == torch.bool or x.is_complex():
+        raise DTypeError(f"{what} must hold real numbers, got a {x.dtype} tensor")
+
+
+def check_finite(x: torch.Tensor, what: str) -> None:
+    """Raise :class:`NonFiniteError` if ``x`` holds NaN or infinity."""
+    if not bool(torch.isfinite(x).all()):
+        n = int((~torch.isfinite(x)).sum())
+        raise NonFiniteError(f"{what} holds {n} NaN/inf value(s); all values must be finite")
+
+
+def _origin(el: ET.Element | None, what: str) -> np.ndarray:
+    T = np.eye(4)
+    if el is None:
+        return T
+    xyz = _floats(el.get("xyz"), 3, 0.0, f"{what} origin xyz")
+    rpy = _floats(el.get("rpy"), 3, 0.0, f"{what} origin rpy")
+    T[:3, :3] = _rpy_matrix(*rpy)
+    T[:3, 3] = xyz
+    return T
+
+
+def _parse_chain(
+    urdf: bytes, ee_frame: str, name: str
+) -> tuple[str, tuple[Joint, ...], np.ndarray, dict[str, np.ndarray]]:
+    try:
+        root = ET.fromstring(urdf)
+    except ET.ParseError as exc:
+        raise RobotDescriptionError(f"{name}: the URDF is not valid XML: {exc}") from exc
+    links = {el.get("name") for el in root.findall("link")}
+    by_child: dict[str, ET.Element] = {}
+    for el in root.findall("joint"):
+        child = el.find("child")
+        if child is not None:
+            by_child[child.get("link")] = el
+    if ee_frame not in links:
+        shown = ", ".join(sorted(links)[:40])
+        raise RobotDescriptionError(
+            f"{name}: end-effector frame {ee_frame!r} is not a link of this URDF; links are: {shown}"
+        )
+    # Walk from the end effector up to the root, then reverse.
+    path: list[ET.Element] = []
+    link = ee_frame
+    while link in by_child:
+        el = by_child[link]
+        path.append(el)
+        link = el.find("parent").get("link")
+        if len(path) > len(by_child):
+            raise RobotDescriptionError(f"{name}: the URDF's joints form a loop")
+    root_link = link
+    path.reverse()
+
+    joints: list[Joint] = []
+    origins: dict[str, np.ndarray] = {}
+    T_acc = np.eye(4)
+    for el in path:
+        jname, jtype = el.get("name"), el.get("type")
+        origins[jname] = _origin(el.find("origin"), f"joint {jname}")
+        T_acc = T_acc @ origins[jname]
+        if jtype == "fixed":
+            continue
+        if jtype not in ("revolute", "continuous", "prismatic"):
+            raise RobotDescriptionError(f"{name}: joint {jname} has unsupported type {jtype!r}")
+        if el.find("mimic") is not None:
+            raise RobotDescriptionError(f"{name}: joint {jname} on the chain mimics another; not supported")
+        axis_el = el.find("axis")
+        # The URDF default axis is x.
+        axis = np.array(
+            _floats(None if axis_el is None else axis_el.get("xyz"), 3, 0.0, f"joint {jname} axis")
+        )
+        axis = np.array([1.0, 0.0, 0.0]) if axis_el is None else axis
+        norm = float(np.linalg.norm(axis))
+        if norm == 0.0:
+            raise RobotDescriptionError(f"{name}: joint {jname} has a zero axis")
+        limit = el.find("limit")
+        if jtype == "continuous":
+            lower, upper = -math.pi, math.pi
+        elif limit is None or limit.get("lower") is None or limit.get("upper") is None:
+            raise RobotDescriptionError(f"{name}: joint {jname} has no position limits")
+        else:
+            lower, upper = float(limit.get("lower")), float(limit.get("upper"))
+        velocity = float(limit.get("velocity", "inf")) if limit is not None else math.inf
+        joints.append(
+            Joint(
+                jname,
+                "prismatic" if jtype == "prismatic" else "revolute",
+                axis / norm,
+                T_acc,
+                lower,
+                upper,
+                velocity,
+            )
+        )
+        T_acc = np.eye(4)
+    if not joints:
+        raise RobotDescriptionError(f"{name}: no movable joint between the root and {ee_frame!r}")
+    return root_link, tuple(joints), T_acc, origins
+
+
+_CACHE: dict[tuple[str, str], Robot] = {}
+
+
+def load_robot(name_or_path: str | Path, ee_frame: str | None = None) -> Robot:
+    """Load a robot by name (see :data:`ROBOTS`) or from a URDF file path.
+
+    A URDF path needs ``ee_frame``, the name of the link that is the end effector. Named robots are
+    cached: loading the same one twice returns the same object.
+    """
+    key = (str(name_or_path), ee_frame or "")
+    if key in _CACHE:
+        return _CACHE[key]
+    text = str(name_or_path)
+    if text in ROBOTS:
+        spec = ROBOTS[text]
+        if spec.source == "file":
+            path = Path(spec.relpath)
+        else:
+            base = _bundled_dir() if spec.source == "bundled" else _example_robot_data_dir()
+            path = base / spec.relpath
+        if not path.is_file():
+            raise RobotDescriptionError(f"robot {text!r}: its URDF {path} is missing from the installation")
+        robot = Robot(text, path.read_bytes(), ee_frame or spec.ee_frame, path)
+    elif text.lower().endswith(".urdf") or Path(text).is_file():
+        path = Path(text)
+        if not path.is_file():
+            raise UnknownRobotError(f"no URDF file at {path}")
+        if ee_frame is None:
+            raise RobotDescriptionError(f"loading {path} needs ee_frame=<name of the end-effector link>")
+        robot = Robot(path.stem, path.read_bytes(), ee_frame, path)
+    else:
+        raise UnknownRobotError(
+            f"unknown robot {text!r}; valid names are {', '.join(available_robots())}, or a path to a .urdf file"
+        )
+    _CACHE[key] = robot
+    return robot

@@ -1,0 +1,540 @@
+"""The ``kinlearn`` command: babble, train the forward/inverse models, validate them.
+
+Every subcommand writes into a run directory (``--run-dir``, default ``runs/<time>-<command>``)
+holding ``config.json`` (the command, its arguments and the resolved configs) beside its outputs.
+A folder that already holds a run is written only with ``--resume`` (same configuration) or
+``--overwrite`` (see :mod:`kinlearn.runs`); nothing is written before every check has passed.
+Exit status: 0 done, 2 bad input or refused (``kinlearn <command>: error: …``), 130 interrupted
+(``kinlearn plan``: 1 when a plan misses its goal).
+
+New subcommands are added with :func:`register_subcommand`::
+
+    @register_subcommand
+    def _add_plan(sub):
+        p = add_command(sub, "plan", "Plan trajectories.", run=_run_plan)
+        ...
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import platform
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import torch
+
+from .. import __version__
+from ..body.robot import available_robots
+from ..data.babbling import BabblingConfig, babble, load_transitions, save_transitions
+from ..errors import ConfigError, KinlearnError
+from ..io import atomic_copy, atomic_write, file_sha256, read_json, write_json
+from ..models.forward_inverse import (
+    FM_PRESETS,
+    AnalyticFM,
+    AnalyticIM,
+    fm_config,
+    im_config,
+    load_fm,
+    load_im,
+)
+from ..runs import IGNORED_KEYS, Run, open_run
+from ..training.loop import (
+    TrainResult,
+    format_validation_table,
+    train_config,
+    train_fm,
+    train_im,
+    train_im_distal,
+    validate_models,
+)
+
+__all__ = [
+    "NONNEGATIVE_FLOAT",
+    "NONNEGATIVE_INT",
+    "POSITIVE_FLOAT",
+    "POSITIVE_INT",
+    "PROBABILITY",
+    "add_command",
+    "add_run_options",
+    "build_parser",
+    "main",
+    "number_type",
+    "open_command_run",
+    "register_subcommand",
+    "settle_run_dir",
+]
+
+#: Transitions babbled for training when no ``--data`` is given, per preset.
+DEFAULT_TRANSITIONS = {"paper": 500_000, "improved": 500_000, "tiny": 20_000}
+
+SubcommandAdder = Callable[[argparse._SubParsersAction], None]
+_SUBCOMMANDS: list[SubcommandAdder] = []
+
+
+def register_subcommand(add: SubcommandAdder) -> SubcommandAdder:
+    """Register a function that adds one subcommand to the parser (usable as a decorator)."""
+    _SUBCOMMANDS.append(add)
+    return add
+
+
+def number_type(
+    kind: type,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    open_low: bool = False,
+    open_high: bool = False,
+) -> Callable[[str], float]:
+    """An argparse ``type``: a finite ``int`` or ``float`` within ``[low, high]`` (ends open when asked),
+    rejected with a message that says what is allowed."""
+    noun = "an integer" if kind is int else "a finite number"
+    parts = []
+    if low is not None:
+        parts.append(f"{'>' if open_low else '≥'} {low:g}")
+    if high is not None:
+        parts.append(f"{'<' if open_high else '≤'} {high:g}")
+    allowed = f"{noun} {' and '.join(parts)}".strip()
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {allowed}, got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"expected {allowed}, got {text!r}")
+        too_low = low is not None and (value < low or (open_low and value == low))
+        too_high = high is not None and (value > high or (open_high and value == high))
+        if too_low or too_high:
+            raise argparse.ArgumentTypeError(f"expected {allowed}, got {text!r}")
+        return value
+
+    parse.__name__ = allowed
+    return parse
+
+
+POSITIVE_INT = number_type(int, low=1)
+NONNEGATIVE_INT = number_type(int, low=0)
+POSITIVE_FLOAT = number_type(float, low=0, open_low=True)
+NONNEGATIVE_FLOAT = number_type(float, low=0)
+PROBABILITY = number_type(float, low=0, high=1)
+
+
+def add_command(
+    sub: argparse._SubParsersAction,
+    name: str,
+    help: str,
+    run: Callable[[argparse.Namespace], int | None],
+    *,
+    seed: bool = True,
+    run_dir: bool = True,
+    seed_default: int = 0,
+) -> argparse.ArgumentParser:
+    """Add subcommand ``name`` with the options every subcommand has: robot, threads, and unless
+    turned off (a command that draws nothing at random or writes no run directory), seed and run dir."""
+    p = sub.add_parser(name, help=help, description=help)
+    p.add_argument("--robot", default="iiwa14", help=f"robot name ({', '.join(available_robots())})")
+    if seed:
+        p.add_argument(
+            "--seed",
+            type=int,
+            default=seed_default,
+            help=f"seed of everything random (default: {seed_default})",
+        )
+    if run_dir:
+        p.add_argument(
+            "--run-dir", type=Path, default=None, help="output folder (default: runs/<time>-<command>)"
+        )
+    p.add_argument(
+        "--threads",
+        type=POSITIVE_INT,
+        default=1,
+        help="torch CPU threads (default: 1, fastest for these small models)",
+    )
+    p.set_defaults(run=run, command=name)
+    return p
+
+
+def add_run_options(p: argparse.ArgumentParser, resumable: bool) -> None:
+    """``--overwrite`` (and ``--resume`` for a command that can continue a run): see :mod:`kinlearn.runs`."""
+    if resumable:
+        p.add_argument(
+            "--resume",
+            action="store_true",
+            help="continue the run in --run-dir from its last checkpoint; its configuration must be identical",
+        )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the run already in the output folder (its outputs are deleted first)",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every registered subcommand."""
+    _load_subcommand_modules()
+    parser = argparse.ArgumentParser(
+        prog="kinlearn", description="Learn robot kinematics and trajectory planning from motor babbling."
+    )
+    parser.add_argument("--version", action="version", version=f"kinlearn {__version__}")
+    sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
+    for add in _SUBCOMMANDS:
+        add(sub)
+    return parser
+
+
+def settle_run_dir(args: argparse.Namespace) -> Path:
+    """``args.run_dir``, set to a new ``runs/<time>-<command>`` when not given."""
+    if args.run_dir is None:
+        args.run_dir = Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.command}"
+    return args.run_dir
+
+
+def open_command_run(
+    args: argparse.Namespace,
+    outputs: Sequence[str],
+    *,
+    resumable: bool = False,
+    ignore: Sequence[str] = (),
+    **configs,
+) -> Run:
+    """Check ``args.run_dir`` (default: a new ``runs/<time>-<command>``) for this command under the
+    run-directory policy (:func:`kinlearn.runs.open_run`) with ``configs`` as its configuration;
+    writes nothing: call ``.begin()`` on the result once every other check has passed."""
+    settle_run_dir(args)
+    argv = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "run"}
+    versions = {"kinlearn": __version__, "torch": torch.__version__, "python": platform.python_version()}
+    return open_run(
+        args.run_dir,
+        command=args.command,
+        config=configs,
+        outputs=outputs,
+        resume=bool(getattr(args, "resume", False)),
+        overwrite=bool(getattr(args, "overwrite", False)),
+        resumable=resumable,
+        meta={"args": argv, "versions": versions},
+        ignore=(*IGNORED_KEYS, *ignore),
+    )
+
+
+def _file_identity(path: Path) -> dict:
+    """An input file as a run records it: its path and its content hash (compared on --resume)."""
+    return {"path": str(path), "sha256": file_sha256(path)}
+
+
+# --------------------------------------------------------------------------------------------------
+# babble
+# --------------------------------------------------------------------------------------------------
+
+
+def _add_babbling_options(p: argparse.ArgumentParser, transitions: int | None) -> None:
+    p.add_argument(
+        "--transitions",
+        type=POSITIVE_INT,
+        default=transitions,
+        help="transitions to babble (walkers × steps, rounded up to whole steps)",
+    )
+    p.add_argument(
+        "--walkers", type=POSITIVE_INT, default=1000, help="parallel random walkers (default: 1000)"
+    )
+    p.add_argument(
+        "--max-step",
+        type=POSITIVE_FLOAT,
+        default=0.083,
+        help="max joint change per step, rad (default: 0.083)",
+    )
+    p.add_argument(
+        "--retarget-prob",
+        type=PROBABILITY,
+        default=0.0,
+        help="per-step chance of a new joint target before the current one is reached (1 = new target every step)",
+    )
+
+
+def _babbling_config(args: argparse.Namespace, n: int) -> BabblingConfig:
+    return BabblingConfig.for_transitions(
+        n,
+        walkers=args.walkers,
+        robot=args.robot,
+        seed=args.seed,
+        max_step=args.max_step,
+        retarget_prob=args.retarget_prob,
+    )
+
+
+@register_subcommand
+def _add_babble(sub) -> None:
+    p = add_command(
+        sub, "babble", "Motor babbling: write (s, a, s') transitions to babbling.npz.", _run_babble
+    )
+    _add_babbling_options(p, 500_000)
+    add_run_options(p, resumable=False)
+
+
+def _run_babble(args: argparse.Namespace) -> int:
+    cfg = _babbling_config(args, args.transitions)
+    run_dir = open_command_run(args, ("babbling.npz",), babbling=cfg.to_dict()).begin()
+    t0 = time.perf_counter()
+    data = babble(cfg)
+    dt = time.perf_counter() - t0
+    path = save_transitions(data, run_dir / "babbling.npz")
+    print(f"{len(data):,} transitions of {cfg.robot} in {dt:.2f} s → {path}")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
+# train-fm / train-im
+# --------------------------------------------------------------------------------------------------
+
+
+def _add_train(sub, kind: str) -> None:
+    what = "forward" if kind == "fm" else "inverse"
+    p = add_command(
+        sub,
+        f"train-{kind}",
+        f"Train the learned {what} model on babbling data; writes {kind}.pt and metrics.jsonl.",
+        _run_train,
+    )
+    p.add_argument(
+        "--preset",
+        choices=sorted(FM_PRESETS),
+        default="paper",
+        help="model + training preset: paper (REFERENCE #5-6), improved, tiny (seconds; for tests)",
+    )
+    p.add_argument(
+        "--data", type=Path, default=None, help="babbling.npz to train on (default: babble afresh)"
+    )
+    _add_babbling_options(p, None)
+    if kind == "fm":
+        p.add_argument(
+            "--fk-hidden",
+            type=POSITIVE_INT,
+            nargs="+",
+            default=None,
+            metavar="WIDTH",
+            help="hidden widths of the FM's g, its learned forward kinematics (presets whose FM is in "
+            "difference form: improved; default 256 256 256)",
+        )
+    else:
+        p.add_argument(
+            "--hidden",
+            type=POSITIVE_INT,
+            nargs="+",
+            default=None,
+            metavar="WIDTH",
+            help="hidden widths of the IM (default: the preset's)",
+        )
+    p.add_argument("--epochs", type=POSITIVE_INT, default=None, help="override the preset's epochs")
+    p.add_argument(
+        "--lr", type=POSITIVE_FLOAT, default=None, help="override the preset's learning rate (> 0)"
+    )
+    p.add_argument("--batch-size", type=POSITIVE_INT, default=None, help="override the preset's batch size")
+    p.add_argument(
+        "--val-fraction",
+        type=number_type(float, low=0, high=1, open_high=True),
+        default=0.1,
+        help="held-out share of the data, in [0, 1) (default: 0.1)",
+    )
+    add_run_options(p, resumable=True)
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--validate",
+        type=NONNEGATIVE_INT,
+        default=100_000,
+        help="fresh transitions to validate on afterwards (0: skip)",
+    )
+    if kind == "im":
+        p.add_argument(
+            "--through-fm",
+            type=Path,
+            default=None,
+            help="after supervised training (in <run-dir>/supervised), refine the IM through this frozen "
+            "fm.pt so that its actions reach their targets (in <run-dir>/through-fm; see train_im_distal)",
+        )
+        p.add_argument("--through-fm-epochs", type=POSITIVE_INT, default=12, help="epochs of that refinement")
+        p.add_argument(
+            "--action-weight", type=NONNEGATIVE_FLOAT, default=0.01, help="pull toward the babbled action"
+        )
+    p.set_defaults(kind=kind)
+
+
+register_subcommand(lambda sub: _add_train(sub, "fm"))
+register_subcommand(lambda sub: _add_train(sub, "im"))
+
+
+def _run_train(args: argparse.Namespace) -> int:
+    kind = args.kind
+    # Every check first (configs, data, the frozen FM): nothing is written before they pass.
+    widths = {}
+    if kind == "fm" and args.fk_hidden is not None:
+        if FM_PRESETS[args.preset].get("ef_mode") != "difference":
+            raise ConfigError(
+                f"--fk-hidden sizes the difference-form FM's g; the {args.preset!r} FM has none"
+            )
+        widths["fk_hidden"] = tuple(args.fk_hidden)
+    if kind == "im" and args.hidden is not None:
+        widths["hidden"] = tuple(args.hidden)
+    model_cfg = (fm_config if kind == "fm" else im_config)(args.robot, args.preset, **widths)
+    overrides: dict = {"seed": args.seed, "val_fraction": args.val_fraction, "progress": not args.no_progress}
+    if args.epochs is not None:
+        overrides["epochs"] = args.epochs
+    if args.batch_size is not None:
+        overrides["batch_size"] = args.batch_size
+    cfg = train_config(kind, args.preset, **overrides)
+    if args.lr is not None:  # replace(): the new value is validated like any other
+        cfg = dataclasses.replace(cfg, optim=dataclasses.replace(cfg.optim, lr=args.lr))
+    configs: dict = {"model": model_cfg.to_dict(), "train": cfg.to_dict()}
+    data, bcfg = None, None
+    if args.data is not None:
+        data = load_transitions(args.data, robot=args.robot)
+        configs.update(data=_file_identity(args.data), babbling=data.config)
+    else:
+        bcfg = _babbling_config(args, args.transitions or DEFAULT_TRANSITIONS[args.preset])
+        configs["babbling"] = bcfg.to_dict()
+    through_fm = dcfg = None
+    if kind == "im" and args.through_fm is not None:
+        through_fm = load_fm(args.through_fm, robot=args.robot)
+        dcfg = train_config("im", args.preset, **{**overrides, "epochs": args.through_fm_epochs})
+        configs["through_fm"] = {
+            **_file_identity(args.through_fm),
+            "action_weight": args.action_weight,
+            "train": dcfg.to_dict(),
+        }
+    if args.validate > 0:
+        configs["validation"] = {"n": args.validate, "seed": args.seed + 10_000}
+    outputs = (f"{kind}.pt", "metrics.jsonl", "validation.json", "tensorboard")
+    if kind == "im":
+        outputs += ("supervised", "through-fm")
+    run = open_command_run(args, outputs, resumable=True, **configs)
+    run_dir = run.begin()
+
+    t0 = time.perf_counter()
+    if data is None:
+        data = babble(bcfg)
+    trainer = train_fm if kind == "fm" else train_im
+    # With a refinement stage, each stage keeps its own checkpoint (so that each resumes alone).
+    stage_dir = run_dir / "supervised" if through_fm is not None else run_dir
+    result = trainer(data, model_cfg, cfg, run_dir=stage_dir, resume=run.resumed)
+    if through_fm is not None:
+        distal = train_im_distal(
+            data,
+            result.model,
+            through_fm,
+            dcfg,
+            run_dir=run_dir / "through-fm",
+            resume=run.resumed,
+            action_weight=args.action_weight,
+        )
+        atomic_copy(distal.checkpoint, run_dir / "im.pt")
+        result = TrainResult(distal.model, result.history + distal.history, run_dir / "im.pt")
+    dt = time.perf_counter() - t0
+    last = result.history[-1] if result.history else {}
+    print(f"trained {kind.upper()} ({args.preset}) in {dt:.1f} s; last epoch: {last}")
+    print(f"checkpoint: {result.checkpoint}")
+    if args.validate > 0:
+        fm, im = (result.model, None) if kind == "fm" else (None, result.model)
+        res = validate_models(fm, im, args.robot, n=args.validate, seed=args.seed + 10_000)
+        res["train_wall_s"] = dt
+        write_json(run_dir / "validation.json", res)
+        print(format_validation_table(res))
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
+# validate
+# --------------------------------------------------------------------------------------------------
+
+
+@register_subcommand
+def _add_validate(sub) -> None:
+    p = add_command(
+        sub,
+        "validate",
+        "Validate FM/IM checkpoints against the analytic robot on fresh babbling data.",
+        _run_validate,
+        seed_default=10_000,  # not the training data's seed (0): fresh transitions
+    )
+    p.add_argument("--fm", default=None, help="FM checkpoint (.pt), or 'analytic'")
+    p.add_argument("--im", default=None, help="IM checkpoint (.pt), or 'analytic'")
+    p.add_argument("--n", type=POSITIVE_INT, default=100_000, help="fresh transitions (default: 100000)")
+    p.add_argument(
+        "--max-step", type=POSITIVE_FLOAT, default=0.083, help="babbling step bound, rad (default: 0.083)"
+    )
+    p.add_argument("--retarget-prob", type=PROBABILITY, default=0.0, help="babbling retarget probability")
+    p.add_argument("--im-iterations", type=POSITIVE_INT, default=1, help="DLS iterations of the analytic IM")
+    add_run_options(p, resumable=False)
+
+
+def _run_validate(args: argparse.Namespace) -> int:
+    if args.fm is None and args.im is None:
+        raise KinlearnError("give --fm and/or --im (a checkpoint path or 'analytic')")
+    fm = None
+    if args.fm is not None:
+        fm = AnalyticFM(args.robot) if args.fm == "analytic" else load_fm(args.fm, robot=args.robot)
+    im = None
+    if args.im is not None:
+        im = (
+            AnalyticIM(args.robot, iterations=args.im_iterations)
+            if args.im == "analytic"
+            else load_im(args.im, robot=args.robot)
+        )
+    models = {
+        name: path if path in (None, "analytic") else _file_identity(Path(path))
+        for name, path in (("fm", args.fm), ("im", args.im))
+    }
+    settings = {k: getattr(args, k) for k in ("n", "seed", "max_step", "retarget_prob", "im_iterations")}
+    run = open_command_run(args, ("validation.json", "validation.md"), validate={**models, **settings})
+    run_dir = run.begin()
+    res = validate_models(
+        fm, im, args.robot, n=args.n, seed=args.seed, max_step=args.max_step, retarget_prob=args.retarget_prob
+    )
+    for name, path in (("fm", args.fm), ("im", args.im)):
+        if path not in (None, "analytic") and Path(path).with_name("config.json").is_file():
+            res[f"{name}_run_config"] = read_json(Path(path).with_name("config.json"))
+    write_json(run_dir / "validation.json", res)
+    table = format_validation_table(res)
+    atomic_write(run_dir / "validation.md", lambda p: p.write_text(table + "\n"))
+    print(table)
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
+
+
+#: Modules holding further subcommands, imported when the parser is built (not when this module is
+#: imported: they import this module's helpers, so importing them here would be a circle).
+SUBCOMMAND_MODULES = ("planning", "body", "view")
+
+
+def _load_subcommand_modules() -> None:
+    import importlib
+
+    for name in SUBCOMMAND_MODULES:
+        module = importlib.import_module(f".{name}", __package__)
+        register = getattr(module, "register", None)
+        if register is not None and register not in _SUBCOMMANDS:
+            register_subcommand(register)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``kinlearn`` command; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)  # bad options: a usage message and exit status 2
+    torch.set_num_threads(args.threads)
+    try:
+        return int(args.run(args) or 0)
+    except KinlearnError as exc:
+        print(f"kinlearn {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        hint = " (continue it with --resume)" if "resume" in vars(args) else ""
+        print(f"kinlearn {args.command}: interrupted{hint}", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""What the robot experiences: motor babbling and endpoint pairs."""

@@ -1,0 +1,1 @@
+"""Evaluation: metrics, the workspace and obstacle benchmarks, figures, the paper reproduction."""

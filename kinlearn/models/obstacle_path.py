@@ -1,0 +1,252 @@
+"""The obstacle-aware trajectory model: joint paths around obstacles, several candidates per problem.
+
+The joint-path TM (:mod:`kinlearn.models.joint_path`) bends the straight joint line with a few sine modes per
+joint; this model does the same, but it also sees the obstacles and proposes ``candidates`` paths at
+once, each its own set of mode coefficients. The planner checks them (and the straight line) against
+the scene and keeps a collision-free one, so a plan costs one network pass and a bounded number of
+path checks whatever the problem: a fixed, small time.
+
+The scene enters as a set. Every primitive (a sphere or an axis-aligned box) becomes a row of
+features: its centre, its half extents (a sphere's radius three times), whether it is a sphere, and
+its centre relative to the start's and the goal's end effector. A small network maps each row to an
+embedding and a masked max over the rows pools them (a PointNet-style set encoder), so scenes of any
+number of primitives give an input of one size; a floor plane enters as its height and a flag. The
+trunk, an MLP over the problem's features and the pooled scene, emits the candidates' coefficients.
+
+Trained self-supervised (:mod:`kinlearn.training.obstacle_path`): no planner shows it a path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import torch
+from torch import nn
+
+from ..body.state import StateLayout
+from ..collision.scene import Scene
+from ..errors import CheckpointError, ConfigError
+from ..io import load_checkpoint, save_checkpoint
+from .joint_path import RobotModelConfig, mlp_layers, register_path_buffers
+
+__all__ = [
+    "PRIMITIVE_FEATURES",
+    "ObstaclePathConfig",
+    "ObstaclePathModel",
+    "export_obstacle_model",
+    "load_obstacle_model",
+    "save_obstacle_model",
+    "scene_primitives",
+]
+
+#: Features per scene primitive: centre (3), half extents (3), is-sphere (1), centre − ef(0) (3),
+#: centre − ef(T) (3).
+PRIMITIVE_FEATURES = 13
+
+
+@dataclass(frozen=True)
+class ObstaclePathConfig(RobotModelConfig):
+    """Architecture of the obstacle-aware TM.
+
+    ``steps``: T (T − 1 intermediate knots). ``modes``: sine modes per joint and candidate.
+    ``candidates``: paths proposed per problem. ``encoder``: widths of the per-primitive network (the
+    last is the pooled scene embedding's size). ``hidden``: widths of the trunk. ``lower``/``upper``:
+    the joint limits (filled by :meth:`for_robot`).
+    """
+
+    robot: str = "iiwa14"
+    dof: int = 7
+    steps: int = 11
+    modes: int = 6
+    candidates: int = 6
+    encoder: tuple[int, ...] = (64, 128)
+    hidden: tuple[int, ...] = (256, 256, 256)
+    activation: Literal["tanh", "silu"] = "silu"
+    lower: tuple[float, ...] = ()
+    upper: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        for name in ("steps", "dof", "modes", "candidates"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ConfigError(f"{name} must be a positive integer, got {v!r}")
+        if self.steps < 2:
+            raise ConfigError(f"steps (T) must be ≥ 2, got {self.steps}")
+        for name in ("encoder", "hidden"):
+            widths = getattr(self, name)
+            if not widths or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in widths):
+                raise ConfigError(f"{name} must be a non-empty tuple of positive widths, got {widths!r}")
+        if self.activation not in ("tanh", "silu"):
+            raise ConfigError(f"activation must be 'tanh' or 'silu', got {self.activation!r}")
+        self._check_limits()
+
+
+def scene_primitives(
+    scene: Scene, batch: int, dtype=torch.float32
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """A scene as the model's set input for ``batch`` problems.
+
+    Returns ``rows (batch, P, 7)`` [centre, half extents, is-sphere] (spheres first, then boxes),
+    ``mask (batch, P)`` (False for padding) and ``floor (batch, 2)`` [has floor, height]. The scene's
+    batch shape must be ``()`` or ``(batch,)``.
+    """
+    if scene.batch_shape not in ((), (batch,)):
+        raise ConfigError(
+            f"the scene's batch shape {tuple(scene.batch_shape)} must be () or ({batch},) for {batch} problems"
+        )
+    s = scene.spheres.to(dtype).expand(batch, *scene.spheres.shape[-2:])
+    b = scene.boxes.to(dtype).expand(batch, *scene.boxes.shape[-2:])
+    sph = torch.cat((s[..., :3], s[..., 3:4].expand(*s.shape[:-1], 3), torch.ones_like(s[..., :1])), -1)
+    box = torch.cat((b[..., :3], b[..., 3:6], torch.zeros_like(b[..., :1])), -1)
+    rows = torch.cat((sph, box), dim=1)
+
+    def mask_of(m, t):
+        if m is None:
+            return torch.ones(batch, t.shape[-2], dtype=torch.bool, device=t.device)
+        return m.expand(batch, t.shape[-2])
+
+    mask = torch.cat((mask_of(scene.sphere_mask, s), mask_of(scene.box_mask, b)), dim=1)
+    if scene.floor is None:
+        floor = torch.zeros(batch, 2, dtype=dtype, device=rows.device)
+    else:
+        h = scene.floor.to(dtype).expand(batch)
+        floor = torch.stack((torch.ones_like(h), h), dim=-1)
+    return rows, mask, floor
+
+
+class ObstaclePathModel(nn.Module):
+    """``forward(s0 (N, S), sT (N, S), rows, mask, floor) -> joints (N, C, T − 1, dof)``: the
+    candidates' intermediate knots (not clamped). See the module docstring."""
+
+    kind = "tm-obstacle-path"
+
+    def __init__(self, config: ObstaclePathConfig):
+        super().__init__()
+        self.config = config
+        self.layout = StateLayout(config.dof)
+        dof = config.dof
+        self.encoder = nn.Sequential(*mlp_layers((PRIMITIVE_FEATURES, *config.encoder), config.activation))
+        n_in = self.n_problem_features + config.encoder[-1]
+        out = nn.Linear(config.hidden[-1], config.candidates * config.modes * dof)
+        gen = torch.Generator().manual_seed(0)
+        with torch.no_grad():
+            # Small weights, and each candidate a different fixed bend to start from: candidates that
+            # start equal would stay equal under a winner-takes-all loss.
+            out.weight.mul_(0.01)
+            out.bias.copy_(0.15 * torch.randn(out.bias.shape, generator=gen))
+            out.bias.view(config.candidates, config.modes, dof)[0].zero_()
+        # The trunk's hidden layers are made after its output layer (the order the shipped model was
+        # initialised in).
+        self.trunk = nn.Sequential(*mlp_layers((n_in, *config.hidden), config.activation), out)
+        register_path_buffers(self, config)
+        self.register_buffer("in_mean", torch.zeros(self.n_problem_features))
+        self.register_buffer("in_std", torch.ones(self.n_problem_features))
+        self.register_buffer("prim_mean", torch.zeros(PRIMITIVE_FEATURES))
+        self.register_buffer("prim_std", torch.ones(PRIMITIVE_FEATURES))
+
+    @property
+    def robot_name(self) -> str:
+        return self.config.robot
+
+    @property
+    def n_problem_features(self) -> int:
+        """[s(0), s(T), θ(T) − θ(0), has floor, floor height]."""
+        return 2 * self.layout.size + self.config.dof + 2
+
+    def problem_features(self, s0: torch.Tensor, sT: torch.Tensor, floor: torch.Tensor) -> torch.Tensor:
+        J = self.layout.joints
+        return torch.cat((s0, sT, sT[:, J] - s0[:, J], floor), dim=-1)
+
+    def primitive_features(self, rows: torch.Tensor, s0: torch.Tensor, sT: torch.Tensor) -> torch.Tensor:
+        E = self.layout.ef
+        c = rows[..., :3]
+        return torch.cat((rows, c - s0[:, None, E], c - sT[:, None, E]), dim=-1)
+
+    @torch.no_grad()
+    def fit_normalization(self, s0, sT, rows, mask, floor) -> None:
+        """Standardise problem and primitive features with statistics of training problems."""
+        x = self.problem_features(s0.double(), sT.double(), floor.double())
+        self.in_mean.copy_(x.mean(0))
+        self.in_std.copy_(x.std(0).clamp_min(1e-3))
+        p = self.primitive_features(rows.double(), s0.double(), sT.double())[mask]
+        self.prim_mean.copy_(p.mean(0))
+        self.prim_std.copy_(p.std(0).clamp_min(1e-3))
+        self.prim_mean[6], self.prim_std[6] = 0.0, 1.0  # the is-sphere flag stays 0/1
+
+    def scene_embedding(self, s0, sT, rows, mask) -> torch.Tensor:
+        """``(N, encoder[-1])``: the masked max over the primitives' embeddings (zeros for no primitive)."""
+        if rows.shape[1] == 0:
+            return s0.new_zeros(s0.shape[0], self.config.encoder[-1])
+        h = self.encoder((self.primitive_features(rows, s0, sT) - self.prim_mean) / self.prim_std)
+        h = torch.where(mask[..., None], h, torch.full_like(h, -torch.inf)).amax(dim=1)
+        return torch.where(torch.isfinite(h), h, torch.zeros_like(h))
+
+    def coefficients(self, s0, sT, rows, mask, floor) -> torch.Tensor:
+        """``(N, C, modes, dof)``: each candidate's sine-mode coefficients."""
+        c = self.config
+        x = (self.problem_features(s0, sT, floor) - self.in_mean) / self.in_std
+        y = self.trunk(torch.cat((x, self.scene_embedding(s0, sT, rows, mask)), dim=-1))
+        return y.view(-1, c.candidates, c.modes, c.dof)
+
+    def forward(self, s0, sT, rows, mask, floor) -> torch.Tensor:
+        J = self.layout.joints
+        coef = self.coefficients(s0, sT, rows, mask, floor)
+        theta0, thetaT = s0[:, None, None, J], sT[:, None, None, J]
+        line = theta0 + self.fractions[:, None] * (thetaT - theta0)  # (N, 1, T − 1, dof)
+        return line + self.half_range * (self.basis @ coef)
+
+
+def save_obstacle_model(
+    tm: ObstaclePathModel, path: str | Path, extra: dict | None = None, depends: dict | None = None
+) -> Path:
+    """Save an obstacle-aware TM: weights, its config, robot and format version (atomically)."""
+    return save_checkpoint(
+        path,
+        kind=ObstaclePathModel.kind,
+        robot=tm.robot_name,
+        config=tm.config.to_dict(),
+        state_dict=tm.state_dict(),
+        extra=extra or {},
+        depends=depends,
+    )
+
+
+def load_obstacle_model(path: str | Path, robot: str | None = None) -> ObstaclePathModel:
+    """Load a model saved by :func:`save_obstacle_model` (training state, if any, is ignored)."""
+    payload = load_checkpoint(path, kind=ObstaclePathModel.kind, robot=robot)
+    try:
+        tm = ObstaclePathModel(ObstaclePathConfig.from_dict(payload["config"]))
+        tm.load_state_dict(payload["state_dict"])
+    except (TypeError, KeyError, RuntimeError, ConfigError) as exc:
+        raise CheckpointError(
+            f"{path}: the obstacle TM checkpoint does not match this kinlearn ({exc})"
+        ) from exc
+    return tm.eval()
+
+
+def export_obstacle_model(src: str | Path, dst: str | Path, half: bool = True) -> Path:
+    """Copy a trained model's weights and config from ``src`` to ``dst``, without its training state.
+
+    ``half``: store the weights as float16 (half the size; they load back into float32, changing the
+    plans by rounding only). The exported file is what is judged: measure the exported planner."""
+    payload = load_checkpoint(src, kind=ObstaclePathModel.kind)
+    load_obstacle_model(src)  # it must load
+    state = {
+        k: v.half() if half and v.is_floating_point() and k not in _EXACT_BUFFERS else v
+        for k, v in payload["state_dict"].items()
+    }
+    return save_checkpoint(
+        dst,
+        kind=ObstaclePathModel.kind,
+        robot=payload["robot"],
+        config=payload["config"],
+        state_dict=state,
+    )
+
+
+#: Buffers kept at full precision on export (limits and standardisation: small, and exactness matters).
+_EXACT_BUFFERS = frozenset(
+    {"lower", "upper", "half_range", "fractions", "in_mean", "in_std", "prim_mean", "prim_std"}
+)

@@ -1,0 +1,1 @@
+"""Planning: the planner, its plans, NumPy inference, baselines, time parameterisation."""

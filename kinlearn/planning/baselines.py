@@ -1,0 +1,262 @@
+"""Planners that learn nothing, for comparison with the learned trajectory model.
+
+Each takes a batch of start and goal states ``(..., dof + 3)`` (s = [θ, ef], see
+:class:`~kinlearn.body.state.StateLayout`) and returns a :class:`~kinlearn.planning.plan.Plan` of ``steps`` steps,
+so the same metrics (:mod:`kinlearn.evaluation.metrics`) apply to all of them:
+
+- :func:`joint_interpolation`: θ moves on a straight line in joint space. Fixed time, always within
+  the limits, ends exactly at θ(T); the end effector follows a curve.
+- :func:`cartesian_dls`: the end effector is sent along the straight line from ef(s(0)) to ef(s(T))
+  by damped-least-squares IK on the robot's exact kinematics. Perfect on the paper's geometric
+  metrics by construction (its waypoints *are* the line); what it reveals is whether the joints can
+  follow, through the executed path and the goal error. It ends at *an* IK solution for the goal
+  position, not necessarily at θ(T).
+- :func:`rrt_connect`: OMPL's RRT-Connect in joint space (optional dependency ``ompl``).
+
+None of them knows about obstacles; neither does the learned planner.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from ..body.kinematics import dls_step, kinematics
+from ..body.robot import Robot, check_finite, check_last_dim
+from ..body.state import StateLayout
+from ..errors import ConfigError, MissingDependencyError, PlanningError, ShapeError
+from .plan import Plan
+
+__all__ = [
+    "PlanningError",
+    "cartesian_dls",
+    "joint_interpolation",
+    "rrt_connect",
+    "rrt_connect_timed",
+]
+
+
+def _endpoints(robot: Robot, start: torch.Tensor, goal: torch.Tensor, steps: int) -> StateLayout:
+    layout = StateLayout(robot.dof)
+    check_last_dim(start, layout.size, "start states")
+    check_last_dim(goal, layout.size, "goal states")
+    if start.shape != goal.shape:
+        raise ShapeError(
+            f"start and goal states must have the same shape, got {tuple(start.shape)} and {tuple(goal.shape)}"
+        )
+    check_finite(start, "start states")
+    check_finite(goal, "goal states")
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 2:
+        raise ConfigError(
+            f"steps must be an integer >= 2 (at least one intermediate waypoint), got {steps!r}"
+        )
+    return layout
+
+
+def _plan_from_joints(robot: Robot, start, goal, joints: torch.Tensor, waypoints=None) -> Plan:
+    """A Plan whose joint path is ``joints (..., T+1, dof)``, judged against the goal state (joints and
+    end effector); waypoints default to its interior FK points."""
+    ef = kinematics(robot, "fast").position(joints, validate=False)
+    lo, hi = robot.limits(joints.dtype, joints.device)
+    within = ((joints >= lo - 1e-6) & (joints <= hi + 1e-6)).flatten(-2).all(-1)
+    return Plan.from_joints(goal, joints, ef, waypoints=waypoints, within_limits=within, robot=robot.name)
+
+
+def _fractions(steps: int, like: torch.Tensor) -> torch.Tensor:
+    """k / T for k = 0 … T, shaped ``(T+1, 1)`` to broadcast against ``(..., 1, n)``."""
+    return torch.linspace(0.0, 1.0, steps + 1, dtype=like.dtype, device=like.device).unsqueeze(-1)
+
+
+@torch.no_grad()
+def joint_interpolation(robot: Robot, start: torch.Tensor, goal: torch.Tensor, steps: int = 11) -> Plan:
+    """Joint-space linear interpolation: θ(k) = θ(0) + (k/T)(θ(T) − θ(0)), k = 0 … T.
+
+    Waypoints are the end-effector positions (exact FK) of the interior configurations, so the
+    executed path passes exactly through them and ends at FK(θ(T)).
+    """
+    layout = _endpoints(robot, start, goal, steps)
+    theta0, _ = layout.split(start)
+    thetaT, _ = layout.split(goal)
+    joints = theta0.unsqueeze(-2) + _fractions(steps, start) * (thetaT - theta0).unsqueeze(-2)
+    return _plan_from_joints(robot, start, goal, joints)
+
+
+@torch.no_grad()
+def cartesian_dls(
+    robot: Robot,
+    start: torch.Tensor,
+    goal: torch.Tensor,
+    steps: int = 11,
+    iterations: int = 20,
+    damping: float = 1e-2,
+) -> Plan:
+    """A straight Cartesian line of the end effector, followed by damped-least-squares IK.
+
+    The waypoints are the line's interior points x(k) = ef(0) + (k/T)(ef(T) − ef(0)), with ef(0), ef(T)
+    the end-effector parts of the start and goal states. θ(0) is the start's joints; each later
+    θ(k) is ``iterations`` DLS steps (:func:`~kinlearn.body.kinematics.dls_step`, damping λ in metres,
+    clamped to the joint limits) towards x(k), warm-started from θ(k−1). ``plan.joints`` is that IK
+    path and ``plan.ef`` its true FK.
+
+    Caveats: the line may leave the workspace or pass where the arm cannot follow it within its
+    joint limits, and DLS gets stuck near singularities: then the executed path leaves the line
+    and the goal error (see :func:`~kinlearn.evaluation.metrics.plan_metrics`) shows by how much. θ(T) of the
+    goal state is not used: the path ends at whatever IK solution the warm start leads to.
+    """
+    layout = _endpoints(robot, start, goal, steps)
+    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+        raise ConfigError(f"iterations must be an integer >= 1, got {iterations!r}")
+    if not damping > 0.0:
+        raise ConfigError(f"damping must be > 0 (metres), got {damping!r}")
+    kin = kinematics(robot, "fast")
+    theta, ef0 = layout.split(start)
+    _, efT = layout.split(goal)
+    line = ef0.unsqueeze(-2) + _fractions(steps, start) * (efT - ef0).unsqueeze(-2)  # (..., T+1, 3)
+    path = [theta]
+    for k in range(1, steps + 1):
+        theta = dls_step(kin, theta, line[..., k, :], iterations=iterations, damping=damping, clamp=True)
+        path.append(theta)
+    return _plan_from_joints(robot, start, goal, torch.stack(path, dim=-2), waypoints=line[..., 1:-1, :])
+
+
+# --------------------------------------------------------------------------------------------------
+# OMPL RRT-Connect
+# --------------------------------------------------------------------------------------------------
+
+
+def _import_ompl():
+    try:
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
+    except ImportError as exc:
+        raise MissingDependencyError(
+            "rrt_connect needs OMPL's Python bindings, which are not installed: "
+            "`pip install ompl` (or `pip install kinlearn[ompl]`)"
+        ) from exc
+    return ob, og, ou
+
+
+def _resample(vertices: np.ndarray, count: int) -> np.ndarray:
+    """``count`` points evenly spaced by arc length along the polyline ``vertices (M, n)``."""
+    seg = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
+    cum = np.concatenate(([0.0], np.cumsum(seg)))
+    if cum[-1] <= 0.0:
+        return np.repeat(vertices[:1], count, axis=0)
+    targets = np.linspace(0.0, cum[-1], count)
+    return np.stack([np.interp(targets, cum, vertices[:, j]) for j in range(vertices.shape[1])], axis=1)
+
+
+def rrt_connect_timed(
+    robot: Robot,
+    start: torch.Tensor,
+    goal: torch.Tensor,
+    steps: int = 11,
+    time_limit: float = 1.0,
+    seed: int | None = 0,
+    simplify: bool = False,
+) -> tuple[Plan, torch.Tensor]:
+    """:func:`rrt_connect`, also returning each query's planning time in seconds ``(...)`` (float64, CPU).
+
+    A query's time is the wall time of everything done for it: setting the start and goal, OMPL's
+    ``solve``, the optional simplification, reading the path back and resampling it.
+    """
+    layout = _endpoints(robot, start, goal, steps)
+    if not time_limit > 0.0:
+        raise ConfigError(f"time_limit must be > 0 seconds, got {time_limit!r}")
+    ob, og, ou = _import_ompl()
+    theta0, _ = layout.split(start)
+    thetaT, _ = layout.split(goal)
+    robot.check_joints(theta0, what="start joints")
+    robot.check_joints(thetaT, what="goal joints")
+    batch = start.shape[:-1]
+    lo, hi = robot.lower, robot.upper
+    q0 = np.clip(theta0.detach().reshape(-1, robot.dof).double().cpu().numpy(), lo, hi)
+    qT = np.clip(thetaT.detach().reshape(-1, robot.dof).double().cpu().numpy(), lo, hi)
+
+    previous_level = ou.getLogLevel()
+    ou.setLogLevel(ou.LOG_NONE)  # OMPL logs every query at INFO level, and warns on re-seeding
+    try:
+        if seed is not None:
+            ou.RNG.setSeed(int(seed))
+        space = ob.RealVectorStateSpace(robot.dof)
+        bounds = ob.RealVectorBounds(robot.dof)
+        for j in range(robot.dof):
+            bounds.setLow(j, float(lo[j]))
+            bounds.setHigh(j, float(hi[j]))
+        space.setBounds(bounds)
+        setup = og.SimpleSetup(space)
+        info = setup.getSpaceInformation()
+        setup.setStateValidityChecker(ob.AllValidStateValidityChecker(info))
+        setup.setPlanner(og.RRTConnect(info))
+        s, g = space.allocState(), space.allocState()
+        paths = np.empty((q0.shape[0], steps + 1, robot.dof))
+        times = np.empty(q0.shape[0])
+        for i in range(q0.shape[0]):
+            t0 = time.perf_counter()
+            for j in range(robot.dof):
+                s[j] = float(q0[i, j])
+                g[j] = float(qT[i, j])
+            setup.clear()
+            setup.setStartAndGoalStates(s, g)
+            # A termination condition without a checking interval is tested inline by the planner;
+            # ``solve(seconds)`` would start a watchdog thread per query, whose scheduling under
+            # load adds milliseconds to a query that takes microseconds.
+            setup.solve(ob.timedPlannerTerminationCondition(float(time_limit)))
+            if not setup.haveExactSolutionPath():
+                raise PlanningError(
+                    f"RRT-Connect found no exact path for query {i} within time_limit={time_limit} s; "
+                    "raise time_limit"
+                )
+            if simplify:
+                setup.simplifySolution()
+            path = setup.getSolutionPath()
+            vertices = np.array(
+                [[path.getState(k)[j] for j in range(robot.dof)] for k in range(path.getStateCount())]
+            )
+            vertices[0], vertices[-1] = q0[i], qT[i]
+            paths[i] = _resample(vertices, steps + 1)
+            times[i] = time.perf_counter() - t0
+    finally:
+        ou.setLogLevel(previous_level)
+
+    joints = torch.as_tensor(paths, dtype=start.dtype, device=start.device).reshape(
+        *batch, steps + 1, robot.dof
+    )
+    # Pin the endpoints to the given joints exactly (resampling in float64 keeps them; the cast may not).
+    joints = torch.cat((theta0.unsqueeze(-2), joints[..., 1:-1, :], thetaT.unsqueeze(-2)), dim=-2)
+    plan = _plan_from_joints(robot, start, goal, joints.detach())
+    return plan, torch.as_tensor(times, dtype=torch.float64).reshape(batch)
+
+
+def rrt_connect(
+    robot: Robot,
+    start: torch.Tensor,
+    goal: torch.Tensor,
+    steps: int = 11,
+    time_limit: float = 1.0,
+    seed: int | None = 0,
+    simplify: bool = False,
+) -> Plan:
+    """OMPL RRT-Connect in joint space from θ(0) to θ(T), one query at a time, resampled to ``steps`` steps.
+
+    The planner searches the box of the joint limits with every state valid (no obstacles, no self
+    collision). Its path (a few straight joint-space segments through random tree vertices) is
+    resampled to ``steps + 1`` configurations evenly spaced by joint-space arc length, so the corners
+    at the tree vertices may be cut; it starts at θ(0) and ends at θ(T) exactly. With ``simplify`` OMPL
+    shortens the path first, which without obstacles gives the straight segment, i.e.
+    :func:`joint_interpolation`. Waypoints are the FK of the interior configurations.
+
+    Honest caveat: **without obstacles RRT-Connect is trivial**: the two trees connect after one or two
+    extensions, a query takes tens of microseconds, and its path is a random detour of joint
+    interpolation. It is a fair baseline for planning *time* (and its tail) only alongside this
+    statement; its time would grow with obstacles, which no planner in kinlearn models.
+
+    ``seed`` seeds OMPL's process-wide random generator before planning, which makes a call
+    reproducible (``None`` leaves it alone). Raises :class:`MissingDependencyError` without ``ompl``
+    and :class:`PlanningError` if a query finds no path within ``time_limit`` seconds. Use
+    :func:`rrt_connect_timed` to get the per-query planning times as well.
+    """
+    return rrt_connect_timed(robot, start, goal, steps, time_limit, seed, simplify)[0]

@@ -1,0 +1,243 @@
+"""The result of planning, shared by the learned planner and the baselines, with its verified outcome."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import torch
+
+from ..errors import ConfigError, ShapeError
+
+__all__ = ["DEFAULT_TOLERANCE", "Plan", "Tolerance"]
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """When a plan counts as reaching its goal: the end effector within ``position`` metres of the
+    target and, for a goal given as joints, every joint within ``joints`` radians of the goal's."""
+
+    position: float = 0.01
+    joints: float = 0.05
+
+
+#: The tolerance plans are judged with unless told otherwise (1 cm, 0.05 rad).
+DEFAULT_TOLERANCE = Tolerance()
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A batch of planned trajectories with T steps (T + 1 configurations, T − 1 intermediate waypoints).
+
+    Attributes (leading batch dimensions ``...`` as in the planner's input):
+        goal: ``(..., dof + 3)`` the goal state s(T). For a goal given as an end-effector position, the
+            state the planner chose to reach it.
+        waypoints: ``(..., T - 1, 3)`` the planner's end-effector waypoints ŝ(1) … ŝ(T−1).
+        joints: ``(..., T + 1, dof)`` the joint path (joints[..., 0, :] = θ(0)). Executing it means
+            moving linearly in joint space between consecutive configurations.
+        ef: ``(..., T + 1, 3)`` the joint path's true end-effector positions by analytic FK.
+        target: ``(..., 3)`` the end-effector position asked for.
+        goal_error: ``(...)`` ‖ef at the last configuration − target‖ (m), verified by the FK.
+        joint_error: ``(...)`` max over joints of |θ at the last configuration − θ of the goal| (rad);
+            NaN where the goal was a position only.
+        success: ``(...)`` bool: ``goal_error ≤ tolerance.position`` and (joint goals)
+            ``joint_error ≤ tolerance.joints``; every configuration is within the joint limits.
+        tolerance: the :class:`Tolerance` used.
+        robot: the name of the robot the plan is for (lets :meth:`timed`, :meth:`show` and
+            :meth:`animate` find its limits and geometry).
+        collision_free: ``(...)`` bool where the plan was made among obstacles: no configuration of the
+            joint path, checked densely (at most 1 cm of body-sphere travel between checked
+            configurations, :func:`kinlearn.collision.check_path`), touches the scene or itself;
+            ``success`` then requires it. ``None`` where no obstacles were given (not checked).
+
+    Derived: ``start`` ``(..., dof + 3)`` the start state [θ(0), ef(0)]; ``actions`` ``(..., T, dof)`` the
+    joint changes a(0) … a(T−1).
+    """
+
+    goal: torch.Tensor
+    waypoints: torch.Tensor
+    joints: torch.Tensor
+    ef: torch.Tensor
+    target: torch.Tensor
+    goal_error: torch.Tensor
+    joint_error: torch.Tensor
+    success: torch.Tensor
+    tolerance: Tolerance = DEFAULT_TOLERANCE
+    robot: str | None = None
+    collision_free: torch.Tensor | None = None
+
+    #: Fields holding per-plan tensors, indexed with the batch (``collision_free`` too, where set).
+    _BATCHED = (
+        "goal",
+        "waypoints",
+        "joints",
+        "ef",
+        "target",
+        "goal_error",
+        "joint_error",
+        "success",
+        "collision_free",
+    )
+
+    @classmethod
+    def from_joints(
+        cls,
+        goal: torch.Tensor,
+        joints: torch.Tensor,
+        ef: torch.Tensor,
+        *,
+        waypoints: torch.Tensor | None = None,
+        target: torch.Tensor | None = None,
+        joint_goal: bool = True,
+        within_limits: torch.Tensor | None = None,
+        tolerance: Tolerance = DEFAULT_TOLERANCE,
+        robot: str | None = None,
+    ) -> Plan:
+        """A plan of the joint path ``joints (..., T+1, dof)`` whose true end effector is ``ef (..., T+1, 3)``.
+
+        ``waypoints`` default to the end effector of the interior configurations; ``target`` to the
+        goal state's end effector. ``joint_goal``: whether the goal's joints must be reached too.
+        ``within_limits (...)``: where the path is known to stay within the joint limits (default: all).
+        """
+        dof = joints.shape[-1]
+        if target is None:
+            target = goal[..., dof:]
+        goal_error = torch.linalg.vector_norm(ef[..., -1, :] - target, dim=-1)
+        if joint_goal:
+            joint_error = (joints[..., -1, :] - goal[..., :dof]).abs().amax(-1)
+            ok = (goal_error <= tolerance.position) & (joint_error <= tolerance.joints)
+        else:
+            joint_error = torch.full_like(goal_error, float("nan"))
+            ok = goal_error <= tolerance.position
+        if within_limits is not None:
+            ok = ok & within_limits
+        return cls(
+            goal=goal,
+            waypoints=ef[..., 1:-1, :] if waypoints is None else waypoints,
+            joints=joints,
+            ef=ef,
+            target=target,
+            goal_error=goal_error,
+            joint_error=joint_error,
+            success=ok,
+            tolerance=tolerance,
+            robot=robot,
+        )
+
+    @property
+    def start(self) -> torch.Tensor:
+        """``(..., dof + 3)`` the start state [θ(0), ef(0)]."""
+        return torch.cat((self.joints[..., 0, :], self.ef[..., 0, :]), dim=-1)
+
+    @property
+    def actions(self) -> torch.Tensor:
+        """``(..., T, dof)`` the joint changes a(t) = θ(t + 1) − θ(t)."""
+        return self.joints[..., 1:, :] - self.joints[..., :-1, :]
+
+    @property
+    def steps(self) -> int:
+        """T, the number of steps."""
+        return self.joints.shape[-2] - 1
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        """The leading batch dimensions (``()`` for a single plan)."""
+        return tuple(self.goal.shape[:-1])
+
+    def __len__(self) -> int:
+        if not self.batch_shape:
+            raise TypeError("a single plan (no batch dimension) has no len()")
+        return self.batch_shape[0]
+
+    def __getitem__(self, idx) -> Plan:
+        """Index the batch: ``plan[3]``, ``plan[:10]``. A single plan cannot be indexed."""
+        if not self.batch_shape:
+            raise ShapeError("this is a single plan (no batch dimension): there is nothing to index")
+        probe = torch.empty(self.batch_shape, device="meta")
+        try:
+            probe[idx]
+        except (IndexError, TypeError) as exc:
+            raise ShapeError(f"index {idx!r} does not fit the plan's batch shape {self.batch_shape}") from exc
+        return dataclasses.replace(
+            self, **{f: getattr(self, f)[idx] for f in self._BATCHED if getattr(self, f) is not None}
+        )
+
+    def _robot(self, robot):
+        from ..body.robot import Robot, load_robot
+
+        if isinstance(robot, Robot):
+            return robot
+        name = robot or self.robot
+        if name is None:
+            raise ConfigError("this plan does not name its robot: pass robot= (a name or a kinlearn.Robot)")
+        return load_robot(name)
+
+    def _single(self, what: str) -> None:
+        if self.batch_shape:
+            raise ShapeError(f"{what} takes a single plan; index the batch first, e.g. plan[0]")
+
+    def timed(self, robot=None, **options):
+        """A time-parameterised trajectory along this plan's joint path within the robot's velocity and
+        acceleration limits (:func:`kinlearn.planning.timing.time_parameterize`, toppra): times, positions,
+        velocities, accelerations, ready for a controller (``.to_csv``, ``.to_json``). One plan at a time."""
+        from .timing import time_parameterize
+
+        self._single("timed()")
+        return time_parameterize(self._robot(robot), self.joints, **options)
+
+    def show(self, robot=None, *, spheres=None, boxes=None, **options):
+        """Open an interactive 3-D view of this plan in the browser (viser): the arm along its joint path,
+        the waypoints, the executed end-effector path and obstacles (:func:`kinlearn.viz.show_plan`)."""
+        from ..viz import show_plan
+
+        self._single("show()")
+        return show_plan(
+            self._robot(robot), self.joints, waypoints=self.waypoints, spheres=spheres, boxes=boxes, **options
+        )
+
+    def animate(self, path, robot=None, *, spheres=None, boxes=None, **options):
+        """Write a GIF of the arm moving along this plan (:func:`kinlearn.viz.animate_plan`); returns its path."""
+        from ..viz import animate_plan
+
+        self._single("animate()")
+        return animate_plan(
+            self._robot(robot),
+            self.joints,
+            path,
+            waypoints=self.waypoints,
+            spheres=spheres,
+            boxes=boxes,
+            **options,
+        )
+
+    def summary(self) -> str:
+        """A short table a person reads: per plan, success, goal errors and end-effector path length."""
+        flat = self.ef.reshape(-1, *self.ef.shape[-2:]).double()
+        length = (flat[:, 1:] - flat[:, :-1]).norm(dim=-1).sum(-1)
+        ge = self.goal_error.reshape(-1)
+        je = self.joint_error.reshape(-1)
+        ok = self.success.reshape(-1)
+        free = None if self.collision_free is None else self.collision_free.reshape(-1)
+        tol = self.tolerance
+        lines = [
+            f"{'plan':>5}  {'success':>7}  {'goal error (mm)':>15}  {'joint error (rad)':>17}  {'ef path (m)':>11}"
+            + ("  collision-free" if free is not None else ""),
+        ]
+        for i in range(ge.numel()):
+            jtxt = "—" if bool(torch.isnan(je[i])) else f"{float(je[i]):.4f}"
+            lines.append(
+                f"{i:>5}  {'yes' if bool(ok[i]) else 'NO':>7}  {1000 * float(ge[i]):>15.2f}  {jtxt:>17}  "
+                f"{float(length[i]):>11.3f}"
+                + (f"  {'yes' if bool(free[i]) else 'NO':>14}" if free is not None else "")
+            )
+        lines.append(
+            f"success: end effector within {1000 * tol.position:g} mm of the target"
+            + (
+                f" and every joint within {tol.joints:g} rad of the goal's"
+                if not bool(torch.isnan(je).all())
+                else ""
+            )
+            + ("; no collision under the dense check" if free is not None else "")
+            + f"; {int(ok.sum())}/{ok.numel()} plans succeeded"
+        )
+        return "\n".join(lines)

@@ -1,0 +1,704 @@
+"""Planning with a trained trajectory model: ``plan(start, goal)`` and :class:`Planner`.
+
+Two kinds of trajectory model plan here:
+
+- the **joint-path TM** (:class:`~kinlearn.models.joint_path.JointPathModel`, the shipped planners): it
+  predicts every waypoint's joints and end effector in one pass; the plan is its joint path from the
+  start's joints to the goal's, clamped to the limits, then checked by the analytic FK. At batch
+  sizes a CPU serves it runs in NumPy (:mod:`kinlearn.planning.inference`), which makes a batch-1 plan cost
+  tens of microseconds;
+- the paper's **waypoint TM** (:class:`~kinlearn.models.trajectory.TrajectoryModel`): it predicts the end
+  effector of each waypoint, and the IM and FM roll out from the start through them to the goal
+  (Algorithm 1; one model-based correction per action, joints kept exact), so its plan ends near the
+  goal's end effector but not at the goal's joints.
+
+A goal given as an end-effector position (``goal_position=`` or a goal of shape ``(..., 3)``) is
+first turned into goal joints by the learned IM and FM, stepping the end effector along the straight
+line to it; the joint path is then planned to those joints.
+
+Every plan says how it went (:class:`~kinlearn.planning.plan.Plan`: ``goal_error``, ``joint_error``,
+``success``), measured by the analytic FK of its own joint path. Inputs outside the domain the TM was
+trained on give a :class:`~kinlearn.errors.DomainWarning`, or a :class:`~kinlearn.errors.DomainError`
+with ``strict=True``.
+"""
+
+from __future__ import annotations
+
+import copy
+import warnings
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..body.kinematics import kinematics
+from ..body.robot import Robot, check_finite, load_robot
+from ..body.state import StateLayout
+from ..collision.body import BodySpheres, body_spheres
+from ..collision.check import check_path
+from ..collision.fast import NumpyBody, NumpyScene, check_paths, first_free
+from ..collision.scene import Scene
+from ..errors import (
+    ConfigError,
+    DomainError,
+    DomainWarning,
+    DTypeError,
+    ObstacleError,
+    ShapeError,
+    StateError,
+)
+from ..io import load_checkpoint
+from ..models.forward_inverse import ForwardModel, InverseModel, load_fm, load_im
+from ..models.joint_path import JointPathModel, load_path_model
+from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model, scene_primitives
+from ..models.rollout import rectify
+from ..models.trajectory import TrajectoryModel
+from .inference import NumpyFK, NumpyObstacleModel, NumpyPathModel
+from .plan import DEFAULT_TOLERANCE, Plan, Tolerance
+
+__all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan"]
+
+#: Planners shipped inside the package, one folder per robot (see ``kinlearn/checkpoints/README.md``).
+DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
+
+#: A full state's end effector may differ from FK of its joints by at most this much (m).
+STATE_EF_TOLERANCE = 1e-3
+#: Joint values may exceed the limits by this much (rad) before they count as outside.
+LIMIT_TOLERANCE = 1e-6
+#: Batches up to this many plans run in NumPy (a few microseconds per operation), larger ones in torch.
+SMALL_BATCH = 16
+#: The babbling step bound (rad per joint and step, REFERENCE #4): the largest action the IM takes.
+MAX_STEP = 0.083
+#: The obstacle-aware TM's file in a planner folder.
+OBSTACLE_TM = "tm_obstacles.pt"
+#: Sphere travel (m) allowed between two configurations the dense collision check looks at.
+CHECK_TRAVEL = 0.01
+
+
+def _as_array(x, what: str) -> tuple[np.ndarray, torch.dtype, torch.device]:
+    """``x`` (tensor, array or nested sequence of numbers) as a float64 array, with the dtype and
+    device the plan's tensors get."""
+    if isinstance(x, torch.Tensor):
+        if x.dtype == torch.bool or x.is_complex():
+            raise DTypeError(f"{what} must hold real numbers, got a {x.dtype} tensor")
+        dtype = x.dtype if x.is_floating_point() else torch.get_default_dtype()
+        if x.dtype in _NUMPY_FLOATS and x.device.type == "cpu":
+            return x.detach().numpy().astype(np.float64, copy=False), dtype, x.device
+        return x.detach().cpu().double().numpy(), dtype, x.device
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError) as exc:
+        raise DTypeError(f"{what} must be an array of numbers, got {type(x).__name__}") from exc
+    if a.dtype.kind not in "fiu":
+        raise DTypeError(f"{what} must hold real numbers, got {a.dtype} ({type(x).__name__})")
+    dtype = torch.float64 if a.dtype == np.float64 else torch.get_default_dtype()
+    return a.astype(np.float64, copy=False), dtype, torch.device("cpu")
+
+
+_NUMPY_FLOATS = {torch.float32: np.float32, torch.float64: np.float64, torch.float16: np.float16}
+
+
+class Planner:
+    """A trajectory model with the frozen models it plans through, for one robot."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        tm: JointPathModel | TrajectoryModel,
+        fm: ForwardModel | None = None,
+        im: InverseModel | None = None,
+        *,
+        refine: int = 1,
+        exact_joints: bool = True,
+        tolerance: Tolerance = DEFAULT_TOLERANCE,
+        max_step: float = MAX_STEP,
+        obstacle_tm: ObstaclePathModel | None = None,
+        body: BodySpheres | None = None,
+        refine_steps: int = 0,
+    ):
+        """``fm``/``im``: needed by a waypoint TM, and by any planner for end-effector position goals.
+
+        ``obstacle_tm``: the obstacle-aware TM that plans when obstacles are given; ``body``: the arm's
+        collision spheres its plans are checked with (default: the robot's analytic sphere model).
+        ``refine_steps``: where no proposed path is collision-free, this many steps of the gradient
+        trajectory optimiser (:func:`kinlearn.planning.obstacle_baselines.trajectory_optimiser`) from the least
+        colliding one, kept if the dense check then finds it free (0: none; the plan's time stays
+        bounded either way).
+
+        ``refine`` and ``exact_joints`` set the IM/FM rollout (see :func:`~kinlearn.models.rollout.rectify`):
+        by default one model-based correction of each action and the joints kept at θ(0) + Σ â.
+        ``refine=0, exact_joints=False`` is the paper's Algorithm 1 as published. ``tolerance``: when a
+        plan counts as a success. ``max_step``: the largest joint change per IM action (rad).
+        """
+        if not isinstance(robot, Robot):
+            raise ConfigError(f"robot must be a kinlearn.Robot (see load_robot), got {type(robot).__name__}")
+        if refine < 0:
+            raise ConfigError(f"refine must be ≥ 0, got {refine}")
+        if not isinstance(tm, (JointPathModel, TrajectoryModel)):
+            raise ConfigError(f"tm must be a JointPathModel or TrajectoryModel, got {type(tm).__name__}")
+        if isinstance(tm, TrajectoryModel) and (fm is None or im is None):
+            raise ConfigError("a waypoint TrajectoryModel plans through an FM and an IM: pass both")
+        for what, m in (("TM", tm), ("FM", fm), ("IM", im)):
+            if m is not None and m.robot_name != robot.name:
+                raise ConfigError(
+                    f"the {what} was trained for {m.robot_name!r}, the planner is for {robot.name!r}"
+                )
+        self.refine, self.exact_joints = int(refine), bool(exact_joints)
+        self.tolerance, self.max_step = tolerance, float(max_step)
+        self.robot = robot
+        self.layout = StateLayout(robot.dof)
+        self.tm = tm.eval().requires_grad_(False)
+        self.fm = fm.eval().requires_grad_(False) if fm is not None else None
+        self.im = im.eval().requires_grad_(False) if im is not None else None
+        for m in (self.fm, self.im):  # the planner checks its inputs once; no per-call re-checks
+            if m is not None:
+                m.validate_inputs = False
+        self.kin = kinematics(robot)
+        self._fk = NumpyFK(self.kin)
+        self._np_tm = NumpyPathModel(tm) if isinstance(tm, JointPathModel) else None
+        if obstacle_tm is not None:
+            if not isinstance(obstacle_tm, ObstaclePathModel):
+                raise ConfigError(
+                    f"obstacle_tm must be an ObstaclePathModel, got {type(obstacle_tm).__name__}"
+                )
+            if obstacle_tm.robot_name != robot.name:
+                raise ConfigError(
+                    f"the obstacle TM was trained for {obstacle_tm.robot_name!r}, the planner is for {robot.name!r}"
+                )
+            obstacle_tm = obstacle_tm.eval().requires_grad_(False)
+        self.obstacle_tm = obstacle_tm
+        self._np_obstacle_tm = NumpyObstacleModel(obstacle_tm) if obstacle_tm is not None else None
+        self._body, self._body64 = body, None
+        self.refine_steps = _check_steps(refine_steps)
+        self._np_body_cache = None
+        self._core = self._rollout
+        self._lo, self._hi = robot.limits(torch.float64)
+        self._lo_np, self._hi_np = self._lo.numpy(), self._hi.numpy()
+        self._lo_tol, self._hi_tol = self._lo_np - LIMIT_TOLERANCE, self._hi_np + LIMIT_TOLERANCE
+        dom_lo, dom_hi = tm.domain_lo.double().numpy(), tm.domain_hi.double().numpy()
+        # Inputs are already held within the joint limits: a domain that covers them checks nothing.
+        S, J = self.layout.size, self.layout.joints
+        covers = all(
+            (dom_lo[k : k + S][J] <= self._lo_np + LIMIT_TOLERANCE).all()
+            and (dom_hi[k : k + S][J] >= self._hi_np - LIMIT_TOLERANCE).all()
+            and np.isinf(dom_lo[k : k + S][self.layout.ef]).all()
+            and np.isinf(dom_hi[k : k + S][self.layout.ef]).all()
+            for k in (0, S)
+        )
+        self._domain = None if covers else (dom_lo, dom_hi)
+
+    # ----------------------------------------------------------------------------------------------
+    # Loading
+    # ----------------------------------------------------------------------------------------------
+
+    @classmethod
+    def load(cls, run_dir: str | Path, robot: str | Robot | None = None, **options) -> Planner:
+        """Load a planner from a folder holding ``tm.pt`` and, where present, ``fm.pt``/``im.pt``.
+
+        A waypoint TM run trained through models elsewhere finds them through its run configuration.
+        ``options``: as for :meth:`__init__`.
+        """
+        run_dir = Path(run_dir)
+        name = robot.name if isinstance(robot, Robot) else robot
+        if not (run_dir / "tm.pt").is_file():
+            raise ConfigError(
+                f"{run_dir} holds no tm.pt; train one with `kinlearn train-tm --run-dir {run_dir}`"
+            )
+        # One verified read says which kind of TM the folder holds and what it records.
+        payload = load_checkpoint(run_dir / "tm.pt", kind=None, robot=name)
+        if payload["kind"] == JointPathModel.kind:
+            tm, sources = load_path_model(run_dir / "tm.pt", robot=name, with_dependencies=True)
+            fm = load_fm(sources["fm"], robot=tm.robot_name) if "fm" in sources else None
+            im = load_im(sources["im"], robot=tm.robot_name) if "im" in sources else None
+            if "obstacle_tm" not in options and (run_dir / OBSTACLE_TM).is_file():
+                options["obstacle_tm"] = load_obstacle_model(run_dir / OBSTACLE_TM, robot=tm.robot_name)
+            return cls(_robot(robot, tm.robot_name), tm, fm, im, **options)
+        from ..training.tm import TMTrainConfig, build_fm_im, load_tm  # the waypoint TM's run format
+
+        tm, config = load_tm(run_dir / "tm.pt", robot=name)
+        if not payload["depends"] and ((run_dir / "fm.pt").is_file() or (run_dir / "im.pt").is_file()):
+            # A run without recorded dependencies (checkpoint format 1): the models beside tm.pt.
+            config = TMTrainConfig.from_dict({**config.to_dict(), "models_dir": str(run_dir)})
+        fm, im = build_fm_im(config)
+        return cls(_robot(robot, config.robot), tm, fm, im, **options)
+
+    @classmethod
+    def default(cls, robot: str = "iiwa14") -> Planner:
+        """The planner shipped with kinlearn for ``robot``."""
+        if isinstance(robot, Robot):
+            robot = robot.name
+        return _default_planner(robot)
+
+    # ----------------------------------------------------------------------------------------------
+    # Input checks
+    # ----------------------------------------------------------------------------------------------
+
+    def _arrays(self, start, goal, goal_position):
+        """Checked inputs as float64 arrays: θ(0) ``(N, dof)``, the goal ``(N, dof)`` joints or ``(N, 3)``
+        position, whether it is a position, the start/goal states' given ef (or None), the batch shape,
+        and the output dtype and device."""
+        dof, S = self.robot.dof, self.layout.size
+        if (goal is None) == (goal_position is None):
+            raise ConfigError("give exactly one of goal (joints or a state) and goal_position (end effector)")
+        x0, dt0, dev = _as_array(start, "start")
+        if goal_position is not None:
+            xT, dtT, _ = _as_array(goal_position, "goal_position")
+            position = True
+            if xT.ndim == 0 or xT.shape[-1] != 3:
+                raise ShapeError(f"goal_position must have shape (..., 3) (metres), got {tuple(xT.shape)}")
+        else:
+            xT, dtT, _ = _as_array(goal, "goal")
+            position = xT.ndim > 0 and xT.shape[-1] == 3 and dof != 3
+        if x0.ndim == 0 or x0.shape[-1] not in (dof, S):
+            raise ShapeError(
+                f"start must have shape (..., {S}) (a state [θ, ef]) or (..., {dof}) (joint values) for "
+                f"{self.robot.name}; got {tuple(x0.shape)}"
+            )
+        if not position and (xT.ndim == 0 or xT.shape[-1] not in (dof, S)):
+            raise ShapeError(
+                f"goal must have shape (..., {S}) (a state), (..., {dof}) (joint values) or (..., 3) (an "
+                f"end-effector position) for {self.robot.name}; got {tuple(xT.shape)}"
+            )
+        if x0.shape[:-1] == xT.shape[:-1]:
+            batch = x0.shape[:-1]
+        else:
+            try:
+                batch = np.broadcast_shapes(x0.shape[:-1], xT.shape[:-1])
+            except ValueError as exc:
+                raise ShapeError(
+                    f"start {tuple(x0.shape)} and goal {tuple(xT.shape)} do not broadcast"
+                ) from exc
+            x0 = np.broadcast_to(x0, (*batch, x0.shape[-1]))
+            xT = np.broadcast_to(xT, (*batch, xT.shape[-1]))
+        x0, xT = x0.reshape(-1, x0.shape[-1]), xT.reshape(-1, xT.shape[-1])
+        lo, hi = self._lo_tol, self._hi_tol
+        for what, x in (("start", x0), ("goal", xT)):
+            is_joints = not (position and what == "goal")
+            q = x[:, :dof] if is_joints else x
+            # One pass checks finiteness and limits (a comparison with NaN is false); explain on failure.
+            ok = ((q >= lo) & (q <= hi)).all() if is_joints else np.isfinite(q).all()
+            if not ok or (x.shape[-1] > q.shape[-1] and not np.isfinite(x).all()):
+                name = "goal_position" if not is_joints and goal_position is not None else what
+                check_finite(torch.from_numpy(np.ascontiguousarray(x)), name)
+                self.robot.check_joints(
+                    torch.from_numpy(np.ascontiguousarray(q)), tol=LIMIT_TOLERANCE, what=f"{what} joints"
+                )
+        ef_given = [
+            x[:, dof:] if x is not None and x.shape[-1] == S else None for x in (x0, None if position else xT)
+        ]
+        dtype = torch.promote_types(dt0, dtT)
+        return x0[:, :dof], (xT if position else xT[:, :dof]), position, ef_given, batch, dtype, dev
+
+    def _check_states(self, ef_given, ef_fk) -> None:
+        for what, given, fk in zip(("start", "goal"), ef_given, ef_fk, strict=False):
+            if given is None:
+                continue
+            err = np.linalg.norm(given - fk, axis=-1)
+            if (err > STATE_EF_TOLERANCE).any():
+                raise StateError(
+                    f"{what}: its end-effector part differs from FK of its joints by up to {err.max():.4g} m "
+                    f"(allowed {STATE_EF_TOLERANCE} m); pass joint values alone to have ef computed"
+                )
+
+    def _check_domain(self, s0: np.ndarray, sT: np.ndarray | None, strict: bool) -> None:
+        if self._domain is None:
+            return
+        lo, hi = self._domain
+        S = self.layout.size
+        parts = [("start", s0, lo[:S], hi[:S])]
+        if sT is not None:
+            parts.append(("goal", sT, lo[S:], hi[S:]))
+        for what, s, a, b in parts:
+            out = (s < a - LIMIT_TOLERANCE) | (s > b + LIMIT_TOLERANCE)
+            if out.any():
+                n = int(out.any(-1).sum())
+                msg = (
+                    f"{n} {what}(s) lie outside the domain this planner was trained on (its training "
+                    f"problems' range of [θ, ef]); the plan may be poor"
+                )
+                if strict:
+                    raise DomainError(msg + "; pass strict=False to plan anyway")
+                warnings.warn(msg, DomainWarning, stacklevel=4)
+
+    # ----------------------------------------------------------------------------------------------
+    # Planning
+    # ----------------------------------------------------------------------------------------------
+
+    def plan(
+        self,
+        start,
+        goal=None,
+        *,
+        goal_position=None,
+        obstacles=None,
+        refine_steps: int | None = None,
+        strict: bool = False,
+    ) -> Plan:
+        """Plan from ``start`` to ``goal``, around ``obstacles`` if given.
+
+        ``start``: joint values ``(..., dof)`` or a state ``(..., dof + 3)``. ``goal``: likewise — the plan
+        ends at its joints — or an end-effector position ``(..., 3)`` (also as ``goal_position=``), reached
+        in whatever configuration the learned models find. Tensors, arrays or sequences of numbers;
+        leading batch dimensions broadcast. Deterministic: the same input gives the same plan bit for
+        bit. Outputs have the input's floating dtype and device.
+
+        ``obstacles``: spheres ``[x, y, z, radius]`` (m, the robot's base frame) as ``(K, 4)`` (one scene
+        for every plan) or ``(..., K, 4)`` (a scene per plan), or a :class:`~kinlearn.collision.Scene`
+        (spheres, boxes, a floor) of batch shape ``()`` or the plans'. The obstacle-aware TM proposes
+        several joint paths, the straight joint line joins them, and the shortest (in joint space) that
+        the dense check finds collision-free is the plan; the plan's ``collision_free`` says whether
+        one was (``success`` requires it); if none is, the shortest, flagged. A start or goal that
+        already collides gives a plan with ``collision_free`` False. Bad obstacles raise
+        :class:`~kinlearn.errors.ObstacleError`. ``refine_steps``: overrides the planner's (see
+        :meth:`__init__`) for this call: where no proposal is free, this many gradient steps refine the
+        least colliding one (bounded time; 25 lifts the held-out success from 80% to 92%).
+
+        Raises :class:`ShapeError`, :class:`DTypeError`, :class:`NonFiniteError`,
+        :class:`JointLimitError` or :class:`StateError` for bad input; warns with
+        :class:`DomainWarning` (or raises :class:`DomainError` when ``strict``) for input outside
+        the training domain. A plan that misses its goal is returned with ``success`` False.
+        """
+        theta0, goal_arr, position, ef_given, batch, dtype, device = self._arrays(start, goal, goal_position)
+        n = theta0.shape[0]
+        if position:
+            ef0 = self._position(theta0)
+            self._check_states(ef_given[:1], [ef0])
+            self._check_domain(np.concatenate((theta0, ef0), -1), None, strict)
+            thetaT = self._reach_position(theta0, ef0, goal_arr)
+            efT = self._position(thetaT)
+            target = goal_arr
+        else:
+            ef = self._position(np.concatenate((theta0, goal_arr)))
+            ef0, efT = ef[:n], ef[n:]
+            self._check_states(ef_given, [ef0, efT])
+            thetaT, target = goal_arr, efT
+            self._check_domain(np.concatenate((theta0, ef0), -1), np.concatenate((thetaT, efT), -1), strict)
+        free = None
+        if obstacles is not None:
+            scene = self._scene(obstacles, batch, n)
+            steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
+            joints, free = self._plan_around(theta0, ef0, thetaT, efT, scene, steps)
+            ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(n, -1, 3)
+            waypoints = ef[:, 1:-1]
+        elif self._np_tm is not None:
+            joints, waypoints, ef = self._joint_path(theta0, ef0, thetaT, efT)
+        else:
+            joints, waypoints, ef = self._waypoint_rollout(theta0, ef0, thetaT, efT)
+        within = ((joints >= self._lo_tol) & (joints <= self._hi_tol)).all((-1, -2))
+        tol = self.tolerance
+        goal_error = np.linalg.norm(ef[:, -1] - target, axis=-1)
+        if position:
+            joint_error = np.full(n, np.nan)
+            success = within & (goal_error <= tol.position)
+        else:
+            joint_error = np.abs(joints[:, -1] - thetaT).max(-1)
+            success = within & (goal_error <= tol.position) & (joint_error <= tol.joints)
+        if free is not None:
+            success = success & free
+        np_dtype = _NUMPY_FLOATS.get(dtype, np.float64)
+        single = batch == ()
+
+        def out(a: np.ndarray) -> torch.Tensor:
+            # A single plan's per-plan values are 0-d (np.ascontiguousarray would make them 1-d).
+            a = np.array(a[0]) if single else np.ascontiguousarray(a.reshape((*batch, *a.shape[1:])))
+            if a.dtype == bool:
+                t = torch.from_numpy(a)
+                return t if device.type == "cpu" else t.to(device)
+            t = torch.from_numpy(a.astype(np_dtype, copy=False))
+            return t if t.dtype == dtype and device.type == "cpu" else t.to(device=device, dtype=dtype)
+
+        return Plan(
+            goal=out(np.concatenate((thetaT, efT), -1)),
+            waypoints=out(waypoints),
+            joints=out(joints),
+            ef=out(ef),
+            target=out(target),
+            goal_error=out(goal_error),
+            joint_error=out(joint_error),
+            success=out(success),
+            tolerance=tol,
+            robot=self.robot.name,
+            collision_free=None if free is None else out(free),
+        )
+
+    __call__ = plan
+
+    # ----------------------------------------------------------------------------------------------
+    # Obstacles
+    # ----------------------------------------------------------------------------------------------
+
+    @property
+    def body(self) -> BodySpheres:
+        """The collision spheres plans are checked with (float64; made once, the given body untouched)."""
+        if self._body64 is None:
+            body = body_spheres(self.robot) if self._body is None else self._body
+            self._body64 = body if body.radii.dtype == torch.float64 else copy.deepcopy(body).double()
+        return self._body64
+
+    @property
+    def _np_body(self) -> NumpyBody:
+        if self._np_body_cache is None:
+            self._np_body_cache = NumpyBody(self.body)
+        return self._np_body_cache
+
+    def _scene(self, obstacles, batch: tuple, n: int) -> Scene:
+        """``obstacles`` as a float64 scene of batch shape ``()`` or ``(n,)``."""
+        if self.obstacle_tm is None:
+            raise ConfigError(
+                f"this planner has no obstacle-aware TM ({OBSTACLE_TM}); load a planner folder holding one, "
+                "or train one with kinlearn.train_obstacles"
+            )
+        if isinstance(obstacles, Scene):
+            scene = obstacles.to(dtype=torch.float64, device="cpu")
+        else:
+            if isinstance(obstacles, (str, bytes)):
+                raise ObstacleError("obstacles must be spheres (K, 4) [x, y, z, radius] or a kinlearn Scene")
+            try:
+                spheres = torch.as_tensor(np.asarray(obstacles, dtype=np.float64))
+            except (TypeError, ValueError) as exc:
+                raise ObstacleError(
+                    f"obstacles must be numbers of shape (K, 4) or (..., K, 4): {exc}"
+                ) from exc
+            if spheres.ndim < 2 or spheres.shape[-1] != 4:
+                raise ObstacleError(
+                    f"obstacle spheres must have shape (K, 4) or (..., K, 4) [x, y, z, radius], "
+                    f"got {tuple(spheres.shape)}"
+                )
+            scene = Scene(spheres=spheres)
+        shape = tuple(scene.batch_shape)
+        if shape == ():
+            return scene
+        if shape != tuple(batch):
+            raise ShapeError(
+                f"the obstacles' batch shape {shape} must be () (one scene for all plans) or the plans' {tuple(batch)}"
+            )
+        return scene.reshape(n) if len(shape) != 1 else scene
+
+    def _plan_around(
+        self, theta0, ef0, thetaT, efT, scene: Scene, steps: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Joint paths ``(N, T + 1, dof)`` around ``scene`` and whether each is collision-free ``(N,)``."""
+        n, dof = theta0.shape
+        rows, mask, floor = scene_primitives(scene, n, torch.float64)
+        if n <= SMALL_BATCH:
+            mid = self._np_obstacle_tm(theta0, ef0, thetaT, efT, rows.numpy(), mask.numpy(), floor.numpy())
+        else:
+            dtype = self.obstacle_tm.in_mean.dtype
+            s0 = torch.from_numpy(np.concatenate((theta0, ef0), -1)).to(dtype)
+            sT = torch.from_numpy(np.concatenate((thetaT, efT), -1)).to(dtype)
+            with torch.no_grad():
+                mid = self.obstacle_tm(s0, sT, rows.to(dtype), mask, floor.to(dtype)).double().numpy()
+        np.clip(mid, self._lo_np, self._hi_np, out=mid)
+        C = mid.shape[1]
+        f = self.obstacle_tm.fractions.double().numpy()[:, None]
+        line = theta0[:, None] + f * (thetaT - theta0)[:, None]  # the straight joint line's knots
+        inner = np.concatenate((line[:, None], mid), axis=1)  # (N, C + 1, T − 1, dof)
+        paths = np.concatenate(
+            (
+                np.broadcast_to(theta0[:, None, None], (n, C + 1, 1, dof)),
+                inner,
+                np.broadcast_to(thetaT[:, None, None], (n, C + 1, 1, dof)),
+            ),
+            axis=2,
+        )
+        length = np.linalg.norm(np.diff(paths, axis=2), axis=-1).sum(-1)  # (N, C + 1)
+        order = np.argsort(length, axis=1, kind="stable")  # shortest first: the straight line leads
+        batched = len(scene.batch_shape) > 0
+        if n <= SMALL_BATCH:
+            chosen, free = [], np.zeros(n, dtype=bool)
+            shared = None if batched else NumpyScene.from_scene(scene)
+            for i in range(n):
+                one = scene[i] if batched else scene
+                nscene = NumpyScene.from_scene(one) if batched else shared
+                k = first_free(self._np_body, paths[i], nscene, order[i], max_travel=CHECK_TRAVEL)
+                if k < 0:  # none is free: the shortest one, flagged (refined first, if asked)
+                    best = paths[i, order[i, 0]]
+                    if steps:  # from the least colliding one
+                        _, clear, _ = check_paths(self._np_body, paths[i], nscene, max_travel=CHECK_TRAVEL)
+                        best = paths[i, int(np.argmax(clear))]
+                    best, ok = self._refine(best, one, nscene, steps)
+                    chosen.append(best)
+                    free[i] = ok
+                else:
+                    chosen.append(paths[i, k])
+                    free[i] = True
+            return np.stack(chosen), free
+        check = check_path(
+            self.body,
+            torch.from_numpy(paths),
+            scene.unsqueeze(-1) if batched else scene,
+            max_travel=CHECK_TRAVEL,
+        )
+        free = check.collision_free.numpy()
+        clearance = torch.minimum(check.clearance, check.self_clearance).numpy()
+        ranked_free = np.take_along_axis(free, order, axis=1)
+        first = ranked_free.argmax(axis=1)
+        any_free = ranked_free.any(axis=1)
+        fallback = clearance.argmax(axis=1) if steps else order[:, 0]
+        pick = np.where(any_free, np.take_along_axis(order, first[:, None], 1)[:, 0], fallback)
+        out = paths[np.arange(n), pick]
+        if steps:
+            for i in np.flatnonzero(~any_free):
+                one = scene[int(i)] if batched else scene
+                out_i, any_free[i] = self._refine(out[i], one, NumpyScene.from_scene(one), steps)
+                if any_free[i]:
+                    out[i] = out_i
+        return out, any_free
+
+    def _refine(self, path: np.ndarray, scene: Scene, nscene, steps: int) -> tuple[np.ndarray, bool]:
+        """``steps`` steps of the gradient trajectory optimiser from ``path`` (if any); the refined path
+        and whether the dense check finds it free. Without steps: ``(path, False)``."""
+        if not steps:
+            return path, False
+        from .obstacle_baselines import trajectory_optimiser
+
+        p = torch.from_numpy(path)
+        refined, _ = trajectory_optimiser(p[0], p[-1], scene, steps=steps, body=self.body, init=p)
+        refined = refined.numpy()
+        free, _, _ = check_paths(self._np_body, refined[None], nscene, max_travel=CHECK_TRAVEL)
+        return (refined, True) if bool(free[0]) else (path, False)
+
+    def _position(self, q: np.ndarray) -> np.ndarray:
+        """FK of ``(N, dof)`` float64 configurations: NumPy for a few, torch's fast path for many."""
+        if q.shape[0] <= SMALL_BATCH:
+            return self._fk.position(q)
+        return self.kin.position(torch.from_numpy(q), validate=False).numpy()
+
+    def _tm_forward(self, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
+        """The joint-path TM's waypoints (joints, ef) as float64 arrays: NumPy for small batches, torch
+        (in the TM's dtype) for large ones, where its matrix products are faster."""
+        if theta0.shape[0] <= SMALL_BATCH:
+            return self._np_tm(theta0, ef0, thetaT, efT)
+        dtype = self.tm.in_mean.dtype
+        s0 = torch.from_numpy(np.concatenate((theta0, ef0), -1)).to(dtype)
+        sT = torch.from_numpy(np.concatenate((thetaT, efT), -1)).to(dtype)
+        with torch.no_grad():
+            out = self.tm(s0, sT)
+        return out.joints.double().numpy(), out.ef.double().numpy()
+
+    def _joint_path(self, theta0, ef0, thetaT, efT):
+        """The joint-path TM's plan: knots ``(N, T + 1, dof)``, its ef waypoints and the knots' FK."""
+        n, dof = theta0.shape
+        mid, waypoints = self._tm_forward(theta0, ef0, thetaT, efT)
+        np.clip(mid, self._lo_np, self._hi_np, out=mid)
+        joints = np.concatenate((theta0[:, None], mid, thetaT[:, None]), axis=1)
+        ef_mid = self._position(mid.reshape(-1, dof)).reshape(n, -1, 3)
+        ef = np.concatenate((ef0[:, None], ef_mid, efT[:, None]), axis=1)
+        return joints, waypoints, ef
+
+    @torch.no_grad()
+    def _waypoint_rollout(self, theta0, ef0, thetaT, efT):
+        """The waypoint TM's plan (TM waypoints, IM/FM rollout): joints, waypoints and their FK."""
+        net_dtype = self.tm.in_mean.dtype
+        s0 = torch.from_numpy(np.concatenate((theta0, ef0), -1)).to(net_dtype)
+        sT = torch.from_numpy(np.concatenate((thetaT, efT), -1)).to(net_dtype)
+        waypoints, actions = self._core(s0, sT)
+        joints = theta0[:, None] + np.concatenate(
+            (np.zeros_like(theta0[:, None]), np.cumsum(actions.double().numpy(), axis=1)), axis=1
+        )
+        ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(*joints.shape[:2], 3)
+        return joints, waypoints.double().numpy(), ef
+
+    def _rollout(self, s0: torch.Tensor, sT: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """TM waypoints and the IM/FM rollout's actions for flat ``(N, S)`` states (network dtype)."""
+        waypoints = self.tm(s0, sT)
+        _, actions = rectify(
+            waypoints,
+            s0,
+            sT,
+            self.fm,
+            self.im,
+            self.layout,
+            refine=self.refine,
+            exact_joints=self.exact_joints,
+        )
+        return waypoints, actions
+
+    def compile(self, **options) -> Planner:
+        """Compile a waypoint TM's rollout with ``torch.compile`` (first calls per input shape are slow).
+
+        Plans stay the same up to floating-point rounding; returns ``self``. The joint-path TM needs no
+        compiling: it plans in a handful of NumPy operations.
+        """
+        if self._np_tm is None:
+            self._core = torch.compile(self._rollout, dynamic=False, **options)
+        return self
+
+    @torch.no_grad()
+    def _reach_position(self, theta0: np.ndarray, ef0: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Goal joints for end-effector positions, found with the learned IM and FM alone.
+
+        The end effector is stepped along the straight line from ef(0) to the target in steps of at
+        most 2 cm, then held at the target for 10 more steps; each action is the IM's, corrected once
+        through the FM (â ← â + IM[FM[s, â], target]), bounded by the babbling step and kept within the
+        joint limits; the end effector of each new state is the FM's. The analytic FK is not used:
+        it only judges the result (``plan.goal_error``).
+        """
+        if self.fm is None or self.im is None:
+            raise ConfigError(
+                "this planner has no FM and IM, which an end-effector position goal needs; give joint goals "
+                "or load a planner folder holding fm.pt and im.pt"
+            )
+        dtype = next(self.im.parameters(), torch.empty(0)).dtype
+        theta, e0, p = (torch.tensor(a, dtype=dtype) for a in (theta0, ef0, target))
+        lo, hi = self._lo.to(dtype), self._hi.to(dtype)
+        # Each plan's own number of line steps (at most 2 cm each), so a plan does not depend on its batch.
+        K = torch.ceil((p - e0).norm(dim=-1, keepdim=True) / 0.02).clamp_min(1)
+        e = e0
+        for k in range(1, int(K.max()) + 11 if K.numel() else 0):
+            aim = e0 + torch.clamp(k / K, max=1.0) * (p - e0)
+            s = self.layout.join(theta, e)
+            a = self.im(s, aim)
+            for _ in range(self.refine):
+                a = a + self.im(self.fm(s, a), aim)
+            a = a.clamp(-self.max_step, self.max_step)
+            nxt = torch.minimum(torch.maximum(theta + a, lo), hi)
+            e = self.fm(s, nxt - theta)[..., self.layout.ef]
+            theta = nxt
+        return theta.double().numpy()
+
+
+def _check_steps(steps) -> int:
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+        raise ConfigError(f"refine_steps must be an integer ≥ 0, got {steps!r}")
+    return steps
+
+
+def _robot(robot: str | Robot | None, name: str) -> Robot:
+    if isinstance(robot, Robot):
+        return robot
+    return load_robot(name)
+
+
+@lru_cache(maxsize=8)
+def _default_planner(robot: str) -> Planner:
+    path = DEFAULT_CHECKPOINTS / robot
+    if not (path / "tm.pt").is_file():
+        shipped = sorted(p.name for p in DEFAULT_CHECKPOINTS.iterdir() if (p / "tm.pt").is_file())
+        raise ConfigError(
+            f"kinlearn ships no planner for {robot!r} (shipped: {', '.join(shipped)}); train one with "
+            "`kinlearn train-planner` and load it with Planner.load(run_dir)"
+        )
+    return Planner.load(path, robot=robot)
+
+
+def plan(
+    start,
+    goal=None,
+    *,
+    goal_position=None,
+    obstacles=None,
+    refine_steps: int | None = None,
+    robot: str | Robot = "iiwa14",
+    strict: bool = False,
+) -> Plan:
+    """Plan with the planner shipped for ``robot`` (see :meth:`Planner.plan`)."""
+    return Planner.default(robot).plan(
+        start,
+        goal,
+        goal_position=goal_position,
+        obstacles=obstacles,
+        refine_steps=refine_steps,
+        strict=strict,
+    )

@@ -1,0 +1,367 @@
+"""Self-supervised training of the obstacle-aware TM through a frozen body model.
+
+No planner shows it a path. Each iteration draws training problems (start and goal joints in a
+scene, from :func:`~kinlearn.collision.problems.make_problems` with seeds other than the benchmark's,
+unverified: nothing needs to know a path exists), and the TM proposes ``candidates`` joint paths for
+each. Every candidate is cut into ``points`` configurations per segment and put through the frozen
+body model (the analytic sphere body, or the one the robot learned from babbling), which says where
+the arm's spheres are. A candidate's loss asks what a user asks of a plan around obstacles:
+
+- ``collision``: the hinge ``max(0, margin − d)`` of every body sphere's signed distance ``d`` to the
+  scene (floor included), summed over spheres and averaged over the configurations;
+- ``self_collision``: the same hinge over the body's self-collision sphere pairs;
+- ``length``: the distance the body's spheres travel along the path, relative to how far they travel
+  along the straight joint line (so the arm moves no more than it must);
+- ``joint_smoothness``: the squared second difference of the knots (no joint-space kinks);
+- ``limits``: knots outside the joint limits (the planner clamps them; this keeps it rare).
+
+The problem's loss is the best candidate's plus ``spread`` times the candidates' mean
+(winner-takes-all, relaxed so no candidate is abandoned): the candidates learn different ways
+around, and the planner keeps whichever its check finds free. Resumable bit-identically, like the
+other trainers.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import torch
+
+from ..body.kinematics import kinematics
+from ..body.robot import Robot, load_robot
+from ..collision.body import BodySpheres, body_spheres
+from ..collision.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
+from ..errors import ConfigError
+from ..io import write_json
+from ..models.obstacle_path import (
+    ObstaclePathConfig,
+    ObstaclePathModel,
+    load_obstacle_model,
+    save_obstacle_model,
+    scene_primitives,
+)
+from .loop import fit_iterations, seed_everything
+
+__all__ = [
+    "TRAINING_SEEDS",
+    "ObstacleLossConfig",
+    "ObstacleTrainConfig",
+    "build_body",
+    "candidate_losses",
+    "make_training_problems",
+    "train_obstacle_model",
+]
+
+#: Seeds of the training problems, one per family (the held-out benchmark uses 1001–1003).
+TRAINING_SEEDS = {"tabletop": 2001, "shelf": 2002, "barrier": 2003}
+
+
+@dataclass(frozen=True)
+class ObstacleLossConfig:
+    """Weights and margins of the obstacle-aware TM's loss (see the module docstring)."""
+
+    collision: float = 1000.0
+    self_collision: float = 1000.0
+    margin: float = 0.03  # m
+    length: float = 1.0
+    joint_smoothness: float = 0.05
+    limits: float = 10.0
+    spread: float = 0.05
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
+                raise ConfigError(f"ObstacleLossConfig.{f.name} must be a finite number ≥ 0, got {v!r}")
+
+
+@dataclass(frozen=True)
+class ObstacleTrainConfig:
+    """Everything that decides an obstacle-aware TM training run; saved as the run's ``config.json``.
+
+    ``problems``: ``.npz`` problem sets (:meth:`ProblemSet.save`) to train on, e.g. from
+    :func:`make_training_problems`. ``body``: ``"analytic"`` (the sphere model) or ``"learned"``
+    (``body_checkpoint``, a learned body model). ``points``: configurations per segment at which the
+    loss looks at the body. ``init_checkpoint``: start from a trained model's weights and input
+    standardisation (fine-tuning, e.g. on more problems) instead of a fresh one; its architecture must
+    match ``model``. Adam with cosine decay to zero.
+    """
+
+    robot: str = "iiwa14"
+    problems: tuple[str, ...] = ()
+    body: Literal["analytic", "learned"] = "analytic"
+    body_checkpoint: str | None = None
+    iterations: int = 3000
+    batch_size: int = 64
+    lr: float = 1e-3
+    points: int = 2
+    checkpoint_every: int = 100
+    init_checkpoint: str | None = None
+    loss: ObstacleLossConfig = field(default_factory=ObstacleLossConfig)
+    model: dict = field(default_factory=dict)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not self.problems:
+            raise ConfigError("ObstacleTrainConfig.problems must name at least one problem set (.npz)")
+        if self.body not in ("analytic", "learned"):
+            raise ConfigError(f"body must be 'analytic' or 'learned', got {self.body!r}")
+        if self.body == "learned" and not self.body_checkpoint:
+            raise ConfigError("a learned body needs body_checkpoint, the path of its body.pt")
+        for name in ("iterations", "batch_size", "points", "checkpoint_every"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ConfigError(f"{name} must be a positive integer, got {v!r}")
+        if not (self.lr > 0.0 and math.isfinite(self.lr)):
+            raise ConfigError(f"lr must be a positive finite number, got {self.lr}")
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["problems"] = list(self.problems)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ObstacleTrainConfig:
+        d = dict(d)
+        d["loss"] = ObstacleLossConfig(**d.get("loss", {}))
+        d["problems"] = tuple(d.get("problems", ()))
+        return cls(**d)
+
+    def model_config(self, robot: Robot) -> ObstaclePathConfig:
+        return ObstaclePathConfig.for_robot(robot, **self.model)
+
+
+def make_training_problems(
+    out_dir: str | Path, per_family: int, chunk: int = 250, robot: Robot | None = None, progress=None
+) -> list[Path]:
+    """Generate (or reuse) unverified training problems: ``per_family`` of each family with
+    :data:`TRAINING_SEEDS`, in files of ``chunk`` problems under ``out_dir``. Deterministic: chunk c of a
+    family is problems ``c·chunk …`` of its seed's sequence, whoever generates it."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    cfg = ProblemConfig(verify=False)
+    paths = []
+    for c in range(math.ceil(per_family / chunk)):
+        n = min(chunk, per_family - c * chunk)
+        for fam in FAMILIES:
+            path = out_dir / (f"{fam}_{c:02d}.npz" if n == chunk else f"{fam}_{c:02d}_{n}.npz")
+            if not path.is_file():
+                make_problems(fam, n, TRAINING_SEEDS[fam], robot=robot, config=cfg, first=c * chunk).save(
+                    path
+                )
+            paths.append(path)
+            if progress is not None:
+                progress(len(paths))
+    return paths
+
+
+def build_body(config: ObstacleTrainConfig, robot: Robot):
+    """The frozen body model ``config`` names, in float32."""
+    if config.body == "analytic":
+        body = body_spheres(robot)
+    else:
+        from ..models.body import load_body_model
+
+        body = load_body_model(config.body_checkpoint, robot=robot.name)
+    return body.float().eval().requires_grad_(False)
+
+
+def _dense(knots: torch.Tensor, fractions: torch.Tensor) -> torch.Tensor:
+    """``(..., K + 1, dof)`` → ``(..., K·P + 1, dof)``: each segment at ``fractions (P,)`` of the way
+    (in [0, 1)), then the last knot."""
+    f = fractions.to(knots)[:, None]
+    seg = knots[..., :-1, None, :] + f * (knots[..., 1:, None, :] - knots[..., :-1, None, :])
+    return torch.cat((seg.flatten(-3, -2), knots[..., -1:, :]), dim=-2)
+
+
+def _travel(centres: torch.Tensor, moving: torch.Tensor) -> torch.Tensor:
+    """``(..., Q, M, 3)`` → ``(...)``: the distance the moving spheres travel, summed."""
+    step = (centres[..., 1:, :, :] - centres[..., :-1, :, :]).norm(dim=-1)
+    return (step * moving).sum((-1, -2))
+
+
+def _far(table: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+    """Padding rows of an obstacle table moved far away (1 km, 1 mm in size): no mask needed after."""
+    if mask is None:
+        return table
+    far = torch.zeros_like(table)
+    far[..., :3] = 1000.0
+    far[..., 3:] = 1e-3
+    return torch.where(mask[..., None], table, far)
+
+
+def _scene_clearance(centres: torch.Tensor, radii: torch.Tensor, scene, floor_mask) -> torch.Tensor:
+    """``centres (N, R, M, 3)`` → ``(N, R, M)``: each sphere's signed distance to its problem's scene
+    (batch ``(N,)``, floor included). The sphere and box distances of
+    :mod:`kinlearn.collision.distance`, lean for training: padding is moved away instead of masked."""
+    c = centres[..., None, :]  # (N, R, M, 1, 3)
+    out = torch.full_like(centres[..., 0], torch.inf)
+    if scene.spheres.shape[-2]:
+        sp = _far(scene.spheres, scene.sphere_mask)[:, None, None]  # (N, 1, 1, K, 4)
+        d = (c - sp[..., :3]).norm(dim=-1) - sp[..., 3]
+        out = torch.minimum(out, d.amin(-1))
+    if scene.boxes.shape[-2]:
+        bx = _far(scene.boxes, scene.box_mask)[:, None, None]  # (N, 1, 1, B, 6)
+        q = (c - bx[..., :3]).abs() - bx[..., 3:]
+        d = q.clamp_min(0.0).square().sum(-1).clamp_min(1e-12).sqrt() + q.amax(-1).clamp_max(0.0)
+        out = torch.minimum(out, d.amin(-1))
+    out = out - radii
+    if scene.floor is not None:
+        h = scene.floor.expand(centres.shape[0])[:, None, None]
+        out = torch.where(floor_mask, torch.minimum(out, centres[..., 2] - radii - h), out)
+    return out
+
+
+def candidate_losses(
+    tm: ObstaclePathModel,
+    body: BodySpheres,
+    s0: torch.Tensor,
+    sT: torch.Tensor,
+    scene,
+    config: ObstacleLossConfig,
+    fractions: torch.Tensor,
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """Each candidate's loss ``(N, C)`` for problems ``(s0, sT)`` in ``scene`` (batch ``(N,)``), and the
+    terms (per candidate, not reduced). The body is looked at in every segment at ``fractions`` (in
+    [0, 1)) of the way, and at the goal."""
+    J = tm.layout.joints
+    n = s0.shape[0]
+    rows, mask, floor = scene_primitives(scene, n, s0.dtype)
+    mid = tm(s0, sT, rows, mask, floor)  # (N, C, T − 1, dof)
+    C = mid.shape[1]
+    theta0 = s0[:, None, None, J].expand(n, C, 1, -1)
+    thetaT = sT[:, None, None, J].expand(n, C, 1, -1)
+    knots = torch.cat((theta0, mid.clamp(tm.lower, tm.upper), thetaT), dim=2)  # (N, C, T + 1, dof)
+    dense = _dense(knots, fractions)  # (N, C, Q, dof)
+    Q = dense.shape[2]
+    centres = body(dense, validate=False)  # (N, C, Q, M, 3)
+    radii = body.radii_like(centres)
+    # The base's spheres never move: a path cannot change their clearance, so only the arm's count.
+    arm = body.link > 0
+    per = _scene_clearance(centres[..., arm, :].flatten(1, 2), radii[arm], scene, body.floor_mask[arm])
+    collision = torch.relu(config.margin - per).sum(-1).view(n, C, Q).mean(-1)  # (N, C)
+    pairs = body.pairs
+    gap = (centres[..., pairs[:, 0], :] - centres[..., pairs[:, 1], :]).norm(dim=-1)
+    pair = gap - radii[pairs[:, 0]] - radii[pairs[:, 1]]
+    self_col = torch.relu(config.margin - pair).sum(-1).mean(-1)  # (N, C)
+    moving = (body.link > 0).to(centres.dtype)
+    with torch.no_grad():
+        steps = torch.arange(4 * (knots.shape[2] - 1), dtype=s0.dtype) / (4 * (knots.shape[2] - 1))
+        line = _dense(torch.cat((theta0[:, :1], thetaT[:, :1]), dim=2), steps)
+        ref = _travel(body(line, validate=False), moving)  # (N, 1)
+    length = _travel(centres, moving) / (ref + 0.05)
+    jacc = knots[:, :, 2:] - 2 * knots[:, :, 1:-1] + knots[:, :, :-2]
+    joint_smooth = jacc.square().sum((-1, -2))
+    limits = (torch.relu(mid - tm.upper) + torch.relu(tm.lower - mid)).square().sum((-1, -2))
+    c = config
+    loss = (
+        c.collision * collision
+        + c.self_collision * self_col
+        + c.length * length
+        + c.joint_smoothness * joint_smooth
+        + c.limits * limits
+    )
+    terms = {
+        "collision": collision,
+        "self_collision": self_col,
+        "length_ratio": length,
+        "joint_smoothness": joint_smooth,
+        "limits": limits,
+    }
+    return loss, terms
+
+
+def _load_pool(paths, robot: Robot) -> ProblemSet:
+    sets = [ProblemSet.load(p, robot=robot.name) for p in paths]
+    return sets[0] if len(sets) == 1 else ProblemSet.concat(sets)
+
+
+def _batch(pool, ef_all, idx, swap):
+    """Problems ``idx`` of the pool as float32 states and scene, start and goal swapped where ``swap``."""
+    q0, q1 = pool.start[idx], pool.goal[idx]
+    e0, e1 = ef_all[0][idx], ef_all[1][idx]
+    w = swap[:, None]
+    s0 = torch.cat((torch.where(w, q1, q0), torch.where(w, e1, e0)), -1).float()
+    sT = torch.cat((torch.where(w, q0, q1), torch.where(w, e0, e1)), -1).float()
+    return s0, sT, pool.scene[idx].to(dtype=torch.float32)
+
+
+def train_obstacle_model(
+    config: ObstacleTrainConfig,
+    run_dir: str | Path,
+    *,
+    resume: bool = True,
+    progress: bool = True,
+    write_config: bool = True,
+) -> ObstaclePathModel:
+    """Train an obstacle-aware TM; checkpoint ``run_dir/tm_obstacles.pt`` every ``checkpoint_every``
+    iterations and at the end (atomically), and resume from it. Logs to ``run_dir/metrics.jsonl``."""
+    run_dir = Path(run_dir)
+    robot = load_robot(config.robot)
+    body = build_body(config, robot)
+    gen = seed_everything(config.seed)
+    tm = ObstaclePathModel(config.model_config(robot))
+    kin = kinematics(robot)
+    pool = _load_pool(config.problems, robot)
+    ef_all = (kin.position(pool.start), kin.position(pool.goal))
+    n_pool = len(pool)
+    if config.init_checkpoint:
+        init = load_obstacle_model(config.init_checkpoint, robot=robot.name)
+        if init.config.to_dict() != tm.config.to_dict():
+            raise ConfigError(
+                f"init_checkpoint {config.init_checkpoint} has another architecture than the run's model"
+            )
+        tm.load_state_dict(init.state_dict())
+    else:  # standardise with both directions, as training draws them
+        rows_all, mask_all, floor_all = scene_primitives(pool.scene, n_pool, torch.float64)
+        s0_all = torch.cat((pool.start, ef_all[0]), -1)
+        sT_all = torch.cat((pool.goal, ef_all[1]), -1)
+        tm.fit_normalization(
+            torch.cat((s0_all, sT_all)),
+            torch.cat((sT_all, s0_all)),
+            rows_all.repeat(2, 1, 1),
+            mask_all.repeat(2, 1),
+            floor_all.repeat(2, 1),
+        )
+    run_dir.mkdir(parents=True, exist_ok=True)
+    cfg_dict = copy.deepcopy(config.to_dict())
+    if write_config and not (resume and (run_dir / "tm_obstacles.pt").exists()):
+        write_json(run_dir / "config.json", cfg_dict)
+
+    def step(it: int):
+        idx = torch.randint(n_pool, (config.batch_size,), generator=gen)
+        swap = torch.rand(config.batch_size, generator=gen) < 0.5
+        s0, sT, scene = _batch(pool, ef_all, idx, swap)
+        # Stratified: each segment is looked at once per stretch of 1/points, at a random place in it.
+        fractions = (torch.arange(config.points) + torch.rand(config.points, generator=gen)) / config.points
+        per, terms = candidate_losses(tm, body, s0, sT, scene, config.loss, fractions)
+        best = per.min(dim=1)
+        loss = best.values.mean() + config.loss.spread * per.mean()
+        rows = torch.arange(per.shape[0])
+        logged = {f"best_{k}": float(v.detach()[rows, best.indices].mean()) for k, v in terms.items()}
+        logged["best_free"] = float((terms["collision"].detach()[rows, best.indices] == 0).float().mean())
+        return loss, logged
+
+    return fit_iterations(
+        tm,
+        step,
+        lambda path, extra: save_obstacle_model(tm, path, extra=extra),
+        run_dir=run_dir,
+        checkpoint="tm_obstacles.pt",
+        kind=ObstaclePathModel.kind,
+        robot=robot.name,
+        train_config=cfg_dict,
+        iterations=config.iterations,
+        lr=config.lr,
+        checkpoint_every=config.checkpoint_every,
+        generator=gen,
+        resume=resume,
+        progress=progress,
+        desc="train obstacle TM",
+        postfix=("loss", "best_free"),
+    )

@@ -1,0 +1,430 @@
+"""Self-supervised training of the trajectory model through a frozen FM and IM (paper Sect. 3).
+
+The FM and IM are each either learned (checkpoints from ``kinlearn train-fm`` / ``train-im``) or
+analytic (FK; a damped-least-squares IK step): the four combinations are the ablation. Their
+weights never change here: they are frozen and only the TM's parameters reach the optimiser.
+
+``tm.pt`` records the learned FM/IM files it was trained through by identity (path relative to
+``tm.pt`` and SHA-256, :func:`kinlearn.io.resolve_dependency`), never by an absolute folder: a run
+folder can move, and a swapped model is an error. Resuming checks the configuration, those models
+and the training pairs. Divergence (a non-finite loss, waypoints beyond :data:`WAYPOINT_BOUND_REACHES`
+arm reaches from the base, or a loss above ``DIVERGENCE_FACTOR`` × the first step's) is an error.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from ..body.robot import Robot, load_robot
+from ..data.endpoints import EndpointPairs
+from ..errors import CheckpointError, ConfigError, DatasetError, TrainingDivergedError
+from ..io import (
+    content_sha256,
+    file_sha256,
+    load_checkpoint,
+    remove_stale_tmp,
+    resolve_dependency,
+    save_checkpoint,
+    write_json,
+)
+from ..models.forward_inverse import AnalyticFM, AnalyticIM, load_fm, load_im
+from ..models.rollout import LossConfig, rectify, tm_loss
+from ..models.trajectory import TMConfig, TrajectoryModel
+from ..runs import diff_configs
+from .loop import (
+    OptimConfig,
+    RunLogger,
+    _check_divergence,
+    _truncate_log,
+    make_optimizer,
+    seed_everything,
+)
+
+__all__ = [
+    "TM_PRESETS",
+    "WAYPOINT_BOUND_REACHES",
+    "TMTrainConfig",
+    "build_fm_im",
+    "evaluate_tm",
+    "load_tm",
+    "tm_preset",
+    "train_tm",
+]
+
+ModelKind = Literal["learned", "analytic"]
+
+#: Waypoints farther than this many arm reaches from the base mean that training diverged.
+WAYPOINT_BOUND_REACHES = 10.0
+
+
+def arm_reach(robot: Robot) -> float:
+    """An upper bound of the end effector's distance from the base (m): the chain's link lengths and
+    the prismatic joints' travel, summed."""
+    links = sum(float(np.linalg.norm(j.T_prev[:3, 3])) for j in robot.joints)
+    travel = sum(max(abs(j.lower), abs(j.upper)) for j in robot.joints if j.kind == "prismatic")
+    return links + travel + float(np.linalg.norm(robot.T_tip[:3, 3]))
+
+
+@dataclass
+class TMTrainConfig:
+    """Everything that decides a TM training run; saved as the run's ``config.json``.
+
+    ``fm``/``im``: ``"learned"`` (loaded from ``models_dir``: ``fm.pt``, ``im.pt``) or ``"analytic"``.
+    ``trainable``: ``"all"``, or ``"shared"`` (only the shared dense layer, as the authors' code
+    effectively did, REFERENCE #13). ``schedule``: constant learning rate or cosine decay to zero.
+    """
+
+    robot: str = "iiwa14"
+    fm: ModelKind = "learned"
+    im: ModelKind = "learned"
+    models_dir: str | None = None
+    im_iterations: int = 1
+    im_damping: float = 1e-2
+    epochs: int = 50
+    batch_size: int = 64
+    optim: OptimConfig = field(default_factory=lambda: OptimConfig(name="rmsprop", lr=1e-3, alpha=0.99))
+    schedule: Literal["constant", "cosine"] = "cosine"
+    loss: LossConfig = field(default_factory=lambda: LossConfig.preset("smooth"))
+    tm: TMConfig = field(default_factory=TMConfig)
+    trainable: Literal["all", "shared"] = "all"
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("fm", "im"):
+            if getattr(self, name) not in ("learned", "analytic"):
+                raise ConfigError(f"{name} must be 'learned' or 'analytic', got {getattr(self, name)!r}")
+        if self.schedule not in ("constant", "cosine"):
+            raise ConfigError(f"schedule must be 'constant' or 'cosine', got {self.schedule!r}")
+        if self.trainable not in ("all", "shared"):
+            raise ConfigError(f"trainable must be 'all' or 'shared', got {self.trainable!r}")
+        if self.epochs <= 0 or self.batch_size <= 0:
+            raise ConfigError("epochs and batch_size must be positive")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TMTrainConfig:
+        d = dict(d)
+        d["optim"] = OptimConfig(**d["optim"])
+        d["loss"] = LossConfig(**d["loss"])
+        d["tm"] = TMConfig(**d["tm"])
+        return cls(**d)
+
+
+#: Named training configurations: fields of :class:`TMTrainConfig`, with ``loss`` a loss preset name
+#: and ``tm`` a dict of :class:`TMConfig` fields.
+TM_PRESETS: dict[str, dict] = {
+    # kinlearn's default: L_TM plus what the metrics ask for, normalised inputs, cosine decay.
+    "default": {},
+    # The paper's setting done right: Eq. 4, RMSprop 1e-3 (γ = 0.99), constant lr, no normalisation.
+    "paper": {"loss": "paper", "schedule": "constant", "tm": {"normalize": False}},
+    # The authors' code, defects included on purpose (REFERENCE #13–15): only the shared layer trains,
+    # random h0 on every call, the released loss (endpoint terms only), batch 1.
+    "reference-parity": {
+        "loss": "released",
+        "schedule": "constant",
+        "tm": {"normalize": False, "h0": "random"},
+        "trainable": "shared",
+        "batch_size": 1,
+    },
+}
+
+
+def tm_preset(name: str, **overrides) -> TMTrainConfig:
+    """A named training configuration (see :data:`TM_PRESETS`) with fields overridden by keyword.
+
+    ``loss`` may be a :class:`LossConfig` or a loss preset name; ``tm`` a dict of TMConfig fields.
+    The TM's robot and joint count follow ``robot``.
+    """
+    if name not in TM_PRESETS:
+        raise ConfigError(f"unknown TM preset {name!r}; choose one of {', '.join(TM_PRESETS)}")
+    fields = {**TM_PRESETS[name], **overrides}
+    robot = fields.get("robot", "iiwa14")
+    tm_fields = {**TM_PRESETS[name].get("tm", {}), **overrides.get("tm", {})}
+    fields["tm"] = TMConfig(**{**tm_fields, "robot": robot, "dof": load_robot(robot).dof})
+    if isinstance(fields.get("loss"), str):
+        fields["loss"] = LossConfig.preset(fields["loss"])
+    return TMTrainConfig(**fields)
+
+
+def build_fm_im(config: TMTrainConfig) -> tuple[torch.nn.Module, torch.nn.Module]:
+    """The frozen FM and IM that the configuration names (learned ones from ``models_dir``)."""
+    robot = load_robot(config.robot)
+    if "learned" in (config.fm, config.im) and config.models_dir is None:
+        raise ConfigError("a learned FM or IM needs models_dir, the folder holding fm.pt and im.pt")
+    models_dir = Path(config.models_dir) if config.models_dir else None
+    fm = AnalyticFM(robot) if config.fm == "analytic" else load_fm(models_dir / "fm.pt", robot=robot.name)
+    if config.im == "analytic":
+        im = AnalyticIM(robot, iterations=config.im_iterations, damping=config.im_damping)
+    else:
+        im = load_im(models_dir / "im.pt", robot=robot.name)
+    for m in (fm, im):
+        m.eval()
+        m.requires_grad_(False)
+    return fm, im
+
+
+def _step_loss(tm, fm, im, s0, sT, loss_cfg: LossConfig):
+    wp = tm(s0, sT)
+    if loss_cfg.gradient == "stop":
+        with torch.no_grad():
+            rect, _ = rectify(wp.detach(), s0, sT, fm, im, tm.layout)
+    else:
+        rect, _ = rectify(wp, s0, sT, fm, im, tm.layout)
+    return wp, tm_loss(wp, rect, s0, sT, tm.layout, loss_cfg)
+
+
+@torch.no_grad()
+def evaluate_tm(tm, fm, im, pairs: EndpointPairs, loss_cfg: LossConfig, batch_size: int = 4096) -> dict:
+    """Mean loss terms and trajectory metrics of ``tm`` on ``pairs``."""
+    from ..evaluation.metrics import summarize, trajectory_metrics
+
+    tm.eval()
+    sums: dict[str, float] = {}
+    wps = []
+    n = len(pairs)
+    for i in range(0, n, batch_size):
+        s0, sT = pairs.start[i : i + batch_size], pairs.goal[i : i + batch_size]
+        wp, (loss, terms) = _step_loss(tm, fm, im, s0, sT, loss_cfg)
+        w = s0.shape[0] / n
+        for k, v in {"loss": loss, **terms}.items():
+            sums[k] = sums.get(k, 0.0) + float(v) * w
+        wps.append(wp)
+    lay = tm.layout
+    per = trajectory_metrics(pairs.start[:, lay.ef], torch.cat(wps), pairs.goal[:, lay.ef])
+    summary = summarize(per)
+    out = dict(sums)
+    for k, v in summary.items():
+        out[k] = v["mean"] if isinstance(v, dict) else v
+    return out
+
+
+def train_tm(
+    config: TMTrainConfig,
+    run_dir: str | Path,
+    train: EndpointPairs,
+    val: EndpointPairs | None = None,
+    *,
+    fm: torch.nn.Module | None = None,
+    im: torch.nn.Module | None = None,
+    resume: bool = True,
+    progress: bool = True,
+    write_config: bool = True,
+) -> TrajectoryModel:
+    """Train a TM on ``train`` pairs; checkpoint ``run_dir/tm.pt`` after every epoch; resume from it.
+
+    ``fm``/``im`` override the models that ``config`` names (they are frozen either way); learned
+    ones loaded from ``config.models_dir`` are recorded in ``tm.pt`` by identity. Logs per-epoch loss
+    terms (and held-out metrics when ``val`` is given) to ``run_dir/metrics.jsonl``; writes the config
+    to ``run_dir/config.json`` unless ``write_config=False`` (the CLI keeps its own record there).
+    Raises :class:`DatasetError` for empty or non-finite pairs, :class:`CheckpointError` when resuming
+    a ``tm.pt`` made with another configuration, FM/IM or pairs, :class:`TrainingDivergedError`.
+    """
+    run_dir = Path(run_dir)
+    robot = load_robot(config.robot)
+    if train.config.robot != robot.name:
+        raise ConfigError(f"endpoint pairs are for {train.config.robot!r}, the run is for {robot.name!r}")
+    if config.tm.robot != robot.name or config.tm.dof != robot.dof:
+        raise ConfigError(
+            f"TM config is for {config.tm.robot!r} ({config.tm.dof} joints), not {robot.name!r}"
+        )
+    _check_pairs(train, "training pairs", robot)
+    if val is not None and len(val) == 0:
+        val = None
+    if val is not None:
+        _check_pairs(val, "held-out pairs", robot)
+    depends: dict[str, tuple[Path, str]] = {}
+    if fm is None or im is None:
+        built_fm, built_im = build_fm_im(config)
+        for kind, given in (("fm", fm), ("im", im)):
+            if given is None and getattr(config, kind) == "learned":
+                path = Path(config.models_dir) / f"{kind}.pt"
+                depends[kind] = (path, file_sha256(path))
+        fm, im = fm or built_fm, im or built_im
+    for m in (fm, im):
+        m.eval()
+        m.requires_grad_(False)
+        m.validate_inputs = False  # a diverging TM is caught by the loss check below
+    gen = seed_everything(config.seed)
+    tm = TrajectoryModel(config.tm)
+    tm.fit_normalization(train.start, train.goal)
+    if config.trainable == "shared":
+        for name, p in tm.named_parameters():
+            p.requires_grad_(name.startswith("shared."))
+    params = [p for p in tm.parameters() if p.requires_grad]
+    opt = make_optimizer(config.optim, params)
+    n = len(train)
+    steps_per_epoch = math.ceil(n / config.batch_size)
+    total = config.epochs * steps_per_epoch
+    if config.schedule == "cosine":
+        sched = torch.optim.lr_scheduler.LambdaLR(
+            opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, total) / total))
+        )
+    else:
+        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0)
+
+    ckpt = run_dir / "tm.pt"
+    data_sha256 = content_sha256((train.start, train.goal))
+    bound = WAYPOINT_BOUND_REACHES * arm_reach(robot)
+    start_epoch, loss_ref = 0, None
+    remove_stale_tmp(run_dir, ckpt.name)  # left by a write that was killed
+    if resume and ckpt.exists():
+        payload = load_checkpoint(ckpt, kind="tm", robot=robot.name)
+        diffs = _resume_differences(payload, config, depends, data_sha256)
+        if diffs:
+            raise CheckpointError(
+                f"{ckpt} was trained with another configuration ({'; '.join(diffs)}); resume with the same "
+                "settings, models and pairs, or train into a new run directory"
+            )
+        extra = payload["extra"]
+        try:
+            tm.load_state_dict(payload["state_dict"])
+            opt.load_state_dict(extra["optimizer"])
+            sched.load_state_dict(extra["scheduler"])
+        except (RuntimeError, ValueError, KeyError) as exc:
+            raise CheckpointError(f"{ckpt} does not fit the TM being trained ({exc})") from exc
+        gen.set_state(extra["generator"])
+        torch.set_rng_state(extra["torch_rng"])
+        start_epoch, loss_ref = extra["epoch"], extra.get("loss_ref")
+    _truncate_log(run_dir / "metrics.jsonl", start_epoch)  # records written after the last checkpoint
+    if write_config:
+        write_json(run_dir / "config.json", _train_config_dict(config))
+
+    with RunLogger(run_dir) as logger:
+        bar = tqdm(
+            range(start_epoch, config.epochs),
+            desc="train TM",
+            disable=not progress,
+            initial=start_epoch,
+            total=config.epochs,
+        )
+        for epoch in bar:
+            tm.train()
+            perm = torch.randperm(n, generator=gen)
+            sums: dict[str, float] = {}
+            for i in range(0, n, config.batch_size):
+                idx = perm[i : i + config.batch_size]
+                wp, (loss, terms) = _step_loss(tm, fm, im, train.start[idx], train.goal[idx], config.loss)
+                far = wp.detach().abs().amax()
+                if not bool(torch.isfinite(loss) & (far <= bound)):  # one check per step
+                    raise TrainingDivergedError(
+                        f"TM training diverged at epoch {epoch + 1} (loss {loss.item():.4g}, a waypoint "
+                        f"{far.item():.4g} m from the base, beyond {bound:.3g} m = {WAYPOINT_BOUND_REACHES:g} "
+                        f"× the arm's reach); lower the learning rate"
+                    )
+                if loss_ref is None:
+                    loss_ref = float(loss.detach())
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+                sched.step()
+                w = idx.numel() / n
+                for k, v in {"loss": loss.detach(), **terms}.items():
+                    sums[k] = sums.get(k, 0.0) + float(v) * w
+            _check_divergence(sums["loss"], loss_ref, epoch, what="TM training")
+            record = {
+                "epoch": epoch + 1,
+                "lr": sched.get_last_lr()[0],
+                **{f"train/{k}": v for k, v in sums.items()},
+            }
+            if val is not None:
+                record.update({f"val/{k}": v for k, v in evaluate_tm(tm, fm, im, val, config.loss).items()})
+            logger.log(record)
+            bar.set_postfix(loss=f"{sums['loss']:.3g}", l_tm=f"{sums['paper_l_tm']:.3g}")
+            save_checkpoint(
+                ckpt,
+                kind="tm",
+                robot=robot.name,
+                config=_checkpoint_config(config),
+                state_dict=tm.state_dict(),
+                extra={
+                    "epoch": epoch + 1,
+                    "optimizer": opt.state_dict(),
+                    "scheduler": sched.state_dict(),
+                    "generator": gen.get_state(),
+                    "torch_rng": torch.get_rng_state(),
+                    "loss_ref": loss_ref,
+                    "data_sha256": data_sha256,
+                },
+                depends=depends,
+            )
+    tm.eval()
+    return tm
+
+
+def _train_config_dict(config: TMTrainConfig) -> dict:
+    return copy.deepcopy(config.to_dict())
+
+
+def _checkpoint_config(config: TMTrainConfig) -> dict:
+    """The config as ``tm.pt`` stores it: without ``models_dir`` (the FM/IM are recorded by identity)."""
+    return {**_train_config_dict(config), "models_dir": None}
+
+
+def _check_pairs(pairs: EndpointPairs, what: str, robot: Robot) -> None:
+    size = robot.dof + 3
+    if len(pairs) == 0:
+        raise DatasetError(f"the {what} are empty: make endpoints with --n ≥ 1")
+    for name, t in (("start", pairs.start), ("goal", pairs.goal)):
+        if t.ndim != 2 or t.shape != (len(pairs), size):
+            raise DatasetError(f"the {what}' {name} states must have shape (N, {size}), got {tuple(t.shape)}")
+        if not bool(torch.isfinite(t).all()):
+            raise DatasetError(f"the {what}' {name} states hold NaN or infinity; make the endpoints again")
+
+
+def _resume_differences(payload: dict, config: TMTrainConfig, depends: dict, data_sha256: str) -> list[str]:
+    """What differs between checkpoint ``payload`` and the run about to resume from it."""
+    diffs = diff_configs(
+        {**payload["config"], "models_dir": None}, _checkpoint_config(config), ignore=("progress",)
+    )
+    if config.schedule == "constant" and payload["config"].get("schedule") == "constant":
+        diffs = [d for d in diffs if not d.startswith("epochs:")]  # the rate does not depend on it
+    recorded = payload.get("depends") or {}
+    for kind, (path, sha) in depends.items():
+        old = (recorded.get(kind) or {}).get("sha256")
+        if old is not None and old != sha:
+            diffs.append(f"{kind} {path}: sha256 {old[:16]}… → {sha[:16]}… (another model)")
+    old_data = payload["extra"].get("data_sha256")
+    if old_data is not None and old_data != data_sha256:
+        diffs.append(f"training pairs: sha256 {old_data[:16]}… → {data_sha256[:16]}…")
+    return diffs
+
+
+def load_tm(
+    path: str | Path, robot: str | None = None, *, resolve: bool = True
+) -> tuple[TrajectoryModel, TMTrainConfig]:
+    """Load a TM checkpoint written by :func:`train_tm`; returns the model (eval mode) and its config.
+
+    With ``resolve`` the learned FM/IM the TM records are found and verified
+    (:func:`kinlearn.io.resolve_dependency`) and the config's ``models_dir`` names their folder, so
+    that :func:`build_fm_im` loads exactly them. Raises :class:`CheckpointError` when one is missing or
+    was replaced.
+    """
+    payload = load_checkpoint(path, kind="tm", robot=robot)
+    try:
+        config = TMTrainConfig.from_dict(payload["config"])
+        tm = TrajectoryModel(config.tm)
+        tm.load_state_dict(payload["state_dict"])
+    except (TypeError, KeyError, RuntimeError, ConfigError) as exc:
+        raise CheckpointError(f"{path}: the TM checkpoint does not match this kinlearn ({exc})") from exc
+    learned = [k for k in ("fm", "im") if getattr(config, k) == "learned" and k in payload["depends"]]
+    if resolve and learned:
+        folders = {resolve_dependency(path, payload, k).parent for k in learned}
+        if len(folders) > 1:
+            raise CheckpointError(
+                f"{path}: its FM and IM were found in different folders ({', '.join(map(str, folders))}); "
+                "put fm.pt and im.pt in one folder"
+            )
+        config = dataclasses.replace(config, models_dir=str(folders.pop()))
+    tm.eval()
+    return tm, config
