@@ -220,42 +220,44 @@ def train_tm_seeds(
             perms = torch.stack([torch.randperm(n, generator=g) for g in gens])
             sums = [dict() for _ in range(M)]
             for i in range(0, n, config.batch_size):
-                idx = perms[:, i : i + config.batch_size]
+                run = [k for k in range(M) if k not in dead]  # a stopped seed costs nothing more
+                idx = perms[run, i : i + config.batch_size]
                 s0, sT = train.start[idx], train.goal[idx]
-                B = idx.shape[1]
-                wp = stacked_forward(members, s0, sT)
-                flat = (wp.reshape(M * B, *wp.shape[2:]), s0.reshape(M * B, -1), sT.reshape(M * B, -1))
+                R, B = idx.shape
+                wp = stacked_forward([members[k] for k in run], s0, sT)
+                flat = (wp.reshape(R * B, *wp.shape[2:]), s0.reshape(R * B, -1), sT.reshape(R * B, -1))
                 if config.loss.gradient == "stop":
                     with torch.no_grad():
                         rect, _ = rectify(flat[0].detach(), flat[1], flat[2], fm, im, members[0].layout)
                 else:
                     rect, _ = rectify(*flat, fm, im, members[0].layout)
-                loss, terms = per_member_loss(wp, rect.reshape(M, B, *rect.shape[1:]), s0, sT)
-                ok = torch.isfinite(loss) & (wp.detach().abs().amax(dim=(1, 2, 3)) <= bound)
-                for k in [k for k in range(M) if k not in dead and not bool(ok[k])]:
-                    dead[k] = TrainingDivergedError(
-                        f"TM training diverged at epoch {epoch + 1} (loss {loss[k].item():.4g}, a waypoint "
+                loss, terms = per_member_loss(wp, rect.reshape(R, B, *rect.shape[1:]), s0, sT)
+                ok = (torch.isfinite(loss) & (wp.detach().abs().amax(dim=(1, 2, 3)) <= bound)).tolist()
+                for j in [j for j in range(R) if not ok[j]]:
+                    dead[run[j]] = TrainingDivergedError(
+                        f"TM training diverged at epoch {epoch + 1} (loss {loss[j].item():.4g}, a waypoint "
                         f"beyond {bound:.3g} m = {WAYPOINT_BOUND_REACHES:g} × the arm's reach); lower the learning rate"
                     )
-                live = [k for k in range(M) if k not in dead]
-                if not live:
+                keep = [j for j in range(R) if ok[j]]
+                if not keep:
                     break
-                for k in live:
-                    if loss_ref[k] is None:
-                        loss_ref[k] = float(loss[k].detach())
+                for j in keep:
+                    if loss_ref[run[j]] is None:
+                        loss_ref[run[j]] = float(loss[j].detach())
                 opt.zero_grad(set_to_none=True)
-                loss[live].sum().backward()
-                with torch.no_grad():  # a stopped seed's parameters stay where they stopped
-                    for k in dead:
-                        for p in members[k].parameters():
-                            p.grad = torch.zeros_like(p)
+                loss[keep].sum().backward()
+                for j in [
+                    j for j in range(R) if not ok[j]
+                ]:  # no gradient, no step: it stays where it stopped
+                    for p in members[run[j]].parameters():
+                        p.grad = None
                 opt.step()
                 sched.step()
                 w = B / n
                 vals = torch.stack([loss.detach(), *terms.values()], dim=1).tolist()
-                for k in live:
-                    for name, v in zip(("loss", *terms), vals[k], strict=True):
-                        sums[k][name] = sums[k].get(name, 0.0) + v * w
+                for j in keep:
+                    for name, v in zip(("loss", *terms), vals[j], strict=True):
+                        sums[run[j]][name] = sums[run[j]].get(name, 0.0) + v * w
             state = opt.state_dict()
             for k in range(M):
                 if k in dead:
