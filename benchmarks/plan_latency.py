@@ -5,7 +5,7 @@
 The planner is ``Planner.load(--run-dir)``, else the one shipped with kinlearn. Every row is timed
 in this run, on one thread, on held-out workspace pairs (uniform within ±90% of the joint range):
 
-- ``kinlearn.planning.plan``: the whole call a user makes (input checks, inference, joint path, clamp to the
+- ``kinlearn.plan``: the whole call a user makes (input checks, inference, joint path, clamp to the
   limits, FK of every configuration, goal errors and success flags, the ``Plan`` of tensors);
 - the paper-size TM forward alone (GRU 20 → dense 20 → head 10 → 3, eager torch, batch 1): what the
   paper's planner costs before its rollout;

@@ -9,22 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from kinlearn.models.body import (
-    BODY_KIND,
-    HELDOUT_PROBLEMS,
-    BodyModelConfig,
-    LearnedBody,
-    load_body_model,
-    save_body_model,
-    train_body_model,
-    validate_body_model,
-)
 
 from kinlearn import load_robot
 from kinlearn.collision import body_obstacle_distance, body_spheres, check_path, clearances, in_collision
 from kinlearn.collision.problems import ProblemSet
 from kinlearn.errors import CheckpointError, ConfigError, DatasetError, NonFiniteError, ShapeError
 from kinlearn.io import load_checkpoint, save_checkpoint
+from kinlearn.models.body import BODY_KIND, BodyModelConfig, LearnedBody, load_body_model, save_body_model
+from kinlearn.training.body import HELDOUT_PROBLEMS, train_body_model, validate_body_model
 
 TINY = BodyModelConfig(hidden=(48, 48), epochs=6, batch_size=128, lr=1e-2, samples=3000, val_fraction=0.1)
 
@@ -161,7 +153,7 @@ def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch):
     cfg = BodyModelConfig(hidden=(16,), epochs=4, batch_size=256, lr=5e-3, samples=1000, seed=3)
     whole = train_body_model(cfg, tmp_path / "whole", progress=False)
 
-    import kinlearn.models.body as bm
+    import kinlearn.training.body as bm
 
     real_save, saves = bm.save_body_model, []
 

@@ -6,12 +6,12 @@ import json
 
 import pytest
 import torch
-from kinlearn.cli.main import add_command, build_parser, main, register_subcommand
-from kinlearn.models.forward_inverse import LearnedFM, LearnedIM, load_fm, load_im
 
 from kinlearn import ConfigError, DatasetError
+from kinlearn.cli.main import add_command, build_parser, main, register_subcommand
 from kinlearn.data.babbling import BabblingConfig, load_transitions
 from kinlearn.data.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
+from kinlearn.models.forward_inverse import LearnedFM, LearnedIM, load_fm, load_im
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS
 from kinlearn.training.tm import tm_preset, train_tm
 

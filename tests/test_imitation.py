@@ -2,11 +2,11 @@
 
 import pytest
 import torch
-from kinlearn.models.forward_inverse import AnalyticFM, AnalyticIM
-from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 
 from kinlearn import ConfigError, load_robot
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
+from kinlearn.models.forward_inverse import AnalyticFM, AnalyticIM
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 from kinlearn.planning.baselines import joint_interpolation
 from kinlearn.planning.planner import Planner
 from kinlearn.training.imitation import imitation_loss, imitation_targets, train_imitation

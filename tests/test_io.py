@@ -8,7 +8,6 @@ import sys
 import numpy as np
 import pytest
 import torch
-from kinlearn.models.forward_inverse import LearnedFM, fm_config, im_config, load_fm
 
 import kinlearn
 from kinlearn import CheckpointError, ConfigError, ShapeError, UnknownRobotError
@@ -26,6 +25,7 @@ from kinlearn.io import (
     resolve_dependency,
     save_checkpoint,
 )
+from kinlearn.models.forward_inverse import LearnedFM, fm_config, im_config, load_fm
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
 from kinlearn.training.loop import train_config, train_fm, train_im
 from kinlearn.training.tm import build_fm_im, load_tm, tm_preset, train_tm

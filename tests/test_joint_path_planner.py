@@ -6,6 +6,11 @@ import warnings
 import numpy as np
 import pytest
 import torch
+
+import kinlearn
+from kinlearn import kinematics, load_robot
+from kinlearn.data.endpoints import EndpointConfig, make_endpoints, workspace_box
+from kinlearn.errors import ConfigError, DomainError, DomainWarning, DTypeError, ShapeError
 from kinlearn.models.forward_inverse import (
     AnalyticFM,
     AnalyticIM,
@@ -14,11 +19,6 @@ from kinlearn.models.forward_inverse import (
     fm_config,
 )
 from kinlearn.models.joint_path import JointPathConfig, JointPathModel, densify
-
-import kinlearn
-from kinlearn import kinematics, load_robot
-from kinlearn.data.endpoints import EndpointConfig, make_endpoints, workspace_box
-from kinlearn.errors import ConfigError, DomainError, DomainWarning, DTypeError, ShapeError
 from kinlearn.planning.inference import NumpyFK, NumpyPathModel
 from kinlearn.planning.planner import MAX_STEP, Planner
 from kinlearn.training.joint_path import PathTrainConfig, train_path_model

@@ -32,7 +32,6 @@ FLOORS: dict[str, int] = {
 KNOWN_UPWARD = {
     ("training.imitation", "planning.baselines"),  # the imitation teacher is a baseline planner
     ("training.tm", "evaluation.metrics"),  # held-out evaluation at the end of TM training
-    ("models.body", "training.loop"),  # the learned body reuses the generic training loop (inside a function)
     ("planning.plan", "viz"),  # Plan.show()/animate() (inside the methods)
 }
 

@@ -2,6 +2,10 @@
 
 import pytest
 import torch
+
+from kinlearn import CheckpointError, ConfigError, NonFiniteError, ShapeError, kinematics, load_robot
+from kinlearn.body.state import StateLayout
+from kinlearn.io import save_checkpoint
 from kinlearn.models.forward_inverse import (
     AnalyticFM,
     AnalyticIM,
@@ -17,10 +21,6 @@ from kinlearn.models.forward_inverse import (
     load_im,
     save_model,
 )
-
-from kinlearn import CheckpointError, ConfigError, NonFiniteError, ShapeError, kinematics, load_robot
-from kinlearn.body.state import StateLayout
-from kinlearn.io import save_checkpoint
 
 
 def states(robot, shape, gen, dtype=torch.float64, margin=0.3):

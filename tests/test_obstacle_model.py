@@ -5,6 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+
+from kinlearn import load_robot
+from kinlearn.body.kinematics import kinematics
+from kinlearn.collision import Scene
+from kinlearn.errors import CheckpointError, ConfigError
 from kinlearn.models.obstacle_path import (
     ObstaclePathConfig,
     ObstaclePathModel,
@@ -12,11 +17,6 @@ from kinlearn.models.obstacle_path import (
     save_obstacle_model,
     scene_primitives,
 )
-
-from kinlearn import load_robot
-from kinlearn.body.kinematics import kinematics
-from kinlearn.collision import Scene
-from kinlearn.errors import CheckpointError, ConfigError
 from kinlearn.planning.inference import NumpyObstacleModel
 
 

@@ -2,14 +2,14 @@
 
 import pytest
 import torch
-from kinlearn.models.forward_inverse import AnalyticFM, AnalyticIM, fm_config, im_config
-from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 
 import kinlearn
 from kinlearn import JointLimitError, NonFiniteError, ShapeError, kinematics, load_robot
 from kinlearn.data.babbling import BabblingConfig, babble
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.errors import CheckpointError, ConfigError, StateError
+from kinlearn.models.forward_inverse import AnalyticFM, AnalyticIM, fm_config, im_config
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
 from kinlearn.training.loop import train_config, train_fm, train_im
 from kinlearn.training.tm import tm_preset, train_tm
@@ -156,3 +156,16 @@ def test_rollout_options_are_checked(iiwa):
     tm = TrajectoryModel(TMConfig())
     with pytest.raises(ConfigError, match="refine"):
         Planner(iiwa, tm, AnalyticFM(iiwa), AnalyticIM(iiwa), refine=-1)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_plans_follow_the_inputs_device_and_dtype():
+    planner = Planner.default("iiwa14")
+    gen = torch.Generator().manual_seed(3)
+    start, goal = planner.robot.sample((4,), gen, margin=0.1), planner.robot.sample((4,), gen, margin=0.1)
+    on_cpu = planner.plan(start, goal)
+    for dtype in (torch.float32, torch.float64):
+        on_gpu = planner.plan(start.to("cuda", dtype), goal.to("cuda", dtype))
+        assert on_gpu.joints.device.type == "cuda" and on_gpu.joints.dtype == dtype
+        torch.testing.assert_close(on_gpu.joints.cpu().double(), on_cpu.joints.double(), atol=1e-6, rtol=0)
+        assert torch.equal(on_gpu.success.cpu(), on_cpu.success)

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import pytest
 import torch
-from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel
 
 from kinlearn import load_robot
 from kinlearn.body.kinematics import kinematics
 from kinlearn.collision import Scene, check_path
 from kinlearn.collision.problems import ProblemSet
 from kinlearn.errors import ConfigError, ObstacleError, ShapeError
+from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel
 from kinlearn.planning.planner import Planner
 
 BENCHMARK = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "obstacle_problems_heldout.npz"
@@ -139,9 +139,8 @@ def test_a_scene_with_boxes_and_floor(planner, problems):
 def test_shipped_planner_plans_around_an_obstacle_and_refines(robot, tmp_path):
     """The shipped obstacle-aware planner: a hard problem (the straight line collides) solved, through
     kinlearn.plan and the CLI, and refinement steps only ever add collision-free plans."""
-    from kinlearn.cli.main import main
-
     import kinlearn
+    from kinlearn.cli.main import main
 
     ps = ProblemSet.load(BENCHMARK)
     hard = torch.nonzero(ps.hard).reshape(-1)[:12]

@@ -4,8 +4,8 @@ import json
 
 import pytest
 import torch
-from kinlearn.cli.main import main
 
+from kinlearn.cli.main import main
 from kinlearn.errors import ConfigError, MissingDependencyError
 from kinlearn.evaluation.reproduce import OPTIMIZER_SWEEP, _run_jobs, preset_config, reproduce
 

@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 import torch
 from conftest import ALL_ROBOTS
-from kinlearn.cli.view import register
-from kinlearn.models.forward_inverse import load_fm, load_im
 
 import kinlearn
 from kinlearn.body.robot import ROBOTS, load_robot
+from kinlearn.cli.view import register
 from kinlearn.errors import CheckpointError, ConfigError
 from kinlearn.evaluation.metrics import plan_metrics
 from kinlearn.evaluation.workspace import evaluate_workspace, heldout_pairs
 from kinlearn.io import load_checkpoint
+from kinlearn.models.forward_inverse import load_fm, load_im
 from kinlearn.planning.baselines import joint_interpolation
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
 

@@ -9,6 +9,9 @@ import time
 import numpy as np
 import pytest
 import torch
+
+from kinlearn import CheckpointError, ConfigError, DatasetError, kinematics, load_robot
+from kinlearn.data.babbling import BabblingConfig, babble
 from kinlearn.models.forward_inverse import (
     AnalyticFM,
     AnalyticIM,
@@ -18,9 +21,6 @@ from kinlearn.models.forward_inverse import (
     load_fm,
     load_im,
 )
-
-from kinlearn import CheckpointError, ConfigError, DatasetError, kinematics, load_robot
-from kinlearn.data.babbling import BabblingConfig, babble
 from kinlearn.training.loop import (
     OptimConfig,
     RunLogger,

@@ -6,13 +6,13 @@ import json
 
 import pytest
 import torch
-from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel
 
 from kinlearn import load_robot
 from kinlearn.collision import body_obstacle_distance, body_spheres
 from kinlearn.collision.problems import ProblemConfig, make_problems
 from kinlearn.errors import CheckpointError, ConfigError
 from kinlearn.io import load_checkpoint
+from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel
 from kinlearn.training.obstacle_path import (
     ObstacleLossConfig,
     ObstacleTrainConfig,
@@ -148,7 +148,6 @@ def test_train_obstacle_planner_command(tmp_path):
     import shutil
 
     from kinlearn.cli.main import main
-
     from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
 
     planner_dir = tmp_path / "planner"

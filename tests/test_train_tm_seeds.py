@@ -5,10 +5,10 @@ import json
 
 import pytest
 import torch
-from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.errors import CheckpointError, ConfigError, TrainingDivergedError
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 from kinlearn.planning.planner import Planner
 from kinlearn.training.loop import OptimConfig
 from kinlearn.training.tm import load_tm, tm_preset, train_tm

@@ -5,6 +5,11 @@ import json
 
 import pytest
 import torch
+
+from kinlearn import ConfigError, kinematics, load_robot
+from kinlearn.body.state import StateLayout
+from kinlearn.data.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
+from kinlearn.errors import CheckpointError, DatasetError
 from kinlearn.models.forward_inverse import (
     AnalyticFM,
     AnalyticIM,
@@ -15,11 +20,6 @@ from kinlearn.models.forward_inverse import (
 )
 from kinlearn.models.rollout import LossConfig, rectify, tm_loss
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
-
-from kinlearn import ConfigError, kinematics, load_robot
-from kinlearn.body.state import StateLayout
-from kinlearn.data.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
-from kinlearn.errors import CheckpointError, DatasetError
 from kinlearn.training.tm import load_tm, tm_preset, train_tm
 
 

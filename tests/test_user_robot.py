@@ -3,7 +3,6 @@ endpoint pairs → TM (the paper's, and the joint-path one) → plan, checked ag
 
 import pytest
 import torch
-from kinlearn.models.forward_inverse import fm_config, im_config, load_fm
 
 import kinlearn
 from kinlearn.body.kinematics import kinematics
@@ -18,6 +17,7 @@ from kinlearn.errors import (
     UnknownRobotError,
 )
 from kinlearn.evaluation.workspace import heldout_pairs
+from kinlearn.models.forward_inverse import fm_config, im_config, load_fm
 from kinlearn.planning.planner import Planner
 from kinlearn.training.joint_path import PathTrainConfig, train_path_model
 from kinlearn.training.loop import train_config, train_fm, train_im

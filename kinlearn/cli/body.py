@@ -13,14 +13,9 @@ from pathlib import Path
 
 from ..errors import ConfigError
 from ..io import load_checkpoint, write_json
-from ..models.body import (
-    HELDOUT_PROBLEMS,
-    BodyModelConfig,
-    save_body_model,
-    train_body_model,
-    validate_body_model,
-)
+from ..models.body import BodyModelConfig, save_body_model
 from ..models.forward_inverse import ACTIVATIONS
+from ..training.body import HELDOUT_PROBLEMS, train_body_model, validate_body_model
 from .main import (
     NONNEGATIVE_INT,
     POSITIVE_FLOAT,
