@@ -36,6 +36,11 @@ KNOWN_UPWARD = {
 }
 
 
+#: Imports forbidden even though they point down: planning (loading and running a planner) uses models,
+#: never training code.
+FORBIDDEN = {("planning", "training")}
+
+
 def _modules() -> dict[str, Path]:
     out = {}
     for f in PACKAGE.rglob("*.py"):
@@ -93,6 +98,17 @@ def test_imports_point_down():
     new = upward - KNOWN_UPWARD
     assert not new, f"imports running up a floor: {sorted(new)}"
     assert not (KNOWN_UPWARD - upward), f"listed debts that are gone (remove them): {KNOWN_UPWARD - upward}"
+
+
+def test_planning_imports_no_training_code():
+    graph = _imports(_modules())
+    bad = {
+        (a, b)
+        for a, targets in graph.items()
+        for b in targets
+        if (a.split(".")[0], b.split(".")[0]) in FORBIDDEN
+    }
+    assert not bad, f"forbidden imports: {sorted(bad)}"
 
 
 def test_no_import_circle():

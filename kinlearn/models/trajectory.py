@@ -13,16 +13,19 @@ reproduce the authors' behaviour.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Literal
 
 import torch
 from torch import nn
 
-from ..body.robot import check_finite, check_last_dim
+from ..body.robot import check_finite, check_last_dim, load_robot
 from ..body.state import StateLayout
-from ..errors import ConfigError
+from ..errors import CheckpointError, ConfigError
+from ..io import load_checkpoint, resolve_dependency
+from .forward_inverse import AnalyticFM, AnalyticIM, ForwardModel, InverseModel, load_fm, load_im
 
-__all__ = ["TMConfig", "TrajectoryModel"]
+__all__ = ["TMConfig", "TrajectoryModel", "load_trajectory_model"]
 
 
 @dataclass
@@ -130,3 +133,50 @@ class TrajectoryModel(nn.Module):
         for what, s in (("start state s0", s0), ("goal state sT", sT)):
             check_last_dim(s, self.layout.size, what)
             check_finite(s, what)
+
+
+def load_trajectory_model(
+    path: str | Path, robot: str | None = None
+) -> tuple[TrajectoryModel, ForwardModel, InverseModel]:
+    """The waypoint TM in ``tm.pt`` (eval mode) and the frozen FM and IM it was trained through.
+
+    Reads only what a planner needs from the checkpoint: the TM's architecture and weights, whether
+    each of the FM/IM is learned or analytic (with the analytic IM's iterations and damping), and the
+    learned ones by the identity the checkpoint records (relative path and hash,
+    :func:`kinlearn.io.resolve_dependency`); a run written before identities were recorded finds
+    them beside ``tm.pt``. No training code is involved. Raises :class:`CheckpointError` when the file
+    does not fit this kinlearn or a model it needs is missing or was replaced.
+    """
+    path = Path(path)
+    payload = load_checkpoint(path, kind="tm", robot=robot)
+    config = payload["config"]
+    try:
+        tm = TrajectoryModel(TMConfig(**config["tm"]))
+        tm.load_state_dict(payload["state_dict"])
+    except (TypeError, KeyError, RuntimeError, ConfigError) as exc:
+        raise CheckpointError(f"{path}: the TM checkpoint does not match this kinlearn ({exc})") from exc
+    arm = load_robot(tm.config.robot)
+    models = {}
+    for kind, loader in (("fm", load_fm), ("im", load_im)):
+        if config.get(kind, "learned") == "analytic":
+            models[kind] = (
+                AnalyticFM(arm)
+                if kind == "fm"
+                else AnalyticIM(
+                    arm, iterations=config.get("im_iterations", 1), damping=config.get("im_damping", 1e-2)
+                )
+            )
+            continue
+        if kind in (payload.get("depends") or {}):
+            src = resolve_dependency(path, payload, kind)
+        else:  # checkpoint format 1: the models beside tm.pt, or in the folder its run named
+            folders = [path.parent] + ([Path(config["models_dir"])] if config.get("models_dir") else [])
+            found = [f / f"{kind}.pt" for f in folders if (f / f"{kind}.pt").is_file()]
+            if not found:
+                raise CheckpointError(f"{path}: cannot find the {kind}.pt it was trained through")
+            src = found[0]
+        models[kind] = loader(src, robot=arm.name)
+    for m in models.values():
+        m.eval()
+        m.requires_grad_(False)
+    return tm.eval(), models["fm"], models["im"]

@@ -53,7 +53,7 @@ from ..models.forward_inverse import ForwardModel, InverseModel, load_fm, load_i
 from ..models.joint_path import JointPathModel, load_path_model
 from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model, scene_primitives
 from ..models.rollout import rectify
-from ..models.trajectory import TrajectoryModel
+from ..models.trajectory import TrajectoryModel, load_trajectory_model
 from .inference import NumpyFK, NumpyObstacleModel, NumpyPathModel
 from .plan import DEFAULT_TOLERANCE, Plan, Tolerance
 
@@ -214,14 +214,8 @@ class Planner:
             if "obstacle_tm" not in options and (run_dir / OBSTACLE_TM).is_file():
                 options["obstacle_tm"] = load_obstacle_model(run_dir / OBSTACLE_TM, robot=tm.robot_name)
             return cls(_robot(robot, tm.robot_name), tm, fm, im, **options)
-        from ..training.tm import TMTrainConfig, build_fm_im, load_tm  # the waypoint TM's run format
-
-        tm, config = load_tm(run_dir / "tm.pt", robot=name)
-        if not payload["depends"] and ((run_dir / "fm.pt").is_file() or (run_dir / "im.pt").is_file()):
-            # A run without recorded dependencies (checkpoint format 1): the models beside tm.pt.
-            config = TMTrainConfig.from_dict({**config.to_dict(), "models_dir": str(run_dir)})
-        fm, im = build_fm_im(config)
-        return cls(_robot(robot, config.robot), tm, fm, im, **options)
+        tm, fm, im = load_trajectory_model(run_dir / "tm.pt", robot=name)
+        return cls(_robot(robot, tm.robot_name), tm, fm, im, **options)
 
     @classmethod
     def default(cls, robot: str = "iiwa14") -> Planner:
