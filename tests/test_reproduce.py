@@ -108,3 +108,27 @@ def test_cli_endpoints_train_tm_plan_export(tmp_path, capsys):
     assert "no file at" in capsys.readouterr().err
     assert main(["plan", "--model", str(tm), "--start", "0,3,0,0,0,0,0", "--goal", goal]) == 2
     assert "iiwa_joint_2" in capsys.readouterr().err
+
+
+def test_seeds_merge_into_a_mean_and_a_spread_over_seeds():
+    from kinlearn.evaluation.reproduce import _merge, _over_seeds_table
+
+    seeds = [
+        {
+            "mean_angle": {"mean": 150.0, "std": 5.0},
+            "success": {"mean": 0.5, "std": 0.5, "rate": 0.5},
+            "n": 9,
+        },
+        {
+            "mean_angle": {"mean": 160.0, "std": 7.0},
+            "success": {"mean": 0.7, "std": 0.4, "rate": 0.7},
+            "n": 9,
+        },
+    ]
+    merged = _merge(seeds)
+    assert merged["mean_angle"] == {"mean": 155.0, "std": 6.0, "seed_std": 5.0, "seeds": 2}
+    assert merged["success"]["rate"] == pytest.approx(0.6) and merged["success"]["seed_std"] == pytest.approx(
+        0.1
+    )
+    table = _over_seeds_table({"#4": merged})
+    assert "| #4 | 2 |" in table and "155.0 ± 5.0" in table and "60.0 ± 10.0%" in table

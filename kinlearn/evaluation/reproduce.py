@@ -37,7 +37,7 @@ from ..training.imitation import train_imitation
 from ..training.loop import train_config, train_fm, train_im, train_im_distal, validate_models
 from ..training.tm import TMTrainConfig, tm_preset, train_tm
 from ..training.tm_seeds import train_tm_seeds
-from .metrics import PAPER_TABLE2, TABLE2_COLUMNS, format_table, plan_metrics, summarize
+from .metrics import METRICS, PAPER_TABLE2, TABLE2_COLUMNS, format_table, plan_metrics, summarize
 
 __all__ = ["OPTIMIZER_SWEEP", "REPRODUCE_PRESETS", "ReproduceConfig", "evaluate_plans", "reproduce"]
 
@@ -211,17 +211,45 @@ def _mean_std(values: list[float]) -> dict:
 
 
 def _merge(summaries: list[dict]) -> dict:
-    """Average per-seed summaries: the mean of each metric's mean, with its std across seeds."""
+    """Average per-seed summaries: each metric's mean of the seeds' means, the mean of their stds over
+    trajectories (``std``), and the std of the seeds' means (``seed_std``, population)."""
     out = {}
     for key, first in summaries[0].items():
         if isinstance(first, dict) and "mean" in first:
+            means = [s[key]["mean"] for s in summaries]
             out[key] = {
-                "mean": sum(s[key]["mean"] for s in summaries) / len(summaries),
+                "mean": sum(means) / len(summaries),
                 "std": sum(s[key]["std"] for s in summaries) / len(summaries),
+                "seed_std": _mean_std(means)["std"],
+                "seeds": len(summaries),
             }
+            if "rate" in first:
+                out[key]["rate"] = out[key]["mean"]
         else:
             out[key] = first
     return out
+
+
+def _over_seeds_table(rows: dict[str, dict]) -> str:
+    """Held-out metrics as mean ± std over the seeds' means (rates in %)."""
+    columns = (*TABLE2_COLUMNS, "sharp_turn", "goal_error", "success")
+    lines = [
+        "| | seeds | " + " | ".join(METRICS[c].label for c in columns) + " |",
+        "|:--|--:|" + "--:|" * len(columns),
+    ]
+    for name, summary in rows.items():
+        cells = []
+        for c in columns:
+            v, info = summary.get(c), METRICS[c]
+            if not v or "seed_std" not in v:
+                cells.append("—")
+            elif info.indicator:
+                cells.append(f"{100 * v['mean']:.1f} ± {100 * v['seed_std']:.1f}%")
+            else:
+                cells.append(f"{v['mean']:.{info.decimals}f} ± {v['seed_std']:.{info.decimals}f}")
+        seeds = next((v["seeds"] for v in summary.values() if isinstance(v, dict) and "seeds" in v), "—")
+        lines.append(f"| {name} | {seeds} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def reproduce(
@@ -374,6 +402,7 @@ def reproduce(
             "diverged": len(runs) - len(ok),
             "final_l_tm": _mean_std([r["final_l_tm"] for r in ok]) if ok else None,
             "heldout": _merge([r["heldout"] for r in ok]) if ok else None,
+            "per_seed": {r["seed"]: r["heldout"] for r in ok if "seed" in r},
             "train_seconds": _mean_std([r["train_seconds"] for r in runs]),
         }
     converged = [k for k in table1 if table1[k]["final_l_tm"] is not None]
@@ -532,11 +561,22 @@ def _markdown(res: dict) -> str:
     rows.update({k: v for k, v in res["baselines"].items() if "skipped" not in v})
     lines += [
         "",
-        "## Table 2 — held-out trajectories (mean ± std over trajectories)",
+        "## Table 2 — held-out trajectories (mean ± std over trajectories; a sweep row averages its seeds)",
         "",
         format_table(rows, columns=(*TABLE2_COLUMNS, "sharp_turn", "goal_error", "success")),
         "",
     ]
+    over_seeds = {
+        f"#{k} kinlearn, paper loss": row["heldout"]
+        for k, row in res["table1"].items()
+        if row["heldout"] is not None and len(cfg["seeds"]) > 1
+    }
+    if over_seeds:
+        lines += [
+            "## Table 2 over seeds — the held-out means of each seed, mean ± std over the seeds",
+            "",
+            _over_seeds_table(over_seeds),
+        ]
     for k, v in res["baselines"].items():
         if "skipped" in v:
             lines.append(f"- {k}: skipped ({v['skipped']})")
