@@ -75,7 +75,6 @@ class LearnedPlanner:
     def __call__(self, start, goal, scene):
         if self.planner is None:
             from kinlearn.models.obstacle_path import load_obstacle_model
-
             from kinlearn.planning.planner import Planner
 
             base = Planner.default(self.robot)

@@ -28,11 +28,11 @@ import time
 import numpy as np
 import torch
 from _common import header, markdown_table
-from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 
 from kinlearn import load_robot
 from kinlearn.errors import MissingDependencyError
 from kinlearn.evaluation.workspace import heldout_pairs
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 from kinlearn.planning.baselines import joint_interpolation, rrt_connect_timed
 from kinlearn.planning.planner import Planner
 

@@ -24,6 +24,9 @@ import time
 
 import torch
 from _common import header, markdown_table
+
+from kinlearn import load_robot
+from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.models.forward_inverse import (
     AnalyticFM,
     AnalyticIM,
@@ -34,9 +37,6 @@ from kinlearn.models.forward_inverse import (
 )
 from kinlearn.models.rollout import LossConfig, rectify, tm_loss
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
-
-from kinlearn import load_robot
-from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.training.loop import OptimConfig, make_optimizer
 from kinlearn.training.tm import tm_preset, train_tm
 
