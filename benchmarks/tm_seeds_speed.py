@@ -53,7 +53,9 @@ def main() -> None:
             )
             warm = pairs.split(256)[0]  # first calls pay for loading and allocation: not timed
             train_tm(cfg, Path(tmp) / f"{preset}-warm", warm, progress=False)
-            train_tm_seeds(cfg, [0, 1], [Path(tmp) / f"{preset}-warm{s}" for s in (0, 1)], warm, progress=False)
+            train_tm_seeds(
+                cfg, [0, 1], [Path(tmp) / f"{preset}-warm{s}" for s in (0, 1)], warm, progress=False
+            )
             t0 = time.perf_counter()
             train_tm(cfg, Path(tmp) / f"{preset}-one", pairs, progress=False)
             one = time.perf_counter() - t0

@@ -17,7 +17,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "kinlearn"
 
 #: Each sub-package is one floor; a module's floor is its sub-package's.
 FLOORS: dict[str, int] = {
-    "errors": 0, "io": 0, "runs": 0,  # errors, files, run directories
+    "errors": 0, "checks": 0, "io": 0, "runs": 0,  # errors, input checks, files, run directories
     "body": 1,  # the robot, its kinematics and state layout
     "collision": 2,  # collision geometry, scenes, benchmark problems
     "data": 3,  # babbling, endpoint pairs

@@ -26,8 +26,9 @@ from typing import Literal
 import numpy as np
 import torch
 
+from ..checks import check_finite, check_last_dim, check_real_dtype
 from ..errors import ConfigError
-from .robot import Robot, check_finite, check_last_dim, check_real_dtype, load_robot
+from .robot import Robot, load_robot
 
 __all__ = [
     "BACKENDS",

@@ -17,12 +17,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..checks import check_finite, check_last_dim
 from ..errors import (
-    DTypeError,
     JointLimitError,
-    NonFiniteError,
     RobotDescriptionError,
-    ShapeError,
     UnknownRobotError,
 )
 
@@ -264,35 +262,6 @@ class Robot:
                 f"{what} outside {self.name}'s limits: joint {self.joint_names[j]} = {float(q[tuple(idx)]):.6g} "
                 f"rad at index {tuple(idx[:-1])}; allowed [{self.lower[j]:.6g}, {self.upper[j]:.6g}] rad"
             )
-
-
-def check_last_dim(x: torch.Tensor, n: int | tuple[int, ...], what: str) -> None:
-    """Raise :class:`ShapeError` unless ``x`` is a tensor of shape ``(..., n)`` (n may be a tuple of options)."""
-    options = (n,) if isinstance(n, int) else tuple(n)
-    if not isinstance(x, torch.Tensor):
-        raise ShapeError(f"{what} must be a torch.Tensor of shape (..., {n}), got {type(x).__name__}")
-    if x.ndim == 0 or x.shape[-1] not in options:
-        allowed = " or ".join(f"(..., {k})" for k in options)
-        raise ShapeError(f"{what} must have shape {allowed}, got {tuple(x.shape)}")
-    if not x.is_floating_point():
-        raise DTypeError(f"{what} must be a real floating-point tensor, got {x.dtype}")
-
-
-def check_real_dtype(x: torch.Tensor, what: str) -> None:
-    """Raise :class:`DTypeError` if ``x`` is a bool or complex tensor (or no tensor): such values are not
-    angles or lengths, and converting them would silently turn True into 1 rad or drop an imaginary part.
-    Integer tensors pass (callers convert or reject them)."""
-    if not isinstance(x, torch.Tensor):
-        raise ShapeError(f"{what} must be a torch.Tensor, got {type(x).__name__}")
-    if x.dtype == torch.bool or x.is_complex():
-        raise DTypeError(f"{what} must hold real numbers, got a {x.dtype} tensor")
-
-
-def check_finite(x: torch.Tensor, what: str) -> None:
-    """Raise :class:`NonFiniteError` if ``x`` holds NaN or infinity."""
-    if not bool(torch.isfinite(x).all()):
-        n = int((~torch.isfinite(x)).sum())
-        raise NonFiniteError(f"{what} holds {n} NaN/inf value(s); all values must be finite")
 
 
 def _origin(el: ET.Element | None, what: str) -> np.ndarray:

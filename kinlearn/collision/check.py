@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..body.robot import check_finite, check_last_dim
+from ..checks import check_finite, check_last_dim
 from ..errors import ConfigError, ShapeError
 from .body import BodySpheres
 from .distance import body_obstacle_distance, self_collision_distance

@@ -30,8 +30,9 @@ import numpy as np
 import torch
 
 from ..body.kinematics import kinematics
-from ..body.robot import Robot, check_finite, check_last_dim, load_robot
+from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
+from ..checks import check_finite, check_last_dim
 from ..errors import ConfigError, DatasetError
 from ..io import load_npz, save_npz
 

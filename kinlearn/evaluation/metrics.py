@@ -30,8 +30,9 @@ from dataclasses import dataclass
 import torch
 
 from ..body.kinematics import kinematics
-from ..body.robot import Robot, check_finite, check_last_dim
+from ..body.robot import Robot
 from ..body.state import StateLayout
+from ..checks import check_finite, check_last_dim
 from ..errors import ConfigError, ShapeError
 from ..models.joint_path import densify
 from ..planning.plan import Plan

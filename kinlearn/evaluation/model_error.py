@@ -33,7 +33,8 @@ import numpy as np
 import torch
 
 from ..body.kinematics import dls_step, kinematics
-from ..body.robot import ROBOTS, Robot, check_finite, check_last_dim, load_robot
+from ..body.robot import ROBOTS, Robot, load_robot
+from ..checks import check_finite, check_last_dim
 from ..errors import ConfigError, MissingDependencyError, RobotDescriptionError, UnknownRobotError
 from ..io import atomic_write
 from ..planning.baselines import cartesian_dls, joint_interpolation, rrt_connect

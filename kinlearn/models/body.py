@@ -39,7 +39,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from ..body.robot import Robot, check_finite, check_last_dim, check_real_dtype, load_robot
+from ..body.robot import Robot, load_robot
+from ..checks import check_finite, check_last_dim, check_real_dtype
 from ..collision import BodySpheres, body_spheres
 from ..errors import CheckpointError, ConfigError
 from ..io import load_checkpoint, save_checkpoint

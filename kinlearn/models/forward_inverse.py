@@ -41,8 +41,9 @@ import torch
 from torch import nn
 
 from ..body.kinematics import dls_step, kinematics
-from ..body.robot import Robot, check_finite, check_last_dim, load_robot
+from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
+from ..checks import check_finite, check_last_dim
 from ..errors import CheckpointError, ConfigError
 from ..io import load_checkpoint, save_checkpoint
 

@@ -19,8 +19,9 @@ from typing import Literal
 import torch
 from torch import nn
 
-from ..body.robot import check_finite, check_last_dim, load_robot
+from ..body.robot import load_robot
 from ..body.state import StateLayout
+from ..checks import check_finite, check_last_dim
 from ..errors import CheckpointError, ConfigError
 from ..io import load_checkpoint, resolve_dependency
 from .forward_inverse import AnalyticFM, AnalyticIM, ForwardModel, InverseModel, load_fm, load_im

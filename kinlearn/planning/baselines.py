@@ -24,8 +24,9 @@ import numpy as np
 import torch
 
 from ..body.kinematics import dls_step, kinematics
-from ..body.robot import Robot, check_finite, check_last_dim
+from ..body.robot import Robot
 from ..body.state import StateLayout
+from ..checks import check_finite, check_last_dim
 from ..errors import ConfigError, MissingDependencyError, PlanningError, ShapeError
 from .plan import Plan
 

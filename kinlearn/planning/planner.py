@@ -33,8 +33,9 @@ import numpy as np
 import torch
 
 from ..body.kinematics import kinematics
-from ..body.robot import Robot, check_finite, load_robot
+from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
+from ..checks import check_finite
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
 from ..collision.fast import NumpyBody, NumpyScene, check_paths, first_free

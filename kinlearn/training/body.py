@@ -14,8 +14,9 @@ from pathlib import Path
 
 import torch
 
-from ..body.robot import Robot, check_last_dim, load_robot
+from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
+from ..checks import check_last_dim
 from ..collision import BodySpheres, Scene, check_path, clearances
 from ..collision.problems import ProblemSet
 from ..data.babbling import Transitions, load_transitions

@@ -1,0 +1,42 @@
+"""Checks of tensors at the API boundary: shape, dtype, finiteness (typed errors, actionable messages).
+
+On the lowest floor with the errors, so that every layer checks its inputs the same way without
+importing the robot.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from .errors import DTypeError, NonFiniteError, ShapeError
+
+__all__ = ["check_finite", "check_last_dim", "check_real_dtype"]
+
+
+def check_last_dim(x: torch.Tensor, n: int | tuple[int, ...], what: str) -> None:
+    """Raise :class:`ShapeError` unless ``x`` is a tensor of shape ``(..., n)`` (n may be a tuple of options)."""
+    options = (n,) if isinstance(n, int) else tuple(n)
+    if not isinstance(x, torch.Tensor):
+        raise ShapeError(f"{what} must be a torch.Tensor of shape (..., {n}), got {type(x).__name__}")
+    if x.ndim == 0 or x.shape[-1] not in options:
+        allowed = " or ".join(f"(..., {k})" for k in options)
+        raise ShapeError(f"{what} must have shape {allowed}, got {tuple(x.shape)}")
+    if not x.is_floating_point():
+        raise DTypeError(f"{what} must be a real floating-point tensor, got {x.dtype}")
+
+
+def check_real_dtype(x: torch.Tensor, what: str) -> None:
+    """Raise :class:`DTypeError` if ``x`` is a bool or complex tensor (or no tensor): such values are not
+    angles or lengths, and converting them would silently turn True into 1 rad or drop an imaginary part.
+    Integer tensors pass (callers convert or reject them)."""
+    if not isinstance(x, torch.Tensor):
+        raise ShapeError(f"{what} must be a torch.Tensor, got {type(x).__name__}")
+    if x.dtype == torch.bool or x.is_complex():
+        raise DTypeError(f"{what} must hold real numbers, got a {x.dtype} tensor")
+
+
+def check_finite(x: torch.Tensor, what: str) -> None:
+    """Raise :class:`NonFiniteError` if ``x`` holds NaN or infinity."""
+    if not bool(torch.isfinite(x).all()):
+        n = int((~torch.isfinite(x)).sum())
+        raise NonFiniteError(f"{what} holds {n} NaN/inf value(s); all values must be finite")
