@@ -447,3 +447,21 @@ def test_kill_9_during_checkpoint_writes_then_resume_is_bit_identical(tmp_path):
         assert torch.equal(a, b), name
     epochs = [json.loads(line)["epoch"] for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert epochs == list(range(1, 151))
+
+
+def test_one_schedule_for_every_trainer():
+    from kinlearn.training.loop import make_schedule
+
+    p = torch.nn.Parameter(torch.zeros(1))
+    opt = torch.optim.SGD([p], lr=2.0)
+    sched = make_schedule(opt, "cosine", 4)
+    rates = []
+    for _ in range(6):
+        rates.append(sched.get_last_lr()[0])
+        opt.step()
+        sched.step()
+    assert rates == pytest.approx([2.0, 1.0 + 2**-0.5, 1.0, 1.0 - 2**-0.5, 0.0, 0.0])
+    constant = make_schedule(torch.optim.SGD([p], lr=0.5), "constant", 4)
+    assert constant.get_last_lr() == [0.5]
+    with pytest.raises(ConfigError, match="constant' or 'cosine"):
+        make_schedule(opt, "linear", 4)

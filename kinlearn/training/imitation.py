@@ -28,7 +28,7 @@ from ..data.endpoints import EndpointPairs
 from ..errors import ConfigError
 from ..models.trajectory import TMConfig, TrajectoryModel
 from ..planning.baselines import joint_interpolation
-from .loop import OptimConfig, make_optimizer, seed_everything
+from .loop import OptimConfig, make_optimizer, make_schedule, seed_everything
 
 __all__ = ["imitation_loss", "imitation_targets", "train_imitation"]
 
@@ -99,12 +99,7 @@ def train_imitation(
     opt = make_optimizer(optim, tm.parameters())
     n = len(train)
     total = epochs * math.ceil(n / batch_size)
-    if schedule == "cosine":
-        sched = torch.optim.lr_scheduler.LambdaLR(
-            opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, total) / total))
-        )
-    else:
-        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0)
+    sched = make_schedule(opt, schedule, total)
 
     tm.train()
     bar = tqdm(range(epochs), desc="train imitation TM", disable=not progress)

@@ -113,6 +113,21 @@ _OPTIMIZERS: dict[str, Callable[[OptimConfig, Any], torch.optim.Optimizer]] = {
 }
 
 
+def make_schedule(
+    opt: torch.optim.Optimizer, kind: str, total_steps: int
+) -> torch.optim.lr_scheduler.LambdaLR:
+    """The learning-rate schedule per optimiser step: ``"constant"``, or ``"cosine"`` decay from the
+    optimiser's rate to zero over ``total_steps`` (then zero)."""
+    if kind == "constant":
+        return torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0)
+    if kind != "cosine":
+        raise ConfigError(f"schedule must be 'constant' or 'cosine', got {kind!r}")
+    total = max(1, int(total_steps))
+    return torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, total) / total))
+    )
+
+
 def make_optimizer(cfg: OptimConfig, params) -> torch.optim.Optimizer:
     """The optimiser named by ``cfg`` over ``params``."""
     return _OPTIMIZERS[cfg.name](cfg, params)
@@ -423,9 +438,7 @@ def fit_iterations(
     """
     run_dir = Path(run_dir)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
-    sched = torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, iterations) / iterations))
-    )
+    sched = make_schedule(opt, "cosine", iterations)
     path = run_dir / checkpoint
     start = 0
     if resume and path.exists():

@@ -46,6 +46,7 @@ from .loop import (
     _check_divergence,
     _truncate_log,
     make_optimizer,
+    make_schedule,
     seed_everything,
 )
 
@@ -266,12 +267,7 @@ def train_tm(
     n = len(train)
     steps_per_epoch = math.ceil(n / config.batch_size)
     total = config.epochs * steps_per_epoch
-    if config.schedule == "cosine":
-        sched = torch.optim.lr_scheduler.LambdaLR(
-            opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, total) / total))
-        )
-    else:
-        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0)
+    sched = make_schedule(opt, config.schedule, total)
 
     ckpt = run_dir / "tm.pt"
     data_sha256 = content_sha256((train.start, train.goal))

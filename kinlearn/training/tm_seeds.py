@@ -29,7 +29,7 @@ from ..errors import CheckpointError, ConfigError, TrainingDivergedError
 from ..io import content_sha256, file_sha256, load_checkpoint, remove_stale_tmp, save_checkpoint, write_json
 from ..models.rollout import rectify, tm_loss
 from ..models.trajectory import TMConfig, TrajectoryModel
-from .loop import RunLogger, _check_divergence, _truncate_log, make_optimizer, seed_everything
+from .loop import RunLogger, _check_divergence, _truncate_log, make_optimizer, make_schedule, seed_everything
 from .tm import (
     WAYPOINT_BOUND_REACHES,
     TMTrainConfig,
@@ -155,12 +155,7 @@ def train_tm_seeds(
     opt = make_optimizer(config.optim, [p for m in members for p in m.parameters()])
     n, M = len(train), len(members)
     total = config.epochs * math.ceil(n / config.batch_size)
-    if config.schedule == "cosine":
-        sched = torch.optim.lr_scheduler.LambdaLR(
-            opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, total) / total))
-        )
-    else:
-        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0)
+    sched = make_schedule(opt, config.schedule, total)
     data_sha256 = content_sha256((train.start, train.goal))
     bound = WAYPOINT_BOUND_REACHES * arm_reach(robot)
 
