@@ -263,7 +263,14 @@ def test_export_never_overwrites_the_shipped_planner_by_default(runs, tmp_path, 
     assert main(["export", "--model", str(root / "tm"), "--out", str(out)]) == 0
     payload = torch.load(out / "tm.pt", weights_only=True)
     assert payload["depends"]["fm"] == {"path": "fm.pt", "sha256": _sha(out / "fm.pt")}
-    assert payload["extra"] == {} and payload["config"]["models_dir"] is None
+    # the planner's tm.pt holds the model's own config: no optimiser, loss, folder or training state
+    assert payload["extra"] == {} and set(payload["config"]) == {
+        "tm",
+        "fm",
+        "im",
+        "im_iterations",
+        "im_damping",
+    }
     assert main(["export", "--model", str(root / "tm"), "--out", str(out)]) == 2
     assert main(["export", "--model", str(root / "tm"), "--out", str(out), "--overwrite"]) == 0
 

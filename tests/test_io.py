@@ -150,7 +150,8 @@ def test_a_tm_records_its_fm_and_im_by_identity_not_by_absolute_path(learned_mod
     cfg = tm_preset("default", models_dir=str(models.resolve()), epochs=1, batch_size=8)
     train_tm(cfg, tmp_path / "tm", pairs, progress=False)
     payload = load_checkpoint(tmp_path / "tm" / "tm.pt", kind="tm")
-    assert payload["config"]["models_dir"] is None
+    assert set(payload["config"]) == {"tm", "fm", "im", "im_iterations", "im_damping"}  # the model's own
+    assert payload["extra"]["train_config"]["models_dir"] is None  # how it was trained: no folder either
     assert str(tmp_path) not in repr({k: payload[k] for k in ("config", "depends", "extra")})
     assert payload["depends"]["fm"]["path"] == "../models/fm.pt"
     _, loaded = load_tm(tmp_path / "tm" / "tm.pt")

@@ -8,6 +8,7 @@ import torch
 
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.errors import CheckpointError, ConfigError, TrainingDivergedError
+from kinlearn.io import load_checkpoint, save_checkpoint
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 from kinlearn.planning.planner import Planner
 from kinlearn.training.loop import OptimConfig
@@ -92,3 +93,27 @@ def test_lockstep_refuses_what_it_cannot_train(tmp_path, pairs):
         train_tm_seeds(_config(trainable="shared"), [0, 1], [tmp_path / "a", tmp_path / "b"], pairs)
     with pytest.raises(ConfigError, match="one run folder per seed"):
         train_tm_seeds(_config(), [0, 0], [tmp_path / "a", tmp_path / "b"], pairs)
+
+
+def test_checkpoints_from_before_the_model_training_split_still_load_and_resume(tmp_path, pairs):
+    """tm.pt used to store the whole training config as its config; such runs load, plan and resume."""
+    cfg = _config(epochs=1)
+    run = tmp_path / "old"
+    train_tm(cfg, run, pairs, progress=False)
+    new = load_checkpoint(run / "tm.pt", kind="tm")
+    old_extra = {k: v for k, v in new["extra"].items() if k != "train_config"}
+    save_checkpoint(
+        run / "tm.pt",
+        kind="tm",
+        robot=new["robot"],
+        config=new["extra"]["train_config"],
+        state_dict=new["state_dict"],
+        extra=old_extra,
+    )
+    _, loaded_cfg = load_tm(run / "tm.pt")
+    assert loaded_cfg.optim == cfg.optim and loaded_cfg.epochs == 1
+    Planner.load(run)
+    more = train_tm(dataclasses.replace(cfg, epochs=2), run, pairs, progress=False)  # resumes epoch 2
+    again = train_tm(dataclasses.replace(cfg, epochs=2), tmp_path / "fresh", pairs, progress=False)
+    assert _max_diff(more, again) < 1e-6
+    assert "optim" not in load_checkpoint(run / "tm.pt", kind="tm")["config"]  # rewritten in the new form

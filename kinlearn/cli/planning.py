@@ -21,7 +21,7 @@ from ..models.forward_inverse import load_fm, load_im
 from ..models.rollout import LOSS_PRESETS
 from ..planning.planner import DEFAULT_CHECKPOINTS, Planner
 from ..runs import open_run
-from ..training.tm import TM_PRESETS, tm_preset, train_tm
+from ..training.tm import MODEL_FIELDS, TM_PRESETS, tm_preset, train_tm
 from .main import (
     NONNEGATIVE_FLOAT,
     NONNEGATIVE_INT,
@@ -719,22 +719,21 @@ def _add_export(sub) -> None:
 
 def _export_sources(model_dir: Path, payload: dict) -> dict[str, Path]:
     """The fm.pt/im.pt the TM of ``model_dir`` was trained through (verified by hash where recorded)."""
-    from ..training.tm import TMTrainConfig
-
     tm_path = model_dir / "tm.pt"
     if payload["kind"] != "tm":  # another planner model: its FM/IM, where it has them, lie beside it
         return {k: model_dir / f"{k}.pt" for k in ("fm", "im") if (model_dir / f"{k}.pt").is_file()}
-    config = TMTrainConfig.from_dict(payload["config"])
+    config = payload["config"]
+    models_dir = config.get("models_dir")  # recorded by checkpoints before the model/training split
     sources = {}
     for kind in ("fm", "im"):
-        if getattr(config, kind) != "learned":
+        if config.get(kind, "learned") != "learned":
             continue
         if kind in payload["depends"]:
             sources[kind] = resolve_dependency(tm_path, payload, kind)
         elif (model_dir / f"{kind}.pt").is_file():  # a format-1 run: the models beside tm.pt
             sources[kind] = model_dir / f"{kind}.pt"
-        elif config.models_dir and (Path(config.models_dir) / f"{kind}.pt").is_file():
-            sources[kind] = Path(config.models_dir) / f"{kind}.pt"
+        elif models_dir and (Path(models_dir) / f"{kind}.pt").is_file():
+            sources[kind] = Path(models_dir) / f"{kind}.pt"
         else:
             raise ConfigError(f"cannot find the {kind}.pt that {tm_path} was trained through")
     return sources
@@ -769,8 +768,8 @@ def _run_export(args: argparse.Namespace) -> int:
             state_dict=weights(payload["state_dict"]),
         )
     config = tm_payload["config"]
-    if tm_payload["kind"] == "tm":  # the FM/IM are recorded by identity, not by a folder
-        config = {**config, "models_dir": None}
+    if tm_payload["kind"] == "tm":  # the model's own config (older runs stored the training config)
+        config = {k: config[k] for k in MODEL_FIELDS if k in config}
     save_checkpoint(  # last: it records the exported fm.pt/im.pt by hash
         out / "tm.pt",
         kind=tm_payload["kind"],

@@ -351,6 +351,7 @@ def train_tm(
                     "torch_rng": torch.get_rng_state(),
                     "loss_ref": loss_ref,
                     "data_sha256": data_sha256,
+                    "train_config": _training_record(config),
                 },
                 depends=depends,
             )
@@ -362,9 +363,29 @@ def _train_config_dict(config: TMTrainConfig) -> dict:
     return copy.deepcopy(config.to_dict())
 
 
+#: Fields of the training config that say what a planner needs (the rest is how it was trained).
+MODEL_FIELDS = ("tm", "fm", "im", "im_iterations", "im_damping")
+
+
 def _checkpoint_config(config: TMTrainConfig) -> dict:
-    """The config as ``tm.pt`` stores it: without ``models_dir`` (the FM/IM are recorded by identity)."""
+    """The config ``tm.pt`` stores: the model's own (its architecture, which FM/IM it plans through),
+    no optimiser, loss or folder. The training config travels in the checkpoint's training state."""
+    d = _train_config_dict(config)
+    return {k: d[k] for k in MODEL_FIELDS}
+
+
+def _training_record(config: TMTrainConfig) -> dict:
+    """The training config as a checkpoint's training state holds it: without ``models_dir`` (the
+    FM/IM are recorded by identity)."""
     return {**_train_config_dict(config), "models_dir": None}
+
+
+def _recorded_training(payload: dict) -> dict | None:
+    """The training config a ``tm.pt`` recorded (checkpoints before the split stored it as ``config``)."""
+    extra = payload.get("extra") or {}
+    if "train_config" in extra:
+        return extra["train_config"]
+    return payload["config"] if "optim" in payload["config"] else None
 
 
 def _check_pairs(pairs: EndpointPairs, what: str, robot: Robot) -> None:
@@ -380,10 +401,9 @@ def _check_pairs(pairs: EndpointPairs, what: str, robot: Robot) -> None:
 
 def _resume_differences(payload: dict, config: TMTrainConfig, depends: dict, data_sha256: str) -> list[str]:
     """What differs between checkpoint ``payload`` and the run about to resume from it."""
-    diffs = diff_configs(
-        {**payload["config"], "models_dir": None}, _checkpoint_config(config), ignore=("progress",)
-    )
-    if config.schedule == "constant" and payload["config"].get("schedule") == "constant":
+    recorded_cfg = _recorded_training(payload) or {}
+    diffs = diff_configs({**recorded_cfg, "models_dir": None}, _training_record(config), ignore=("progress",))
+    if config.schedule == "constant" and recorded_cfg.get("schedule") == "constant":
         diffs = [d for d in diffs if not d.startswith("epochs:")]  # the rate does not depend on it
     recorded = payload.get("depends") or {}
     for kind, (path, sha) in depends.items():
@@ -408,7 +428,16 @@ def load_tm(
     """
     payload = load_checkpoint(path, kind="tm", robot=robot)
     try:
-        config = TMTrainConfig.from_dict(payload["config"])
+        recorded = _recorded_training(payload)
+        if recorded is not None:
+            config = TMTrainConfig.from_dict(recorded)
+        else:  # an exported planner: the model's config alone; training fields at their defaults
+            model = payload["config"]
+            config = TMTrainConfig(
+                robot=model["tm"]["robot"],
+                **{k: v for k, v in model.items() if k != "tm"},
+                tm=TMConfig(**model["tm"]),
+            )
         tm = TrajectoryModel(config.tm)
         tm.load_state_dict(payload["state_dict"])
     except (TypeError, KeyError, RuntimeError, ConfigError) as exc:

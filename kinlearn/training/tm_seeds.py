@@ -37,6 +37,7 @@ from .tm import (
     _checkpoint_config,
     _resume_differences,
     _train_config_dict,
+    _training_record,
     arm_reach,
     build_fm_im,
 )
@@ -283,6 +284,7 @@ def train_tm_seeds(
                         "torch_rng": torch.get_rng_state(),
                         "loss_ref": loss_ref[k],
                         "data_sha256": data_sha256,
+                        "train_config": _training_record(configs[k]),
                     },
                     depends=depends,
                 )
