@@ -6,11 +6,12 @@ importing the robot.
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
-from .errors import DTypeError, NonFiniteError, ShapeError
+from .errors import ConfigError, DTypeError, NonFiniteError, ShapeError
 
-__all__ = ["check_finite", "check_last_dim", "check_real_dtype"]
+__all__ = ["check_finite", "check_last_dim", "check_real_dtype", "check_region"]
 
 
 def check_last_dim(x: torch.Tensor, n: int | tuple[int, ...], what: str) -> None:
@@ -40,3 +41,15 @@ def check_finite(x: torch.Tensor, what: str) -> None:
     if not bool(torch.isfinite(x).all()):
         n = int((~torch.isfinite(x)).sum())
         raise NonFiniteError(f"{what} holds {n} NaN/inf value(s); all values must be finite")
+
+
+def check_region(region, what: str = "region") -> tuple[float, ...]:
+    """``region`` as 6 floats (m: x_min, x_max, y_min, y_max, z_min, z_max); :class:`ConfigError` unless
+    they are 6 finite numbers with each min ≤ max."""
+    r = np.asarray(region, dtype=float)
+    if r.shape != (6,) or not np.isfinite(r).all() or (r[0::2] > r[1::2]).any():
+        raise ConfigError(
+            f"{what} must be 6 finite numbers x_min, x_max, y_min, y_max, z_min, z_max with each min ≤ max, "
+            f"got {region!r}"
+        )
+    return tuple(float(v) for v in r)

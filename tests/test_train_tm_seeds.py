@@ -91,6 +91,9 @@ def test_lockstep_refuses_what_it_cannot_train(tmp_path, pairs):
         train_tm_seeds(_config(tm={"gru_layers": 2}), [0, 1], [tmp_path / "a", tmp_path / "b"], pairs)
     with pytest.raises(ConfigError, match="trainable"):
         train_tm_seeds(_config(trainable="shared"), [0, 1], [tmp_path / "a", tmp_path / "b"], pairs)
+    with pytest.raises(ConfigError, match="TM config is for 'panda'"):
+        other = dataclasses.replace(_config(), tm=TMConfig(robot="panda", dof=7))
+        train_tm_seeds(other, [0, 1], [tmp_path / "a", tmp_path / "b"], pairs)
     with pytest.raises(ConfigError, match="one run folder per seed"):
         train_tm_seeds(_config(), [0, 0], [tmp_path / "a", tmp_path / "b"], pairs)
 

@@ -267,5 +267,9 @@ def test_endpoint_config_errors():
         make_endpoints(EndpointConfig(n=0))
     with pytest.raises(ConfigError, match="7 joint values"):
         make_endpoints(EndpointConfig(n=4, home=(0.0, 0.1)))
+    with pytest.raises(ConfigError, match=r"EndpointConfig\.region must be 6 finite numbers"):
+        EndpointConfig(region=(0.5, 0.3, 0.0, 1.0, 0.0, 1.0))  # x_min > x_max
+    with pytest.raises(ConfigError, match=r"EndpointConfig\.region must be 6 finite numbers"):
+        EndpointConfig(region=(0.0, 1.0, 0.0, 1.0))
     with pytest.raises(ConfigError, match="widen the region"):
         make_endpoints(EndpointConfig(n=4, region=(5.0, 6.0, 5.0, 6.0, 5.0, 6.0)))

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..checks import check_finite, check_last_dim
+from ..checks import check_finite, check_last_dim, check_region
 from ..errors import (
     JointLimitError,
     RobotDescriptionError,
@@ -105,12 +105,7 @@ def register_robot(
             raise JointLimitError(f"home {tuple(h)} leaves {name}'s joint limits")
         home = tuple(float(v) for v in h)
     if region is not None:
-        r = np.asarray(region, dtype=float)
-        if r.shape != (6,) or not np.isfinite(r).all() or (r[0::2] > r[1::2]).any():
-            raise ConfigError(
-                f"region must be 6 finite numbers x_min, x_max, y_min, y_max, z_min, z_max, each min ≤ max; got {region!r}"
-            )
-        region = tuple(float(v) for v in r)
+        region = check_region(region)
     unregister_robot(name)
     ROBOTS[name] = RobotSpec(
         "file", str(path), ee_frame, description or f"{path.name} ({robot.dof}-DoF)", home, region

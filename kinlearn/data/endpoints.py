@@ -24,6 +24,7 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
+from ..checks import check_region
 from ..errors import ConfigError
 from ..io import load_npz, save_npz
 
@@ -80,12 +81,7 @@ class EndpointConfig:
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
                 raise ConfigError(f"EndpointConfig.{name} must be a finite number ≥ 0, got {value!r}")
         if self.region is not None:
-            r = np.asarray(self.region, dtype=float)
-            if r.shape != (6,) or not np.isfinite(r).all() or (r[0::2] > r[1::2]).any():
-                raise ConfigError(
-                    "EndpointConfig.region must be 6 finite numbers x_min, x_max, y_min, y_max, z_min, z_max "
-                    f"with each min ≤ max, got {self.region!r}"
-                )
+            check_region(self.region, "EndpointConfig.region")
 
 
 @dataclass

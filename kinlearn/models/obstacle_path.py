@@ -28,7 +28,7 @@ from torch import nn
 from ..body.state import StateLayout
 from ..collision.scene import Scene
 from ..errors import CheckpointError, ConfigError
-from ..io import load_checkpoint, save_checkpoint
+from ..io import half_weights, load_checkpoint, save_checkpoint
 from .joint_path import RobotModelConfig, mlp_layers, register_path_buffers
 
 __all__ = [
@@ -229,14 +229,11 @@ def load_obstacle_model(path: str | Path, robot: str | None = None) -> ObstacleP
 def export_obstacle_model(src: str | Path, dst: str | Path, half: bool = True) -> Path:
     """Copy a trained model's weights and config from ``src`` to ``dst``, without its training state.
 
-    ``half``: store the weights as float16 (half the size; they load back into float32, changing the
-    plans by rounding only). The exported file is what is judged: measure the exported planner."""
+    ``half``: store the layers' weights as float16 (:func:`kinlearn.io.half_weights`: half the size;
+    they load back into float32, changing the plans by rounding only). The exported file is what is judged: measure the exported planner."""
     payload = load_checkpoint(src, kind=ObstaclePathModel.kind)
     load_obstacle_model(src)  # it must load
-    state = {
-        k: v.half() if half and v.is_floating_point() and k not in _EXACT_BUFFERS else v
-        for k, v in payload["state_dict"].items()
-    }
+    state = half_weights(payload["state_dict"]) if half else payload["state_dict"]
     return save_checkpoint(
         dst,
         kind=ObstaclePathModel.kind,
@@ -244,9 +241,3 @@ def export_obstacle_model(src: str | Path, dst: str | Path, half: bool = True) -
         config=payload["config"],
         state_dict=state,
     )
-
-
-#: Buffers kept at full precision on export (limits and standardisation: small, and exactness matters).
-_EXACT_BUFFERS = frozenset(
-    {"lower", "upper", "half_range", "fractions", "in_mean", "in_std", "prim_mean", "prim_std"}
-)

@@ -232,14 +232,7 @@ def train_tm(
     a ``tm.pt`` made with another configuration, FM/IM or pairs, :class:`TrainingDivergedError`.
     """
     run_dir = Path(run_dir)
-    robot = load_robot(config.robot)
-    if train.config.robot != robot.name:
-        raise ConfigError(f"endpoint pairs are for {train.config.robot!r}, the run is for {robot.name!r}")
-    if config.tm.robot != robot.name or config.tm.dof != robot.dof:
-        raise ConfigError(
-            f"TM config is for {config.tm.robot!r} ({config.tm.dof} joints), not {robot.name!r}"
-        )
-    _check_pairs(train, "training pairs", robot)
+    robot = _checked_robot(config, train)
     if val is not None and len(val) == 0:
         val = None
     if val is not None:
@@ -247,10 +240,7 @@ def train_tm(
     depends: dict[str, tuple[Path, str]] = {}
     if fm is None or im is None:
         built_fm, built_im = build_fm_im(config)
-        for kind, given in (("fm", fm), ("im", im)):
-            if given is None and getattr(config, kind) == "learned":
-                path = Path(config.models_dir) / f"{kind}.pt"
-                depends[kind] = (path, file_sha256(path))
+        depends = _learned_dependencies(config, [k for k, given in (("fm", fm), ("im", im)) if given is None])
         fm, im = fm or built_fm, im or built_im
     for m in (fm, im):
         m.eval()
@@ -337,26 +327,67 @@ def train_tm(
                 record.update({f"val/{k}": v for k, v in evaluate_tm(tm, fm, im, val, config.loss).items()})
             logger.log(record)
             bar.set_postfix(loss=f"{sums['loss']:.3g}", l_tm=f"{sums['paper_l_tm']:.3g}")
-            save_checkpoint(
-                ckpt,
-                kind="tm",
-                robot=robot.name,
-                config=_checkpoint_config(config),
-                state_dict=tm.state_dict(),
-                extra={
-                    "epoch": epoch + 1,
-                    "optimizer": opt.state_dict(),
-                    "scheduler": sched.state_dict(),
-                    "generator": gen.get_state(),
-                    "torch_rng": torch.get_rng_state(),
-                    "loss_ref": loss_ref,
-                    "data_sha256": data_sha256,
-                    "train_config": _training_record(config),
-                },
-                depends=depends,
+            _save_run_checkpoint(
+                ckpt, config, tm, epoch + 1, opt.state_dict(), sched, gen, loss_ref, data_sha256, depends
             )
     tm.eval()
     return tm
+
+
+def _checked_robot(config: TMTrainConfig, train: EndpointPairs) -> Robot:
+    """The run's robot, once the TM config and the training pairs are checked to be for it."""
+    robot = load_robot(config.robot)
+    if train.config.robot != robot.name:
+        raise ConfigError(f"endpoint pairs are for {train.config.robot!r}, the run is for {robot.name!r}")
+    if config.tm.robot != robot.name or config.tm.dof != robot.dof:
+        raise ConfigError(
+            f"TM config is for {config.tm.robot!r} ({config.tm.dof} joints), not {robot.name!r}"
+        )
+    _check_pairs(train, "training pairs", robot)
+    return robot
+
+
+def _learned_dependencies(config: TMTrainConfig, kinds=("fm", "im")) -> dict[str, tuple[Path, str]]:
+    """The learned FM/IM files (of ``kinds``) the run trains through, with their SHA-256."""
+    out = {}
+    for kind in kinds:
+        if getattr(config, kind) == "learned":
+            path = Path(config.models_dir) / f"{kind}.pt"
+            out[kind] = (path, file_sha256(path))
+    return out
+
+
+def _save_run_checkpoint(
+    path: Path,
+    config: TMTrainConfig,
+    tm: TrajectoryModel,
+    epoch: int,
+    optimizer_state: dict,
+    sched,
+    gen: torch.Generator,
+    loss_ref: float | None,
+    data_sha256: str,
+    depends: dict,
+) -> None:
+    """A training run's ``tm.pt``: the model's config and weights, and everything a resume needs."""
+    save_checkpoint(
+        path,
+        kind="tm",
+        robot=load_robot(config.robot).name,
+        config=_checkpoint_config(config),
+        state_dict=tm.state_dict(),
+        extra={
+            "epoch": epoch,
+            "optimizer": optimizer_state,
+            "scheduler": sched.state_dict(),
+            "generator": gen.get_state(),
+            "torch_rng": torch.get_rng_state(),
+            "loss_ref": loss_ref,
+            "data_sha256": data_sha256,
+            "train_config": _training_record(config),
+        },
+        depends=depends,
+    )
 
 
 def _train_config_dict(config: TMTrainConfig) -> dict:

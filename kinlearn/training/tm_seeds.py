@@ -23,21 +23,20 @@ from pathlib import Path
 import torch
 from tqdm.auto import tqdm
 
-from ..body.robot import load_robot
 from ..data.endpoints import EndpointPairs
 from ..errors import CheckpointError, ConfigError, TrainingDivergedError
-from ..io import content_sha256, file_sha256, load_checkpoint, remove_stale_tmp, save_checkpoint, write_json
+from ..io import content_sha256, load_checkpoint, remove_stale_tmp, write_json
 from ..models.rollout import rectify, tm_loss
 from ..models.trajectory import TMConfig, TrajectoryModel
 from .loop import RunLogger, _check_divergence, _truncate_log, make_optimizer, make_schedule, seed_everything
 from .tm import (
     WAYPOINT_BOUND_REACHES,
     TMTrainConfig,
-    _check_pairs,
-    _checkpoint_config,
+    _checked_robot,
+    _learned_dependencies,
     _resume_differences,
+    _save_run_checkpoint,
     _train_config_dict,
-    _training_record,
     arm_reach,
     build_fm_im,
 )
@@ -132,17 +131,10 @@ def train_tm_seeds(
     if config.trainable != "all":
         raise ConfigError("seeds train in lockstep only with every parameter trainable (trainable='all')")
     _check_lockstep(config.tm)
-    robot = load_robot(config.robot)
-    if train.config.robot != robot.name:
-        raise ConfigError(f"endpoint pairs are for {train.config.robot!r}, the run is for {robot.name!r}")
-    _check_pairs(train, "training pairs", robot)
+    robot = _checked_robot(config, train)
     configs = [dataclasses.replace(config, seed=s) for s in seeds]
     fm, im = build_fm_im(config)
-    depends = {}
-    for kind in ("fm", "im"):
-        if getattr(config, kind) == "learned":
-            path = Path(config.models_dir) / f"{kind}.pt"
-            depends[kind] = (path, file_sha256(path))
+    depends = _learned_dependencies(config)
     for m in (fm, im):
         m.validate_inputs = False  # a diverging TM is caught by the checks below
 
@@ -270,23 +262,17 @@ def train_tm_seeds(
                         **{f"train/{name}": v for name, v in sums[k].items()},
                     }
                 )
-                save_checkpoint(
+                _save_run_checkpoint(
                     run_dirs[k] / "tm.pt",
-                    kind="tm",
-                    robot=robot.name,
-                    config=_checkpoint_config(configs[k]),
-                    state_dict=members[k].state_dict(),
-                    extra={
-                        "epoch": epoch + 1,
-                        "optimizer": _member_optimizer_state(state, k, n_params),
-                        "scheduler": sched.state_dict(),
-                        "generator": gens[k].get_state(),
-                        "torch_rng": torch.get_rng_state(),
-                        "loss_ref": loss_ref[k],
-                        "data_sha256": data_sha256,
-                        "train_config": _training_record(configs[k]),
-                    },
-                    depends=depends,
+                    configs[k],
+                    members[k],
+                    epoch + 1,
+                    _member_optimizer_state(state, k, n_params),
+                    sched,
+                    gens[k],
+                    loss_ref[k],
+                    data_sha256,
+                    depends,
                 )
             for k, exc in dead.items():
                 if not (run_dirs[k] / "diverged.json").exists():
