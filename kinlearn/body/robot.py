@@ -19,6 +19,7 @@ import torch
 
 from ..checks import check_finite, check_last_dim, check_region
 from ..errors import (
+    ConfigError,
     JointLimitError,
     RobotDescriptionError,
     UnknownRobotError,
@@ -85,8 +86,6 @@ def register_robot(
     so a bad file, frame, home or region fails here. Registration lives in this process only: worker
     processes (``kinlearn reproduce --workers``) must register it too. Returns the loaded robot.
     """
-    from ..errors import ConfigError
-
     if not isinstance(name, str) or not name or name.strip() != name or name.lower().endswith(".urdf"):
         raise ConfigError(f"a robot name must be a non-empty word, not a path; got {name!r}")
     if name in BUILTIN_ROBOTS:
@@ -116,8 +115,6 @@ def register_robot(
 
 def unregister_robot(name: str) -> None:
     """Forget a robot :func:`register_robot` added (kinlearn's own cannot be removed)."""
-    from ..errors import ConfigError
-
     if name in BUILTIN_ROBOTS:
         raise ConfigError(f"{name!r} is one of kinlearn's own robots")
     ROBOTS.pop(name, None)

@@ -58,6 +58,7 @@ __all__ = [
     "LearnedFM",
     "LearnedIM",
     "fm_config",
+    "frozen_fm_im",
     "im_config",
     "load_fm",
     "load_im",
@@ -594,3 +595,28 @@ def load_fm(path: str | Path, robot: str | None = None) -> ForwardModel:
 def load_im(path: str | Path, robot: str | None = None) -> InverseModel:
     """Load an inverse model saved by :func:`save_model`; ``robot`` (if given) must match the checkpoint's."""
     return _build(load_checkpoint(path, kind="im", robot=robot), path, "im")
+
+
+def frozen_fm_im(
+    robot: Robot,
+    fm: Literal["learned", "analytic"],
+    im: Literal["learned", "analytic"],
+    *,
+    fm_path: str | Path | None = None,
+    im_path: str | Path | None = None,
+    im_iterations: int = 1,
+    im_damping: float = 1e-2,
+) -> tuple[ForwardModel, InverseModel]:
+    """The FM and IM a trajectory model is trained or planned through, frozen (eval mode, no gradient
+    to their weights): each learned (loaded from its path) or analytic (FK; ``im_iterations`` damped
+    least-squares steps of damping ``im_damping``)."""
+    f = AnalyticFM(robot) if fm == "analytic" else load_fm(fm_path, robot=robot.name)
+    i = (
+        AnalyticIM(robot, iterations=im_iterations, damping=im_damping)
+        if im == "analytic"
+        else load_im(im_path, robot=robot.name)
+    )
+    for m in (f, i):
+        m.eval()
+        m.requires_grad_(False)
+    return f, i

@@ -24,7 +24,7 @@ from ..body.state import StateLayout
 from ..checks import check_finite, check_last_dim
 from ..errors import CheckpointError, ConfigError
 from ..io import load_checkpoint, resolve_dependency
-from .forward_inverse import AnalyticFM, AnalyticIM, ForwardModel, InverseModel, load_fm, load_im
+from .forward_inverse import ForwardModel, InverseModel, frozen_fm_im
 
 __all__ = ["TMConfig", "TrajectoryModel", "load_trajectory_model"]
 
@@ -157,27 +157,25 @@ def load_trajectory_model(
     except (TypeError, KeyError, RuntimeError, ConfigError) as exc:
         raise CheckpointError(f"{path}: the TM checkpoint does not match this kinlearn ({exc})") from exc
     arm = load_robot(tm.config.robot)
-    models = {}
-    for kind, loader in (("fm", load_fm), ("im", load_im)):
+    paths = {}
+    for kind in ("fm", "im"):
         if config.get(kind, "learned") == "analytic":
-            models[kind] = (
-                AnalyticFM(arm)
-                if kind == "fm"
-                else AnalyticIM(
-                    arm, iterations=config.get("im_iterations", 1), damping=config.get("im_damping", 1e-2)
-                )
-            )
             continue
         if kind in (payload.get("depends") or {}):
-            src = resolve_dependency(path, payload, kind)
+            paths[kind] = resolve_dependency(path, payload, kind)
         else:  # checkpoint format 1: the models beside tm.pt, or in the folder its run named
             folders = [path.parent] + ([Path(config["models_dir"])] if config.get("models_dir") else [])
             found = [f / f"{kind}.pt" for f in folders if (f / f"{kind}.pt").is_file()]
             if not found:
                 raise CheckpointError(f"{path}: cannot find the {kind}.pt it was trained through")
-            src = found[0]
-        models[kind] = loader(src, robot=arm.name)
-    for m in models.values():
-        m.eval()
-        m.requires_grad_(False)
-    return tm.eval(), models["fm"], models["im"]
+            paths[kind] = found[0]
+    fm, im = frozen_fm_im(
+        arm,
+        config.get("fm", "learned"),
+        config.get("im", "learned"),
+        fm_path=paths.get("fm"),
+        im_path=paths.get("im"),
+        im_iterations=config.get("im_iterations", 1),
+        im_damping=config.get("im_damping", 1e-2),
+    )
+    return tm.eval(), fm, im

@@ -36,7 +36,7 @@ from ..io import (
     save_checkpoint,
     write_json,
 )
-from ..models.forward_inverse import AnalyticFM, AnalyticIM, load_fm, load_im
+from ..models.forward_inverse import frozen_fm_im
 from ..models.rollout import LossConfig, rectify, tm_loss
 from ..models.trajectory import TMConfig, TrajectoryModel
 from ..runs import diff_configs
@@ -163,16 +163,16 @@ def build_fm_im(config: TMTrainConfig) -> tuple[torch.nn.Module, torch.nn.Module
     robot = load_robot(config.robot)
     if "learned" in (config.fm, config.im) and config.models_dir is None:
         raise ConfigError("a learned FM or IM needs models_dir, the folder holding fm.pt and im.pt")
-    models_dir = Path(config.models_dir) if config.models_dir else None
-    fm = AnalyticFM(robot) if config.fm == "analytic" else load_fm(models_dir / "fm.pt", robot=robot.name)
-    if config.im == "analytic":
-        im = AnalyticIM(robot, iterations=config.im_iterations, damping=config.im_damping)
-    else:
-        im = load_im(models_dir / "im.pt", robot=robot.name)
-    for m in (fm, im):
-        m.eval()
-        m.requires_grad_(False)
-    return fm, im
+    folder = Path(config.models_dir) if config.models_dir else None
+    return frozen_fm_im(
+        robot,
+        config.fm,
+        config.im,
+        fm_path=folder / "fm.pt" if folder else None,
+        im_path=folder / "im.pt" if folder else None,
+        im_iterations=config.im_iterations,
+        im_damping=config.im_damping,
+    )
 
 
 def _step_loss(tm, fm, im, s0, sT, loss_cfg: LossConfig):
