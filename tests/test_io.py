@@ -170,6 +170,8 @@ def test_a_tm_records_its_fm_and_im_by_identity_not_by_absolute_path(learned_mod
     shutil.copy(tmp_path / "tm" / "tm.pt", alone / "tm.pt")
     with pytest.raises(CheckpointError, match=r"made with fm \.\./models/fm\.pt of sha256 [0-9a-f]{64}"):
         load_tm(alone / "tm.pt")
+    with pytest.raises(CheckpointError, match=r"made with fm \.\./models/fm\.pt of sha256 [0-9a-f]{64}"):
+        Planner.load(alone)  # the planner's own reader says the same
     # another FM swapped in under the trained TM: refused
     shutil.copy(root / "other" / "fm.pt", models / "fm.pt")
     with pytest.raises(CheckpointError, match="another model"):

@@ -120,3 +120,15 @@ def test_checkpoints_from_before_the_model_training_split_still_load_and_resume(
     again = train_tm(dataclasses.replace(cfg, epochs=2), tmp_path / "fresh", pairs, progress=False)
     assert _max_diff(more, again) < 1e-6
     assert "optim" not in load_checkpoint(run / "tm.pt", kind="tm")["config"]  # rewritten in the new form
+    # an old run naming a learned FM it recorded by no identity, with none beside it: a typed error
+    lost = tmp_path / "lost"
+    lost.mkdir()
+    save_checkpoint(
+        lost / "tm.pt",
+        kind="tm",
+        robot=new["robot"],
+        config={**new["extra"]["train_config"], "fm": "learned", "models_dir": str(tmp_path / "gone")},
+        state_dict=new["state_dict"],
+    )
+    with pytest.raises(CheckpointError, match=r"cannot find the fm\.pt"):
+        Planner.load(lost)

@@ -77,6 +77,8 @@ def test_register_robot_refuses_bad_input(toy, tmp_path):
     with pytest.raises(ConfigError, match="region"):
         register_robot("toy4b", path, "tool", region=(1, 0, 0, 1, 0, 1))
     assert "toy4b" not in kinlearn.available_robots()
+    with pytest.raises(ConfigError, match="one of kinlearn's own"):
+        unregister_robot("panda")
 
 
 def test_a_urdf_arm_goes_through_the_whole_pipeline(toy, tmp_path):
