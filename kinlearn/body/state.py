@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import torch
 
-__all__ = ["StateLayout"]
+__all__ = ["StateLayout", "straight_line"]
 
 
 @dataclass(frozen=True)
@@ -37,3 +37,13 @@ class StateLayout:
     def join(self, theta: torch.Tensor, ef: torch.Tensor) -> torch.Tensor:
         """``θ (..., dof)``, ``ef (..., 3)`` → ``s (..., dof + 3)``."""
         return torch.cat((theta, ef), dim=-1)
+
+
+def straight_line(start: torch.Tensor, goal: torch.Tensor, steps: int) -> torch.Tensor:
+    """The straight line x(k) = x(0) + (k/T)(x(T) − x(0)), k = 0 … T = ``steps``, in any coordinates
+    (joints, end-effector positions): ``start``, ``goal`` ``(..., n)`` → ``(..., T + 1, n)``, ending
+    exactly at ``goal``."""
+    f = torch.linspace(0.0, 1.0, steps + 1, dtype=start.dtype, device=start.device).unsqueeze(-1)
+    line = start.unsqueeze(-2) + f * (goal - start).unsqueeze(-2)
+    line[..., -1, :] = goal
+    return line

@@ -44,6 +44,7 @@ import torch
 
 from ..body.kinematics import dls_step, kinematics
 from ..body.robot import Robot, load_robot
+from ..body.state import straight_line
 from ..errors import ConfigError, DatasetError, MissingDependencyError, ObstacleError, PlanningError
 from ..io import load_npz, save_npz
 from .body import BodySpheres, body_spheres
@@ -317,7 +318,7 @@ class RrtChecker:
         self.motions += 1
         path = torch.as_tensor(np.stack([a, b]), dtype=_F64)
         n = int(segment_steps(self.body, path, self.max_travel)[0])
-        q = path[0] + torch.linspace(0.0, 1.0, n + 1, dtype=_F64).unsqueeze(-1) * (path[1] - path[0])
+        q = straight_line(path[0], path[1], n)
         coarse = torch.zeros(n + 1, dtype=torch.bool)
         coarse[::8] = True
         coarse[-1] = True

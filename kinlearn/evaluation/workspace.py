@@ -15,6 +15,7 @@ from collections.abc import Callable, Mapping
 import torch
 
 from ..body.robot import Robot
+from ..body.state import straight_line
 from ..data.endpoints import EndpointConfig, EndpointPairs, make_endpoints
 from ..planning.plan import Plan
 from .metrics import dense_path_length, plan_metrics
@@ -49,7 +50,7 @@ def evaluate_workspace(
     joint interpolation's, per pair, median), ``path_median`` (m) and ``seconds`` (wall time).
     """
     start, goal = pairs.start.double(), pairs.goal.double()
-    lerp_len = dense_path_length(robot, _lerp(start[:, : robot.dof], goal[:, : robot.dof]))
+    lerp_len = dense_path_length(robot, straight_line(start[:, : robot.dof], goal[:, : robot.dof], 11))
     out: dict[str, dict[str, float]] = {}
     for name, planner in planners.items():
         per: dict[str, list[torch.Tensor]] = {}
@@ -79,11 +80,6 @@ def evaluate_workspace(
             "seconds": seconds,
         }
     return out
-
-
-def _lerp(q0: torch.Tensor, qT: torch.Tensor, steps: int = 11) -> torch.Tensor:
-    f = torch.linspace(0.0, 1.0, steps + 1, dtype=q0.dtype)[:, None]
-    return q0[:, None] + f * (qT - q0)[:, None]
 
 
 #: Columns of :func:`workspace_table`: key, header, scale, decimals.

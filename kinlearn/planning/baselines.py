@@ -25,7 +25,7 @@ import torch
 
 from ..body.kinematics import dls_step, kinematics
 from ..body.robot import Robot
-from ..body.state import StateLayout
+from ..body.state import StateLayout, straight_line
 from ..checks import check_finite, check_last_dim
 from ..errors import ConfigError, MissingDependencyError, PlanningError, ShapeError
 from .plan import Plan
@@ -65,11 +65,6 @@ def _plan_from_joints(robot: Robot, start, goal, joints: torch.Tensor, waypoints
     return Plan.from_joints(goal, joints, ef, waypoints=waypoints, within_limits=within, robot=robot.name)
 
 
-def _fractions(steps: int, like: torch.Tensor) -> torch.Tensor:
-    """k / T for k = 0 … T, shaped ``(T+1, 1)`` to broadcast against ``(..., 1, n)``."""
-    return torch.linspace(0.0, 1.0, steps + 1, dtype=like.dtype, device=like.device).unsqueeze(-1)
-
-
 @torch.no_grad()
 def joint_interpolation(robot: Robot, start: torch.Tensor, goal: torch.Tensor, steps: int = 11) -> Plan:
     """Joint-space linear interpolation: θ(k) = θ(0) + (k/T)(θ(T) − θ(0)), k = 0 … T.
@@ -80,7 +75,7 @@ def joint_interpolation(robot: Robot, start: torch.Tensor, goal: torch.Tensor, s
     layout = _endpoints(robot, start, goal, steps)
     theta0, _ = layout.split(start)
     thetaT, _ = layout.split(goal)
-    joints = theta0.unsqueeze(-2) + _fractions(steps, start) * (thetaT - theta0).unsqueeze(-2)
+    joints = straight_line(theta0, thetaT, steps)
     return _plan_from_joints(robot, start, goal, joints)
 
 
@@ -114,7 +109,7 @@ def cartesian_dls(
     kin = kinematics(robot, "fast")
     theta, ef0 = layout.split(start)
     _, efT = layout.split(goal)
-    line = ef0.unsqueeze(-2) + _fractions(steps, start) * (efT - ef0).unsqueeze(-2)  # (..., T+1, 3)
+    line = straight_line(ef0, efT, steps)  # (..., T+1, 3)
     path = [theta]
     for k in range(1, steps + 1):
         theta = dls_step(kin, theta, line[..., k, :], iterations=iterations, damping=damping, clamp=True)

@@ -3,7 +3,7 @@
 The self-supervised TM (:mod:`kinlearn.training.tm`) learns its waypoints through the frozen FM and
 IM (Algorithm 1). This baseline instead regresses the same network onto *observed* trajectories:
 "imitating observed trajectories" here means, for every endpoint pair [s(0), s(T)], the joint-space
-linear interpolation from θ(0) to θ(T) (:func:`kinlearn.planning.baselines.joint_interpolation`), whose
+linear interpolation from θ(0) to θ(T) (the baseline :func:`kinlearn.planning.baselines.joint_interpolation`), whose
 end-effector waypoints FK(θ(k)), k = 1 … T − 1, are the targets. The loss is the plain mean squared
 error between the TM's waypoints ŝ(1) … ŝ(T−1) and those targets; FM and IM play no part in
 training.
@@ -23,11 +23,12 @@ from typing import Literal
 import torch
 from tqdm.auto import tqdm
 
+from ..body.kinematics import kinematics
 from ..body.robot import load_robot
+from ..body.state import StateLayout, straight_line
 from ..data.endpoints import EndpointPairs
 from ..errors import ConfigError
 from ..models.trajectory import TMConfig, TrajectoryModel
-from ..planning.baselines import joint_interpolation
 from .loop import OptimConfig, make_optimizer, make_schedule, seed_everything
 
 __all__ = ["imitation_loss", "imitation_targets", "train_imitation"]
@@ -36,10 +37,13 @@ __all__ = ["imitation_loss", "imitation_targets", "train_imitation"]
 def imitation_targets(pairs: EndpointPairs, steps: int = 11) -> torch.Tensor:
     """The waypoints to imitate, ``(N, steps - 1, 3)``: FK of the joint-space linear interpolation.
 
-    These are ``joint_interpolation(robot, start, goal, steps).waypoints``, in the pairs' dtype.
+    These are the waypoints of ``joint_interpolation(robot, start, goal, steps)``, in the pairs' dtype.
     """
     robot = load_robot(pairs.config.robot)
-    return joint_interpolation(robot, pairs.start, pairs.goal, steps=steps).waypoints
+    lay = StateLayout(robot.dof)
+    line = straight_line(pairs.start[..., lay.joints], pairs.goal[..., lay.joints], steps)
+    with torch.no_grad():
+        return kinematics(robot, "fast").position(line[..., 1:-1, :], validate=False)
 
 
 @torch.no_grad()

@@ -37,6 +37,7 @@ import torch
 
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
+from ..body.state import straight_line
 from ..data.endpoints import workspace_box
 from ..errors import ConfigError
 from ..io import write_json
@@ -152,8 +153,7 @@ def path_loss(
     every = m // LENGTH_POINTS  # the path is measured at LENGTH_POINTS points per segment
     ef = fm.ef_along(dense, ef0, every)
     with torch.no_grad():
-        f = torch.linspace(0.0, 1.0, dense.shape[1], dtype=s0.dtype)[:, None]
-        ref = _path_length(fm.ef_along(theta0[:, None] + f * (thetaT - theta0)[:, None], ef0, every))
+        ref = _path_length(fm.ef_along(straight_line(theta0, thetaT, dense.shape[1] - 1), ef0, every))
     scale = ref + 0.02  # metres: keeps near-zero moves from dominating
     length = (_path_length(ef) / scale).mean()
     ef_k = ef[:, ::LENGTH_POINTS]  # the end effector at the waypoints (K + 1 points)

@@ -39,6 +39,7 @@ from ..io import (
 from ..models.forward_inverse import frozen_fm_im
 from ..models.rollout import LossConfig, rectify, tm_loss
 from ..models.trajectory import TMConfig, TrajectoryModel
+from ..polyline import trajectory_metrics
 from ..runs import diff_configs
 from .loop import (
     OptimConfig,
@@ -188,8 +189,6 @@ def _step_loss(tm, fm, im, s0, sT, loss_cfg: LossConfig):
 @torch.no_grad()
 def evaluate_tm(tm, fm, im, pairs: EndpointPairs, loss_cfg: LossConfig, batch_size: int = 4096) -> dict:
     """Mean loss terms and trajectory metrics of ``tm`` on ``pairs``."""
-    from ..evaluation.metrics import summarize, trajectory_metrics
-
     tm.eval()
     sums: dict[str, float] = {}
     wps = []
@@ -203,11 +202,7 @@ def evaluate_tm(tm, fm, im, pairs: EndpointPairs, loss_cfg: LossConfig, batch_si
         wps.append(wp)
     lay = tm.layout
     per = trajectory_metrics(pairs.start[:, lay.ef], torch.cat(wps), pairs.goal[:, lay.ef])
-    summary = summarize(per)
-    out = dict(sums)
-    for k, v in summary.items():
-        out[k] = v["mean"] if isinstance(v, dict) else v
-    return out
+    return {**sums, **{k: float(v.double().mean()) for k, v in per.items()}}
 
 
 def train_tm(
