@@ -23,7 +23,7 @@ from kinlearn import load_robot
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.errors import MissingDependencyError
 from kinlearn.evaluation.workspace import POSITION_COLUMNS, evaluate_workspace, heldout_pairs, workspace_table
-from kinlearn.planning.baselines import cartesian_dls, joint_interpolation, rrt_connect
+from kinlearn.planning.baselines import CartesianDLS, JointInterpolation, RRTConnect
 from kinlearn.planning.planner import Planner
 
 
@@ -41,20 +41,17 @@ def main() -> None:
     robot = load_robot(args.robot)
     planner = Planner.load(args.model) if args.model else Planner.default(args.robot)
     pairs = heldout_pairs(robot, n=args.n)
-    dof = robot.dof
     rows = {
-        "kinlearn (joint goals)": lambda a, b: planner.plan(a, b),
-        "joint interpolation": lambda a, b: joint_interpolation(robot, a, b),
-        "Cartesian line + DLS IK": lambda a, b: cartesian_dls(robot, a, b),
+        "kinlearn (joint goals)": planner,
+        "joint interpolation": JointInterpolation(robot),
+        "Cartesian line + DLS IK": CartesianDLS(robot),
     }
     joint = evaluate_workspace(robot, pairs, rows)
     if args.rrt:
         try:
             sub = pairs.split(min(args.rrt, len(pairs)))[0]
             name = f"RRT-Connect + simplification ({len(sub)} pairs)"
-            joint[name] = evaluate_workspace(
-                robot, sub, {name: lambda a, b: rrt_connect(robot, a, b, simplify=True)}
-            )[name]
+            joint[name] = evaluate_workspace(robot, sub, {name: RRTConnect(robot, simplify=True)})[name]
         except MissingDependencyError as exc:
             print(f"RRT-Connect skipped: {exc}")
     print(f"\n## Joint goals: {len(pairs)} held-out workspace pairs (±90% of the joint range)\n")
@@ -63,12 +60,13 @@ def main() -> None:
         pos = evaluate_workspace(
             robot,
             pairs,
-            {"kinlearn (position goals)": lambda a, b: planner.plan(a[:, :dof], goal_position=b[:, dof:])},
+            {"kinlearn (position goals)": planner},
+            goal_kind="position",
         )
         print("\n## End-effector position goals (same pairs; any configuration)\n")
         print(workspace_table(pos, POSITION_COLUMNS))
     paper = make_endpoints(EndpointConfig(robot=robot.name, n=args.n, seed=777))
-    task = evaluate_workspace(robot, paper, {"kinlearn (joint goals)": lambda a, b: planner.plan(a, b)})
+    task = evaluate_workspace(robot, paper, {"kinlearn (joint goals)": planner})
     print(f"\n## The paper's task: {len(paper)} held-out pairs\n")
     print(workspace_table(task))
     print(f"\ntook {time.perf_counter() - t0:.0f} s")

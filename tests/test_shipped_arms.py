@@ -17,7 +17,7 @@ from kinlearn.evaluation.metrics import plan_metrics
 from kinlearn.evaluation.workspace import evaluate_workspace, heldout_pairs
 from kinlearn.io import load_checkpoint
 from kinlearn.models.forward_inverse import load_fm, load_im
-from kinlearn.planning.baselines import joint_interpolation
+from kinlearn.planning.baselines import JointInterpolation
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
 
 #: Held-out workspace pairs per arm (uniform within ±90% of the joint range, a seed no training used).
@@ -105,8 +105,8 @@ def test_shipped_planner_shortens_the_hand_path_without_sharper_turns(shipped):
         robot,
         pairs,
         {
-            "planner": lambda a, b: planner.plan(a, b),
-            "joint interpolation": lambda a, b: joint_interpolation(robot, a, b),
+            "planner": planner,
+            "joint interpolation": JointInterpolation(robot),
         },
     )
     assert res["planner"]["state_success"] == 1.0

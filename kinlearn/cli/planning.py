@@ -448,7 +448,7 @@ def _run_train_planner(args: argparse.Namespace) -> int:
     if args.heldout:
         planner = Planner.load(run_dir)
         pairs = heldout_pairs(robot, n=args.heldout)
-        res = evaluate_workspace(robot, pairs, {"this planner": lambda a, b: planner.plan(a, b)})
+        res = evaluate_workspace(robot, pairs, {"this planner": planner})
         print(f"held-out workspace pairs ({args.heldout}, uniform within ±90% of the joint range):")
         print(workspace_table(res))
     print(f"trained planner in {run_dir}")

@@ -25,7 +25,7 @@ import torch
 from ..errors import DatasetError, ObstacleError
 from ..io import load_npz, save_npz
 
-__all__ = ["SCENE_FORMAT", "Scene"]
+__all__ = ["SCENE_FORMAT", "Scene", "as_scene"]
 
 #: Version of the scene ``.npz`` layout written by :meth:`Scene.save`.
 SCENE_FORMAT = 1
@@ -402,3 +402,23 @@ class Scene:
             f"Scene(batch={tuple(self.batch_shape)}, spheres={self.num_spheres}, boxes={self.num_boxes}, "
             f"floor={floor}, dtype={self.dtype})"
         )
+
+
+def as_scene(obstacles) -> Scene:
+    """``obstacles`` as a :class:`Scene`: a Scene as is, or spheres ``(K, 4)`` / ``(..., K, 4)``
+    [x, y, z, radius] (m) as a scene of spheres. :class:`ObstacleError` for anything else."""
+    if isinstance(obstacles, Scene):
+        return obstacles
+    if isinstance(obstacles, (str, bytes)) or obstacles is None:
+        raise ObstacleError("obstacles must be spheres (K, 4) [x, y, z, radius] or a kinlearn Scene")
+    if isinstance(obstacles, torch.Tensor) and (obstacles.dtype == torch.bool or obstacles.is_complex()):
+        raise ObstacleError(f"obstacle spheres must hold real numbers, got a {obstacles.dtype} tensor")
+    try:
+        spheres = torch.as_tensor(np.asarray(obstacles, dtype=np.float64))
+    except (TypeError, ValueError) as exc:
+        raise ObstacleError(f"obstacles must be numbers of shape (K, 4) or (..., K, 4): {exc}") from exc
+    if spheres.ndim < 2 or spheres.shape[-1] != 4:
+        raise ObstacleError(
+            f"obstacle spheres must have shape (K, 4) or (..., K, 4) [x, y, z, radius], got {tuple(spheres.shape)}"
+        )
+    return Scene(spheres=spheres)

@@ -29,6 +29,7 @@ import torch
 from ..body.kinematics import kinematics
 from ..collision import BodySpheres, Scene, check_path
 from ..collision.problems import FAMILIES, ProblemSet
+from ..data.problem import LIMIT_TOLERANCE
 from ..errors import ConfigError, ShapeError
 from ..io import atomic_write
 from ..planning.plan import DEFAULT_TOLERANCE, Tolerance
@@ -47,8 +48,6 @@ __all__ = [
 
 #: rad: a path's first configuration must equal the problem's start to this (float32 round-off passes).
 START_TOLERANCE = 1e-5
-#: rad: how far a configuration may leave the joint limits and still count as within them.
-LIMIT_TOLERANCE = 1e-6
 #: The per-problem tensors :func:`obstacle_outcome` returns.
 OUTCOME_KEYS = (
     "success",

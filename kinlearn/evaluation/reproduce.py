@@ -445,7 +445,7 @@ def _workspace(config: ReproduceConfig, robot, models: Path, out: Path) -> dict:
     """The joint-path TMs (trained by the jobs) judged on held-out workspace pairs."""
     from ..models.forward_inverse import AnalyticFM, AnalyticIM, load_fm, load_im
     from ..models.joint_path import load_path_model
-    from ..planning.baselines import rrt_connect
+    from ..planning.baselines import CartesianDLS, JointInterpolation, RRTConnect
     from .workspace import evaluate_workspace, heldout_pairs
 
     fm, im = load_fm(models / "fm.pt", robot=robot.name), load_im(models / "im.pt", robot=robot.name)
@@ -455,28 +455,18 @@ def _workspace(config: ReproduceConfig, robot, models: Path, out: Path) -> dict:
         for kind in ("learned", "analytic")
     }
     pairs = heldout_pairs(robot, n=config.workspace_pairs)
-    dof = robot.dof
-
-    def joint_goals(planner):
-        return lambda a, b: planner.plan(a, b)
-
-    def position_goals(planner):
-        return lambda a, b: planner.plan(a[:, :dof], goal_position=b[:, dof:])
-
     rows = {
-        "kinlearn joint-path TM, trained through the learned FM": joint_goals(Planner(robot, tms["learned"])),
-        "kinlearn joint-path TM, trained through the analytic FM": joint_goals(
-            Planner(robot, tms["analytic"])
-        ),
-        "joint interpolation": lambda a, b: joint_interpolation(robot, a, b),
-        "Cartesian line + DLS IK (analytic robot)": lambda a, b: cartesian_dls(robot, a, b),
+        "kinlearn joint-path TM, trained through the learned FM": Planner(robot, tms["learned"]),
+        "kinlearn joint-path TM, trained through the analytic FM": Planner(robot, tms["analytic"]),
+        "joint interpolation": JointInterpolation(robot),
+        "Cartesian line + DLS IK (analytic robot)": CartesianDLS(robot),
     }
     joint = evaluate_workspace(robot, pairs, rows)
     try:
         n_rrt = min(len(pairs), 500)
         sub = pairs.split(n_rrt)[0]
         joint[f"RRT-Connect (OMPL, {n_rrt} pairs)"] = evaluate_workspace(
-            robot, sub, {"rrt": lambda a, b: rrt_connect(robot, a, b, seed=config.seed)}
+            robot, sub, {"rrt": RRTConnect(robot, seed=config.seed)}
         )["rrt"]
     except MissingDependencyError as exc:
         joint["RRT-Connect (OMPL)"] = {"skipped": str(exc)}
@@ -485,10 +475,10 @@ def _workspace(config: ReproduceConfig, robot, models: Path, out: Path) -> dict:
         for im_kind, i in (("learned", im), ("analytic", aim)):
             planner = Planner(robot, tms["learned"], f, i)
             name = f"kinlearn, goal joints from the {fm_kind} FM + {im_kind} IM"
-            position[name] = evaluate_workspace(robot, pairs, {name: position_goals(planner)})[name]
+            position[name] = evaluate_workspace(robot, pairs, {name: planner}, goal_kind="position")[name]
     paper = make_endpoints(EndpointConfig(robot=robot.name, n=config.heldout_pairs, seed=config.seed + 777))
     paper_task = evaluate_workspace(
-        robot, paper, {"kinlearn joint-path TM (learned FM)": joint_goals(Planner(robot, tms["learned"]))}
+        robot, paper, {"kinlearn joint-path TM (learned FM)": Planner(robot, tms["learned"])}
     )
     return {"pairs": len(pairs), "joint_goals": joint, "position_goals": position, "paper_task": paper_task}
 

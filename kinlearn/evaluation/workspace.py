@@ -10,14 +10,17 @@ effector's executed path (sampled densely) against joint interpolation's on the 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
+from typing import Literal
 
 import torch
 
 from ..body.robot import Robot
 from ..body.state import straight_line
 from ..data.endpoints import EndpointConfig, EndpointPairs, make_endpoints
-from ..planning.plan import Plan
+from ..data.problem import GOAL_KINDS, Problem
+from ..errors import ConfigError
+from ..planning.plan import PlannerLike
 from .metrics import dense_path_length, plan_metrics
 
 __all__ = ["POSITION_COLUMNS", "WORKSPACE_COLUMNS", "evaluate_workspace", "heldout_pairs", "workspace_table"]
@@ -37,28 +40,37 @@ def heldout_pairs(
 def evaluate_workspace(
     robot: Robot,
     pairs: EndpointPairs,
-    planners: Mapping[str, Callable[[torch.Tensor, torch.Tensor], Plan]],
+    planners: Mapping[str, PlannerLike],
     *,
+    goal_kind: Literal["state", "position"] = "state",
     batch_size: int = 1000,
 ) -> dict[str, dict[str, float]]:
     """Run each planner on ``pairs`` (in batches) and summarise what executing its plans gives.
 
-    ``planners``: name → ``f(start_states (N, S), goal_states (N, S)) -> Plan``. Returns, per planner:
+    ``planners``: name → a planner of the planner protocol (``plan(problem) -> Plan``: the learned
+    :class:`~kinlearn.planning.planner.Planner`, :class:`~kinlearn.planning.baselines.JointInterpolation`,
+    …). ``goal_kind``: the pairs' goal states (``"state"``) or only their end-effector positions
+    (``"position"``) are the goals. Returns, per planner:
     ``state_success`` (share), ``ef_success`` (share within 1 cm), ``goal_error_median``/``_p95`` (m),
     ``joint_goal_error_median`` (rad), ``limit_violation`` and ``sharp_turn`` (shares; turns of the
     executed path sharper than 90°), ``path_ratio_median`` (the dense executed end-effector path over
     joint interpolation's, per pair, median), ``path_median`` (m) and ``seconds`` (wall time).
     """
+    if goal_kind not in GOAL_KINDS:
+        raise ConfigError(f"goal_kind must be one of {GOAL_KINDS}, got {goal_kind!r}")
+    for name, planner in planners.items():
+        if not isinstance(planner, PlannerLike):
+            raise ConfigError(f"planner {name!r} has no plan(problem) method (the planner protocol)")
     start, goal = pairs.start.double(), pairs.goal.double()
+    problems = Problem.from_states(robot, start, goal)
+    if goal_kind == "position":
+        problems = problems.position_goals()
     lerp_len = dense_path_length(robot, straight_line(start[:, : robot.dof], goal[:, : robot.dof], 11))
     out: dict[str, dict[str, float]] = {}
     for name, planner in planners.items():
         per: dict[str, list[torch.Tensor]] = {}
         t0 = time.perf_counter()
-        plans = [
-            planner(start[i : i + batch_size], goal[i : i + batch_size])
-            for i in range(0, len(pairs), batch_size)
-        ]
+        plans = [planner.plan(problems[i : i + batch_size]) for i in range(0, len(pairs), batch_size)]
         seconds = time.perf_counter() - t0
         for p in plans:
             m = plan_metrics(p, robot)

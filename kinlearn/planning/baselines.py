@@ -19,6 +19,7 @@ None of them knows about obstacles; neither does the learned planner.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -27,11 +28,15 @@ from ..body.kinematics import dls_step, kinematics
 from ..body.robot import Robot
 from ..body.state import StateLayout, straight_line
 from ..checks import check_finite, check_last_dim
+from ..data.problem import Problem
 from ..errors import ConfigError, MissingDependencyError, PlanningError, ShapeError
-from .plan import Plan
+from .plan import Plan, judge
 
 __all__ = [
+    "CartesianDLS",
+    "JointInterpolation",
     "PlanningError",
+    "RRTConnect",
     "cartesian_dls",
     "joint_interpolation",
     "rrt_connect",
@@ -106,15 +111,22 @@ def cartesian_dls(
         raise ConfigError(f"iterations must be an integer >= 1, got {iterations!r}")
     if not damping > 0.0:
         raise ConfigError(f"damping must be > 0 (metres), got {damping!r}")
-    kin = kinematics(robot, "fast")
     theta, ef0 = layout.split(start)
     _, efT = layout.split(goal)
+    joints, line = _dls_path(robot, theta, ef0, efT, steps, iterations, damping)
+    return _plan_from_joints(robot, start, goal, joints, waypoints=line[..., 1:-1, :])
+
+
+def _dls_path(robot: Robot, theta, ef0, efT, steps: int, iterations: int, damping: float):
+    """The DLS IK path along the straight end-effector line ef0 → efT: joints ``(..., T+1, dof)`` and the
+    line ``(..., T+1, 3)``."""
+    kin = kinematics(robot, "fast")
     line = straight_line(ef0, efT, steps)  # (..., T+1, 3)
     path = [theta]
     for k in range(1, steps + 1):
         theta = dls_step(kin, theta, line[..., k, :], iterations=iterations, damping=damping, clamp=True)
         path.append(theta)
-    return _plan_from_joints(robot, start, goal, torch.stack(path, dim=-2), waypoints=line[..., 1:-1, :])
+    return torch.stack(path, dim=-2), line
 
 
 # --------------------------------------------------------------------------------------------------
@@ -256,3 +268,91 @@ def rrt_connect(
     :func:`rrt_connect_timed` to get the per-query planning times as well.
     """
     return rrt_connect_timed(robot, start, goal, steps, time_limit, seed, simplify)[0]
+
+
+# --------------------------------------------------------------------------------------------------
+# The planner protocol: plan(problem) -> Plan
+# --------------------------------------------------------------------------------------------------
+
+
+def _check_problem(planner, problem: Problem, who: str) -> None:
+    if not isinstance(problem, Problem):
+        raise ConfigError(
+            f"{who} plans a kinlearn Problem (Problem.make(robot, start, goal)), got {type(problem).__name__}"
+        )
+    if problem.robot.name != planner.robot.name:
+        raise ConfigError(
+            f"{who} plans for {planner.robot.name!r}; the problems are for {problem.robot.name!r}"
+        )
+
+
+def _check_steps(steps) -> None:
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 2:
+        raise ConfigError(
+            f"steps must be an integer >= 2 (at least one intermediate waypoint), got {steps!r}"
+        )
+
+
+@dataclass(frozen=True)
+class JointInterpolation:
+    """:func:`joint_interpolation` as a planner (:class:`~kinlearn.planning.plan.PlannerLike`): goal states
+    only; obstacles are not avoided, but a plan among them is checked and says whether it collides."""
+
+    robot: Robot
+    steps: int = 11
+
+    def __post_init__(self) -> None:
+        _check_steps(self.steps)
+
+    @torch.no_grad()
+    def plan(self, problem: Problem) -> Plan:
+        _check_problem(self, problem, "joint interpolation")
+        problem.require("state", "joint interpolation")
+        return judge(problem, straight_line(problem.start_joints, problem.goal_joints, self.steps))
+
+
+@dataclass(frozen=True)
+class CartesianDLS:
+    """:func:`cartesian_dls` as a planner: the end effector on a straight line to the goal (a state's end
+    effector or a position), followed by DLS IK; ignores obstacles (a plan among them is checked)."""
+
+    robot: Robot
+    steps: int = 11
+    iterations: int = 20
+    damping: float = 1e-2
+
+    def __post_init__(self) -> None:
+        _check_steps(self.steps)
+        if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or self.iterations < 1:
+            raise ConfigError(f"iterations must be an integer >= 1, got {self.iterations!r}")
+        if not self.damping > 0.0:
+            raise ConfigError(f"damping must be > 0 (metres), got {self.damping!r}")
+
+    @torch.no_grad()
+    def plan(self, problem: Problem) -> Plan:
+        _check_problem(self, problem, "Cartesian DLS")
+        ef0 = problem.start[..., self.robot.dof :]
+        joints, line = _dls_path(
+            self.robot, problem.start_joints, ef0, problem.target, self.steps, self.iterations, self.damping
+        )
+        return judge(problem, joints, waypoints=line[..., 1:-1, :])
+
+
+@dataclass(frozen=True)
+class RRTConnect:
+    """:func:`rrt_connect` (free space: every state valid) as a planner; goal states only. For planning
+    around obstacles use :class:`kinlearn.planning.obstacle_baselines.SceneRRTConnect`."""
+
+    robot: Robot
+    steps: int = 11
+    time_limit: float = 1.0
+    seed: int | None = 0
+    simplify: bool = False
+
+    def plan(self, problem: Problem) -> Plan:
+        _check_problem(self, problem, "RRT-Connect")
+        problem.require("state", "RRT-Connect")
+        joints = rrt_connect(
+            self.robot, problem.start, problem.goal, self.steps, self.time_limit, self.seed, self.simplify
+        ).joints
+        return judge(problem, joints)

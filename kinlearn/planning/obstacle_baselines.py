@@ -22,6 +22,13 @@ unless one is passed; its robot is the robot planned for.
 ======================  ==========================================================================
 
 None of them is a guarantee: judge their paths with :func:`kinlearn.evaluation.obstacles.obstacle_outcome`.
+
+Each also comes as a planner of the planner protocol (:class:`~kinlearn.planning.plan.PlannerLike`):
+:class:`JointLine`, :class:`CartesianLine`, :class:`SceneRRTConnect` and :class:`TrajectoryOptimiser`
+take a :class:`~kinlearn.data.problem.Problem` batch (goal states; its obstacles, or free space) and
+return one :class:`~kinlearn.planning.plan.Plan`, judged by :func:`~kinlearn.planning.plan.judge`. Paths
+of different lengths are padded by repeating their last configuration (zero-length segments: the
+same motion); a search that found nothing gives the straight line with ``success`` False.
 """
 
 from __future__ import annotations
@@ -38,11 +45,17 @@ from ..body.kinematics import kinematics
 from ..body.robot import load_robot
 from ..collision import BodySpheres, Scene, body_obstacle_distance, body_spheres, self_collision_distance
 from ..collision.problems import rrt_connect_solve
+from ..data.problem import Problem
 from ..errors import ConfigError, ShapeError
-from .baselines import cartesian_dls, joint_interpolation
+from .baselines import _check_problem, cartesian_dls, joint_interpolation
+from .plan import Plan, judge
 
 __all__ = [
+    "CartesianLine",
+    "JointLine",
     "OptimiserConfig",
+    "SceneRRTConnect",
+    "TrajectoryOptimiser",
     "cartesian_line",
     "default_body",
     "joint_line",
@@ -315,3 +328,113 @@ def trajectory_optimiser(
             inner.clamp_(lo, hi)
     path = objective.path(inner.detach())
     return _pin(path, start, goal), time.perf_counter() - t0
+
+
+# --------------------------------------------------------------------------------------------------
+# The planner protocol: plan(problem) -> Plan
+# --------------------------------------------------------------------------------------------------
+
+
+class _PathPlanner:
+    """A one-problem-at-a-time path function as a planner of problem batches (see the module docstring)."""
+
+    name = "planner"
+    body: BodySpheres
+
+    @property
+    def robot(self):
+        return self.body.robot
+
+    def _path(self, start: torch.Tensor, goal: torch.Tensor, scene: Scene) -> torch.Tensor | None:
+        raise NotImplementedError
+
+    def plan(self, problem: Problem) -> Plan:
+        _check_problem(self, problem, self.name)
+        problem.require("state", self.name)
+        flat_shape = (-1, self.robot.dof)
+        starts = problem.start_joints.reshape(flat_shape)
+        goals = problem.goal_joints.reshape(flat_shape)
+        scene = problem.obstacles if problem.obstacles is not None else Scene()
+        scenes = scene.reshape(starts.shape[0]) if len(scene.batch_shape) else None
+        paths, found = [], []
+        for i in range(starts.shape[0]):
+            path = self._path(starts[i], goals[i], scene if scenes is None else scenes[i])
+            found.append(path is not None)
+            paths.append(torch.stack((starts[i], goals[i])) if path is None else path)
+        longest = max(p.shape[0] for p in paths)
+        joints = torch.stack([torch.cat((p, p[-1:].expand(longest - p.shape[0], -1))) for p in paths])
+        shape = (*problem.batch_shape, longest, self.robot.dof)
+        return judge(problem, joints.reshape(shape), found=torch.tensor(found).reshape(problem.batch_shape))
+
+
+@dataclass(frozen=True)
+class JointLine(_PathPlanner):
+    """:func:`joint_line` as a planner."""
+
+    body: BodySpheres
+    steps: int = 10
+    name = "the joint line"
+
+    def _path(self, start, goal, scene):
+        return joint_line(start, goal, scene, steps=self.steps, body=self.body)[0]
+
+
+@dataclass(frozen=True)
+class CartesianLine(_PathPlanner):
+    """:func:`cartesian_line` as a planner."""
+
+    body: BodySpheres
+    steps: int = 10
+    iterations: int = 20
+    damping: float = 1e-2
+    name = "the Cartesian line"
+
+    def _path(self, start, goal, scene):
+        return cartesian_line(
+            start,
+            goal,
+            scene,
+            steps=self.steps,
+            iterations=self.iterations,
+            damping=self.damping,
+            body=self.body,
+        )[0]
+
+
+@dataclass(frozen=True)
+class SceneRRTConnect(_PathPlanner):
+    """:func:`rrt_connect` (around the problem's obstacles, on the dense checker) as a planner."""
+
+    body: BodySpheres
+    time_limit: float = 1.0
+    simplify: bool = True
+    seed: int | None = 0
+    max_travel: float = 0.01
+    name = "RRT-Connect"
+
+    def _path(self, start, goal, scene):
+        return rrt_connect(
+            start,
+            goal,
+            scene,
+            time_limit=self.time_limit,
+            simplify=self.simplify,
+            seed=self.seed,
+            max_travel=self.max_travel,
+            body=self.body,
+        )[0]
+
+
+@dataclass(frozen=True)
+class TrajectoryOptimiser(_PathPlanner):
+    """:func:`trajectory_optimiser` as a planner."""
+
+    body: BodySpheres
+    steps: int = 100
+    config: OptimiserConfig | None = None
+    name = "the trajectory optimiser"
+
+    def _path(self, start, goal, scene):
+        return trajectory_optimiser(start, goal, scene, steps=self.steps, config=self.config, body=self.body)[
+            0
+        ]

@@ -4,12 +4,22 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import torch
 
+from ..body.kinematics import kinematics
+from ..body.robot import Robot
+from ..checks import check_finite, check_last_dim
+from ..collision.body import body_spheres
+from ..collision.check import check_path
+from ..data.problem import LIMIT_TOLERANCE, Problem
 from ..errors import ConfigError, ShapeError
 
-__all__ = ["DEFAULT_TOLERANCE", "Plan", "Tolerance"]
+__all__ = ["CHECK_TRAVEL", "DEFAULT_TOLERANCE", "Plan", "PlannerLike", "Tolerance", "judge"]
+
+#: Sphere travel (m) allowed between two configurations the dense collision check looks at.
+CHECK_TRAVEL = 0.01
 
 
 @dataclass(frozen=True)
@@ -90,14 +100,18 @@ class Plan:
         target: torch.Tensor | None = None,
         joint_goal: bool = True,
         within_limits: torch.Tensor | None = None,
+        collision_free: torch.Tensor | None = None,
         tolerance: Tolerance = DEFAULT_TOLERANCE,
         robot: str | None = None,
     ) -> Plan:
-        """A plan of the joint path ``joints (..., T+1, dof)`` whose true end effector is ``ef (..., T+1, 3)``.
+        """A plan of the joint path ``joints (..., T+1, dof)`` whose true end effector is ``ef (..., T+1, 3)``:
+        the one way every planner (learned or baseline) makes its :class:`Plan`.
 
         ``waypoints`` default to the end effector of the interior configurations; ``target`` to the
         goal state's end effector. ``joint_goal``: whether the goal's joints must be reached too.
         ``within_limits (...)``: where the path is known to stay within the joint limits (default: all).
+        ``collision_free (...)``: where the path was checked among obstacles and found free (None: not
+        checked); ``success`` requires it.
         """
         dof = joints.shape[-1]
         if target is None:
@@ -111,6 +125,8 @@ class Plan:
             ok = goal_error <= tolerance.position
         if within_limits is not None:
             ok = ok & within_limits
+        if collision_free is not None:
+            ok = ok & collision_free
         return cls(
             goal=goal,
             waypoints=ef[..., 1:-1, :] if waypoints is None else waypoints,
@@ -122,6 +138,7 @@ class Plan:
             success=ok,
             tolerance=tolerance,
             robot=robot,
+            collision_free=collision_free,
         )
 
     @property
@@ -241,3 +258,66 @@ class Plan:
             + f"; {int(ok.sum())}/{ok.numel()} plans succeeded"
         )
         return "\n".join(lines)
+
+
+@runtime_checkable
+class PlannerLike(Protocol):
+    """What every planner is: the learned :class:`~kinlearn.planning.planner.Planner` and each baseline
+    (:mod:`kinlearn.planning.baselines`, :mod:`kinlearn.planning.obstacle_baselines`). ``plan`` takes a
+    :class:`~kinlearn.data.problem.Problem` for ``robot`` and returns one :class:`Plan` per problem, whose
+    outcome (``success``, ``collision_free`` where there are obstacles) is verified, not believed."""
+
+    robot: Robot
+
+    def plan(self, problem: Problem) -> Plan: ...
+
+
+def judge(
+    problem: Problem,
+    joints: torch.Tensor,
+    *,
+    waypoints: torch.Tensor | None = None,
+    found: torch.Tensor | None = None,
+    tolerance: Tolerance = DEFAULT_TOLERANCE,
+    max_travel: float = CHECK_TRAVEL,
+) -> Plan:
+    """The :class:`Plan` of the joint paths ``joints (..., T+1, dof)`` a planner made for ``problem``,
+    judged on the robot itself: the analytic FK gives the end effector, the limits are checked on every
+    configuration, the goal (state or position) is checked within ``tolerance``, and among obstacles
+    every path is checked densely (:func:`~kinlearn.collision.check_path`, ``max_travel`` m of sphere
+    travel between checked configurations). ``waypoints`` default to the interior configurations' FK.
+    ``found (...)``: where the planner found a path at all (a search that ran out of time gives a
+    stand-in path with ``found`` False): ``success`` requires it."""
+    robot = problem.robot
+    check_last_dim(joints, robot.dof, "joint paths")
+    if joints.ndim < 2 or joints.shape[:-2] != problem.batch_shape or joints.shape[-2] < 2:
+        raise ShapeError(
+            f"joint paths must have shape {(*problem.batch_shape, 'T+1', robot.dof)} with T ≥ 1 for "
+            f"problems of batch shape {tuple(problem.batch_shape)}, got {tuple(joints.shape)}"
+        )
+    check_finite(joints, "joint paths")
+    joints = joints.detach().double()
+    ef = kinematics(robot, "fast").position(joints, validate=False)
+    lo, hi = robot.limits(joints.dtype, joints.device)
+    within = ((joints >= lo - LIMIT_TOLERANCE) & (joints <= hi + LIMIT_TOLERANCE)).flatten(-2).all(-1)
+    if found is not None:
+        within = within & found.to(within.device)
+    free = None
+    if problem.obstacles is not None:
+        free = check_path(
+            body_spheres(robot), joints, problem.obstacles, max_travel=max_travel
+        ).collision_free
+    state = problem.goal_kind == "state"
+    goal = problem.goal if state else torch.cat((joints[..., -1, :], ef[..., -1, :]), dim=-1)
+    return Plan.from_joints(
+        goal,
+        joints,
+        ef,
+        waypoints=waypoints,
+        target=problem.target,
+        joint_goal=state,
+        within_limits=within,
+        collision_free=free,
+        tolerance=tolerance,
+        robot=robot.name,
+    )

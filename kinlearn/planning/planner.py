@@ -25,6 +25,7 @@ with ``strict=True``.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import warnings
 from functools import lru_cache
 from pathlib import Path
@@ -39,13 +40,13 @@ from ..checks import check_finite
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
 from ..collision.fast import NumpyBody, NumpyScene, check_paths, first_free
-from ..collision.scene import Scene
+from ..collision.scene import Scene, as_scene
+from ..data.problem import LIMIT_TOLERANCE, STATE_EF_TOLERANCE, Problem
 from ..errors import (
     ConfigError,
     DomainError,
     DomainWarning,
     DTypeError,
-    ObstacleError,
     ShapeError,
     StateError,
 )
@@ -56,25 +57,19 @@ from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model, scene
 from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
 from .inference import NumpyFK, NumpyObstacleModel, NumpyPathModel
-from .plan import DEFAULT_TOLERANCE, Plan, Tolerance
+from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance
 
 __all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan"]
 
 #: Planners shipped inside the package, one folder per robot (see ``kinlearn/checkpoints/README.md``).
 DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
 
-#: A full state's end effector may differ from FK of its joints by at most this much (m).
-STATE_EF_TOLERANCE = 1e-3
-#: Joint values may exceed the limits by this much (rad) before they count as outside.
-LIMIT_TOLERANCE = 1e-6
 #: Batches up to this many plans run in NumPy (a few microseconds per operation), larger ones in torch.
 SMALL_BATCH = 16
 #: The babbling step bound (rad per joint and step, REFERENCE #4): the largest action the IM takes.
 MAX_STEP = 0.083
 #: The obstacle-aware TM's file in a planner folder.
 OBSTACLE_TM = "tm_obstacles.pt"
-#: Sphere travel (m) allowed between two configurations the dense collision check looks at.
-CHECK_TRAVEL = 0.01
 
 
 def _as_array(x, what: str) -> tuple[np.ndarray, torch.dtype, torch.device]:
@@ -285,6 +280,18 @@ class Planner:
         dtype = torch.promote_types(dt0, dtT)
         return x0[:, :dof], (xT if position else xT[:, :dof]), position, ef_given, batch, dtype, dev
 
+    def _unpack(self, problem: Problem, goal, goal_position, obstacles):
+        """A problem's start, goal (state or position) and obstacles, as :meth:`plan` takes them."""
+        if goal is not None or goal_position is not None or obstacles is not None:
+            raise ConfigError("a Problem carries its goal and obstacles: pass plan(problem) alone")
+        if problem.robot.name != self.robot.name:
+            raise ConfigError(
+                f"this planner is for {self.robot.name!r}; the problems are for {problem.robot.name!r}"
+            )
+        if problem.goal_kind == "position":
+            return problem.start, None, problem.goal, problem.obstacles
+        return problem.start, problem.goal, None, problem.obstacles
+
     def _check_states(self, ef_given, ef_fk) -> None:
         for what, given, fk in zip(("start", "goal"), ef_given, ef_fk, strict=False):
             if given is None:
@@ -330,7 +337,9 @@ class Planner:
         refine_steps: int | None = None,
         strict: bool = False,
     ) -> Plan:
-        """Plan from ``start`` to ``goal``, around ``obstacles`` if given.
+        """Plan from ``start`` to ``goal``, around ``obstacles`` if given; or plan a
+        :class:`~kinlearn.data.problem.Problem` given as ``start`` (the planner protocol,
+        :class:`~kinlearn.planning.plan.PlannerLike`: ``planner.plan(problem)``).
 
         ``start``: joint values ``(..., dof)`` or a state ``(..., dof + 3)``. ``goal``: likewise — the plan
         ends at its joints — or an end-effector position ``(..., 3)`` (also as ``goal_position=``), reached
@@ -354,6 +363,8 @@ class Planner:
         :class:`DomainWarning` (or raises :class:`DomainError` when ``strict``) for input outside
         the training domain. A plan that misses its goal is returned with ``success`` False.
         """
+        if isinstance(start, Problem):
+            start, goal, goal_position, obstacles = self._unpack(start, goal, goal_position, obstacles)
         theta0, goal_arr, position, ef_given, batch, dtype, device = self._arrays(start, goal, goal_position)
         n = theta0.shape[0]
         if position:
@@ -381,40 +392,36 @@ class Planner:
         else:
             joints, waypoints, ef = self._waypoint_rollout(theta0, ef0, thetaT, efT)
         within = ((joints >= self._lo_tol) & (joints <= self._hi_tol)).all((-1, -2))
-        tol = self.tolerance
-        goal_error = np.linalg.norm(ef[:, -1] - target, axis=-1)
-        if position:
-            joint_error = np.full(n, np.nan)
-            success = within & (goal_error <= tol.position)
-        else:
-            joint_error = np.abs(joints[:, -1] - thetaT).max(-1)
-            success = within & (goal_error <= tol.position) & (joint_error <= tol.joints)
-        if free is not None:
-            success = success & free
-        np_dtype = _NUMPY_FLOATS.get(dtype, np.float64)
         single = batch == ()
 
-        def out(a: np.ndarray) -> torch.Tensor:
-            # A single plan's per-plan values are 0-d (np.ascontiguousarray would make them 1-d).
-            a = np.array(a[0]) if single else np.ascontiguousarray(a.reshape((*batch, *a.shape[1:])))
-            if a.dtype == bool:
-                t = torch.from_numpy(a)
-                return t if device.type == "cpu" else t.to(device)
-            t = torch.from_numpy(a.astype(np_dtype, copy=False))
-            return t if t.dtype == dtype and device.type == "cpu" else t.to(device=device, dtype=dtype)
+        def t(a: np.ndarray) -> torch.Tensor:
+            # Float64 views of the arrays; a single plan's leading dimension goes (np.ascontiguousarray
+            # would make its 0-d per-plan values 1-d).
+            if single:
+                return torch.from_numpy(np.array(a[0]))
+            return torch.from_numpy(np.ascontiguousarray(a.reshape((*batch, *a.shape[1:]))))
 
-        return Plan(
-            goal=out(np.concatenate((thetaT, efT), -1)),
-            waypoints=out(waypoints),
-            joints=out(joints),
-            ef=out(ef),
-            target=out(target),
-            goal_error=out(goal_error),
-            joint_error=out(joint_error),
-            success=out(success),
-            tolerance=tol,
+        plan = Plan.from_joints(
+            t(np.concatenate((thetaT, efT), -1)),
+            t(joints),
+            t(ef),
+            waypoints=t(waypoints),
+            target=t(target),
+            joint_goal=not position,
+            within_limits=t(within),
+            collision_free=None if free is None else t(free),
+            tolerance=self.tolerance,
             robot=self.robot.name,
-            collision_free=None if free is None else out(free),
+        )
+        if dtype == torch.float64 and device.type == "cpu":
+            return plan
+        return dataclasses.replace(
+            plan,
+            **{
+                f: v.to(device=device, dtype=dtype if v.is_floating_point() else v.dtype)
+                for f in Plan._BATCHED
+                if (v := getattr(plan, f)) is not None
+            },
         )
 
     __call__ = plan
@@ -444,23 +451,7 @@ class Planner:
                 f"this planner has no obstacle-aware TM ({OBSTACLE_TM}); load a planner folder holding one, "
                 "or train one with kinlearn.train_obstacles"
             )
-        if isinstance(obstacles, Scene):
-            scene = obstacles.to(dtype=torch.float64, device="cpu")
-        else:
-            if isinstance(obstacles, (str, bytes)):
-                raise ObstacleError("obstacles must be spheres (K, 4) [x, y, z, radius] or a kinlearn Scene")
-            try:
-                spheres = torch.as_tensor(np.asarray(obstacles, dtype=np.float64))
-            except (TypeError, ValueError) as exc:
-                raise ObstacleError(
-                    f"obstacles must be numbers of shape (K, 4) or (..., K, 4): {exc}"
-                ) from exc
-            if spheres.ndim < 2 or spheres.shape[-1] != 4:
-                raise ObstacleError(
-                    f"obstacle spheres must have shape (K, 4) or (..., K, 4) [x, y, z, radius], "
-                    f"got {tuple(spheres.shape)}"
-                )
-            scene = Scene(spheres=spheres)
+        scene = as_scene(obstacles).to(dtype=torch.float64, device="cpu")
         shape = tuple(scene.batch_shape)
         if shape == ():
             return scene

@@ -1,0 +1,224 @@
+"""A batch of planning problems: where each plan starts, where it must end, and what it must avoid.
+
+:class:`Problem` is what every planner takes (:class:`~kinlearn.planning.plan.PlannerLike`: the learned
+:class:`~kinlearn.planning.planner.Planner` and every baseline), what the trajectory models read
+(:meth:`Problem.features`) and what evaluation runs planners on. Made once by :meth:`Problem.make`,
+which checks everything a planner would otherwise check (shapes, dtypes, NaN/inf, joint limits, a
+state's end effector against FK of its joints, obstacles) and fills in what was left out (a start or
+goal given as joints gets its end effector by the analytic FK); after that a problem is trusted.
+
+Goal kinds:
+
+- ``"state"``: ``goal`` is a full state [θ(T), ef(T)]; the plan must end at its joints (and so at its
+  end effector);
+- ``"position"``: ``goal`` is an end-effector position ``(..., 3)``; any configuration reaching it will do.
+
+``obstacles`` is a :class:`~kinlearn.collision.scene.Scene` of batch shape ``()`` (one scene for every
+problem) or the problems' batch shape, or ``None`` (free space).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import torch
+
+from ..body.kinematics import kinematics
+from ..body.robot import Robot
+from ..body.state import StateLayout
+from ..checks import check_finite, check_real_dtype
+from ..collision.scene import Scene, as_scene
+from ..errors import ConfigError, ShapeError, StateError
+
+__all__ = ["GOAL_KINDS", "STATE_EF_TOLERANCE", "Problem"]
+
+#: What a goal can be: a full state (joints and end effector) or an end-effector position.
+GOAL_KINDS = ("state", "position")
+#: A given state's end effector may differ from FK of its joints by at most this much (m).
+STATE_EF_TOLERANCE = 1e-3
+#: Joint values may exceed the limits by this much (rad) before they count as outside.
+LIMIT_TOLERANCE = 1e-6
+
+
+def _tensor(x, what: str) -> torch.Tensor:
+    if isinstance(x, torch.Tensor):
+        check_real_dtype(x, what)
+        return x.detach().to(torch.float64)
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ShapeError(f"{what} must be an array of numbers, got {type(x).__name__}") from exc
+    return torch.from_numpy(a)
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """A batch of planning problems for one robot (see the module docstring).
+
+    Attributes (float64, batch shape ``...``):
+        robot: the :class:`~kinlearn.body.robot.Robot` the problems are for.
+        start: ``(..., dof + 3)`` start states [θ(0), ef(0)].
+        goal: ``(..., dof + 3)`` goal states, or ``(..., 3)`` end-effector positions (``goal_kind``).
+        goal_kind: ``"state"`` or ``"position"``.
+        obstacles: a :class:`~kinlearn.collision.scene.Scene` of batch shape ``()`` or ``...``, or None.
+
+    Build it with :meth:`make` (checked) rather than the constructor.
+    """
+
+    robot: Robot
+    start: torch.Tensor
+    goal: torch.Tensor
+    goal_kind: Literal["state", "position"] = "state"
+    obstacles: Scene | None = None
+
+    @classmethod
+    def make(
+        cls,
+        robot: Robot,
+        start,
+        goal=None,
+        *,
+        goal_position=None,
+        obstacles=None,
+    ) -> Problem:
+        """Checked problems from ``start`` (joints ``(..., dof)`` or states ``(..., dof + 3)``) to ``goal``
+        (joints, states, or an end-effector position ``(..., 3)``, also as ``goal_position=``), around
+        ``obstacles`` (a Scene, or spheres ``(K, 4)`` / ``(..., K, 4)`` [x, y, z, radius]).
+
+        Leading batch dimensions broadcast. Raises :class:`ShapeError`, :class:`DTypeError`,
+        :class:`NonFiniteError`, :class:`JointLimitError`, :class:`StateError` (a state whose end
+        effector is not FK of its joints), :class:`ObstacleError` or :class:`ConfigError`.
+        """
+        if not isinstance(robot, Robot):
+            raise ConfigError(
+                f"robot must be a kinlearn Robot (load_robot(name)), got {type(robot).__name__}"
+            )
+        if (goal is None) == (goal_position is None):
+            raise ConfigError("give exactly one of goal (joints or a state) and goal_position (end effector)")
+        dof, S = robot.dof, StateLayout(robot.dof).size
+        x0 = _tensor(start, "start")
+        position = goal_position is not None
+        xT = _tensor(goal_position if position else goal, "goal_position" if position else "goal")
+        if not position and xT.ndim > 0 and xT.shape[-1] == 3 and dof != 3:
+            position = True
+        if x0.ndim == 0 or x0.shape[-1] not in (dof, S):
+            raise ShapeError(
+                f"start must have shape (..., {S}) (a state [θ, ef]) or (..., {dof}) (joint values) for "
+                f"{robot.name}; got {tuple(x0.shape)}"
+            )
+        if position and (xT.ndim == 0 or xT.shape[-1] != 3):
+            raise ShapeError(f"goal_position must have shape (..., 3) (metres), got {tuple(xT.shape)}")
+        if not position and (xT.ndim == 0 or xT.shape[-1] not in (dof, S)):
+            raise ShapeError(
+                f"goal must have shape (..., {S}) (a state), (..., {dof}) (joint values) or (..., 3) (an "
+                f"end-effector position) for {robot.name}; got {tuple(xT.shape)}"
+            )
+        try:
+            batch = torch.broadcast_shapes(x0.shape[:-1], xT.shape[:-1])
+        except RuntimeError as exc:
+            raise ShapeError(f"start {tuple(x0.shape)} and goal {tuple(xT.shape)} do not broadcast") from exc
+        x0 = x0.expand(*batch, x0.shape[-1])
+        xT = xT.expand(*batch, xT.shape[-1])
+        start_state = _state(robot, x0, "start")
+        goal_state = xT.clone() if position else _state(robot, xT, "goal")
+        if position:
+            check_finite(goal_state, "goal_position")
+        scene = None
+        if obstacles is not None:
+            scene = as_scene(obstacles).to(dtype=torch.float64, device="cpu")
+            if tuple(scene.batch_shape) not in ((), tuple(batch)):
+                raise ShapeError(
+                    f"the obstacles' batch shape {tuple(scene.batch_shape)} must be () (one scene for all "
+                    f"problems) or the problems' {tuple(batch)}"
+                )
+        return cls(robot, start_state, goal_state, "position" if position else "state", scene)
+
+    def __post_init__(self) -> None:
+        if self.goal_kind not in GOAL_KINDS:
+            raise ConfigError(f"goal_kind must be one of {GOAL_KINDS}, got {self.goal_kind!r}")
+
+    @property
+    def layout(self) -> StateLayout:
+        return StateLayout(self.robot.dof)
+
+    @property
+    def batch_shape(self) -> torch.Size:
+        return self.start.shape[:-1]
+
+    def __len__(self) -> int:
+        if not self.batch_shape:
+            raise TypeError("a single problem (batch shape ()) has no len()")
+        return self.batch_shape[0]
+
+    def __getitem__(self, index) -> Problem:
+        """The problems at ``index`` of the leading batch dimensions (the scene too, where it has them)."""
+        scene = self.obstacles
+        if scene is not None and tuple(scene.batch_shape) != ():
+            scene = scene[index]
+        return Problem(self.robot, self.start[index], self.goal[index], self.goal_kind, scene)
+
+    @property
+    def start_joints(self) -> torch.Tensor:
+        """``(..., dof)`` θ(0)."""
+        return self.start[..., : self.robot.dof]
+
+    @property
+    def goal_joints(self) -> torch.Tensor:
+        """``(..., dof)`` θ(T); :class:`ConfigError` for a position goal (it has no joints)."""
+        self.require("state", "goal joints")
+        return self.goal[..., : self.robot.dof]
+
+    @property
+    def target(self) -> torch.Tensor:
+        """``(..., 3)`` the end-effector position the plan must end at."""
+        return self.goal if self.goal_kind == "position" else self.goal[..., self.robot.dof :]
+
+    def require(self, goal_kind: str, who: str) -> None:
+        """Raise :class:`ConfigError` unless the goals are of ``goal_kind`` (for planners that take one)."""
+        if self.goal_kind != goal_kind:
+            raise ConfigError(f"{who} needs {goal_kind} goals; these problems have {self.goal_kind} goals")
+
+    def position_goals(self) -> Problem:
+        """The same problems with their goals reduced to the end-effector position (any configuration)."""
+        return Problem(self.robot, self.start, self.target, "position", self.obstacles)
+
+    def features(self) -> torch.Tensor:
+        """What a trajectory model reads of the problems: ``[s(0), s(T)]`` ``(..., 2 (dof + 3))``."""
+        self.require("state", "a trajectory model's input")
+        return torch.cat((self.start, self.goal), dim=-1)
+
+    @classmethod
+    def from_states(cls, robot: Robot, start: torch.Tensor, goal: torch.Tensor, obstacles=None) -> Problem:
+        """Problems from start and goal states known to be consistent (e.g. drawn by
+        :func:`~kinlearn.data.endpoints.make_endpoints`): shapes are checked, FK is not recomputed."""
+        lay = StateLayout(robot.dof)
+        for x, what in ((start, "start"), (goal, "goal")):
+            if not isinstance(x, torch.Tensor) or x.ndim == 0 or x.shape[-1] != lay.size:
+                raise ShapeError(
+                    f"{what} states must have shape (..., {lay.size}), got {getattr(x, 'shape', x)}"
+                )
+        if start.shape != goal.shape:
+            raise ShapeError(
+                f"start and goal states differ in shape: {tuple(start.shape)}, {tuple(goal.shape)}"
+            )
+        scene = None if obstacles is None else as_scene(obstacles).to(dtype=torch.float64, device="cpu")
+        return cls(robot, start.double(), goal.double(), "state", scene)
+
+
+def _state(robot: Robot, x: torch.Tensor, what: str) -> torch.Tensor:
+    """Joints or a state ``(..., dof [+ 3])`` as a checked state: joints within the limits, ef = FK."""
+    dof = robot.dof
+    check_finite(x, what)
+    q = x[..., :dof]
+    robot.check_joints(q, tol=LIMIT_TOLERANCE, what=f"{what} joints")
+    ef = kinematics(robot, "fast").position(q.reshape(-1, dof), validate=False).reshape(*q.shape[:-1], 3)
+    if x.shape[-1] > dof:
+        err = torch.linalg.vector_norm(x[..., dof:] - ef, dim=-1)
+        if bool((err > STATE_EF_TOLERANCE).any()):
+            raise StateError(
+                f"{what}: its end-effector part differs from FK of its joints by up to {float(err.max()):.4g} m "
+                f"(allowed {STATE_EF_TOLERANCE} m); pass joint values alone to have ef computed"
+            )
+    return torch.cat((q, ef), dim=-1)

@@ -1,0 +1,177 @@
+"""Problem batches and the planner protocol: every planner takes a Problem and returns a judged Plan."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from kinlearn.body.kinematics import kinematics
+from kinlearn.body.robot import load_robot
+from kinlearn.collision.body import body_spheres
+from kinlearn.collision.scene import Scene
+from kinlearn.data.problem import Problem
+from kinlearn.errors import (
+    ConfigError,
+    DTypeError,
+    JointLimitError,
+    NonFiniteError,
+    ObstacleError,
+    ShapeError,
+    StateError,
+)
+from kinlearn.planning.baselines import CartesianDLS, JointInterpolation, RRTConnect
+from kinlearn.planning.obstacle_baselines import (
+    CartesianLine,
+    JointLine,
+    SceneRRTConnect,
+    TrajectoryOptimiser,
+)
+from kinlearn.planning.plan import PlannerLike, judge
+from kinlearn.planning.planner import Planner
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot("iiwa14")
+
+
+@pytest.fixture(scope="module")
+def joints(robot):
+    g = torch.Generator().manual_seed(0)
+    lo, hi = robot.limits(torch.float64)
+    u = torch.rand(2, 4, robot.dof, generator=g, dtype=torch.float64)
+    return lo + 0.8 * (hi - lo) * (u + 0.125)
+
+
+def test_make_fills_the_end_effector_and_broadcasts(robot, joints):
+    start, goal = joints[0], joints[1]
+    p = Problem.make(robot, start, goal)
+    assert p.goal_kind == "state" and p.batch_shape == (4,) and len(p) == 4
+    ef = kinematics(robot).position(start)
+    assert torch.allclose(p.start[:, robot.dof :], ef, atol=1e-9)
+    assert torch.equal(p.start_joints, start) and torch.equal(p.goal_joints, goal)
+    assert torch.equal(p.features(), torch.cat((p.start, p.goal), -1))
+    # A single start broadcasts against a batch of goals; a state's own ef is accepted when it is FK's.
+    one = Problem.make(robot, p.start[0], goal)
+    assert one.batch_shape == (4,) and torch.equal(one.start[3], p.start[0])
+    assert p[1:3].batch_shape == (2,) and torch.equal(p[2].goal, p.goal[2])
+
+
+def test_position_goals(robot, joints):
+    target = torch.tensor([0.5, 0.1, 0.6], dtype=torch.float64)
+    p = Problem.make(robot, joints[0], goal_position=target)
+    assert p.goal_kind == "position" and p.goal.shape == (4, 3)
+    assert torch.equal(p.target[0], target)
+    with pytest.raises(ConfigError, match="state goals"):
+        _ = p.goal_joints
+    with pytest.raises(ConfigError, match="state goals"):
+        p.features()
+    q = Problem.make(robot, joints[0], joints[1]).position_goals()
+    assert q.goal_kind == "position" and q.goal.shape == (4, 3)
+
+
+def test_bad_problems_raise_typed_errors(robot, joints):
+    start, goal = joints[0, 0], joints[1, 0]
+    with pytest.raises(ConfigError, match="exactly one"):
+        Problem.make(robot, start)
+    with pytest.raises(ConfigError, match="Robot"):
+        Problem.make("iiwa14", start, goal)
+    with pytest.raises(ShapeError, match="start must have shape"):
+        Problem.make(robot, start[:5], goal)
+    with pytest.raises(ShapeError, match="do not broadcast"):
+        Problem.make(robot, joints[0, :3], joints[1])
+    with pytest.raises(DTypeError):
+        Problem.make(robot, torch.ones(robot.dof, dtype=torch.bool), goal)
+    bad = start.clone()
+    bad[2] = float("nan")
+    with pytest.raises(NonFiniteError):
+        Problem.make(robot, bad, goal)
+    far = start.clone()
+    far[0] = 10.0
+    with pytest.raises(JointLimitError):
+        Problem.make(robot, start, far)
+    state = torch.cat((start, torch.tensor([9.0, 9.0, 9.0], dtype=torch.float64)))
+    with pytest.raises(StateError, match="end-effector part"):
+        Problem.make(robot, state, goal)
+    with pytest.raises(ObstacleError):
+        Problem.make(robot, start, goal, obstacles=torch.ones(3, 3))
+    with pytest.raises(ShapeError, match="batch shape"):
+        Problem.make(robot, joints[0], joints[1], obstacles=torch.tensor([[[0.5, 0, 0.5, 0.1]]] * 3))
+    with pytest.raises(ConfigError, match="goal_kind"):
+        Problem(robot, start, goal, "pose")
+
+
+def test_every_planner_satisfies_the_protocol(robot):
+    body = body_spheres(robot).double()
+    planners = [
+        Planner.default("iiwa14"),
+        JointInterpolation(robot),
+        CartesianDLS(robot),
+        RRTConnect(robot),
+        JointLine(body),
+        CartesianLine(body),
+        SceneRRTConnect(body),
+        TrajectoryOptimiser(body, steps=5),
+    ]
+    for planner in planners:
+        assert isinstance(planner, PlannerLike), type(planner).__name__
+
+
+def test_baselines_plan_problems_and_say_how_it_went(robot, joints):
+    p = Problem.make(robot, joints[0], joints[1])
+    plan = JointInterpolation(robot).plan(p)
+    assert plan.joints.shape == (4, 12, robot.dof)
+    assert bool(plan.success.all()) and plan.collision_free is None
+    assert torch.allclose(plan.joints[:, -1], p.goal_joints)
+    # The Cartesian line reaches the position but not the goal's joints: judged against the state...
+    dls = CartesianDLS(robot).plan(p)
+    assert bool((dls.joint_error > 0.05).any()) and not bool(dls.success.all())
+    # ...and against the position alone it may succeed.
+    pos = CartesianDLS(robot).plan(p.position_goals())
+    assert torch.isnan(pos.joint_error).all()
+    assert bool((pos.success == (pos.goal_error <= 0.01) & ~torch.isnan(pos.goal_error)).all())
+    with pytest.raises(ConfigError, match="state goals"):
+        JointInterpolation(robot).plan(p.position_goals())
+    with pytest.raises(ConfigError, match="panda"):
+        JointInterpolation(load_robot("panda")).plan(p)
+    with pytest.raises(ConfigError, match="Problem"):
+        JointInterpolation(robot).plan((joints[0], joints[1]))
+    with pytest.raises(ConfigError, match="steps"):
+        JointInterpolation(robot, steps=1)
+
+
+def test_the_learned_planner_plans_a_problem_as_its_arguments(robot, joints):
+    planner = Planner.default("iiwa14")
+    p = Problem.make(robot, joints[0], joints[1])
+    a, b = planner.plan(p), planner.plan(joints[0], joints[1])
+    assert torch.equal(a.joints.double(), b.joints.double()) and torch.equal(a.success, b.success)
+    pos = planner.plan(p.position_goals())
+    assert torch.isnan(pos.joint_error).all()
+    with pytest.raises(ConfigError, match="alone"):
+        planner.plan(p, joints[1])
+    with pytest.raises(ConfigError, match="panda"):
+        Planner.default("panda").plan(p)
+
+
+def test_obstacles_are_checked_for_every_planner(robot, joints):
+    start, goal = joints[0, :2], joints[1, :2]
+    mid = kinematics(robot).position((start + goal) / 2)  # a sphere on the straight line's middle
+    scene = Scene(spheres=torch.cat((mid, torch.full((2, 1), 0.12, dtype=torch.float64)), -1).unsqueeze(1))
+    p = Problem.make(robot, start, goal, obstacles=scene)
+    line = JointInterpolation(robot).plan(p)
+    assert line.collision_free is not None and not bool(line.collision_free.any())
+    assert not bool(line.success.any())
+    opt = TrajectoryOptimiser(body_spheres(robot).double(), steps=3).plan(p)
+    assert opt.collision_free.shape == (2,) and torch.allclose(opt.joints[:, -1], goal)
+    assert bool((opt.success <= opt.collision_free).all())
+    free = JointLine(body_spheres(robot).double()).plan(Problem.make(robot, start, goal))
+    assert free.collision_free is None and bool(free.success.all())  # free space: not checked
+
+
+def test_judge_refuses_paths_that_do_not_fit(robot, joints):
+    p = Problem.make(robot, joints[0], joints[1])
+    with pytest.raises(ShapeError, match="joint paths"):
+        judge(p, torch.zeros(3, 5, robot.dof, dtype=torch.float64))
+    found = torch.tensor([True, False, True, True])
+    plan = judge(p, torch.stack((p.start_joints, p.goal_joints), -2), found=found)
+    assert plan.success.tolist() == [True, False, True, True]
