@@ -6,6 +6,8 @@ Quick start::
     plan = kinlearn.plan(start_joints, goal_joints)   # the shipped iiwa14 planner, anywhere in its range
     plan.joints, plan.ef, plan.success, plan.goal_error
     kinlearn.plan(start_joints, goal_position=[0.5, 0.1, 0.4])   # an end-effector goal
+    problem = kinlearn.Problem.make(robot, start, goal, obstacles=spheres)
+    planner.plan(problem)                              # any planner: learned or a baseline
     plan.timed()                                       # times, velocities, accelerations within limits
 """
 
@@ -15,6 +17,7 @@ from .body.state import StateLayout
 from .collision import BodySpheres, Scene, body_spheres, check_path
 from .data.babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
 from .data.endpoints import EndpointConfig, EndpointPairs, load_endpoints, make_endpoints, save_endpoints
+from .data.problem import Problem
 from .errors import (
     CheckpointError,
     ConfigError,
@@ -52,8 +55,15 @@ from .models.joint_path import JointPathConfig, JointPathModel, load_path_model
 from .models.obstacle_path import ObstaclePathConfig, ObstaclePathModel, load_obstacle_model
 from .models.rollout import LossConfig, rectify, tm_loss
 from .models.trajectory import TMConfig, TrajectoryModel
-from .planning.baselines import cartesian_dls, joint_interpolation, rrt_connect
-from .planning.plan import Plan, Tolerance
+from .planning.baselines import (
+    CartesianDLS,
+    JointInterpolation,
+    RRTConnect,
+    cartesian_dls,
+    joint_interpolation,
+    rrt_connect,
+)
+from .planning.plan import Plan, PlannerLike, Tolerance, judge
 from .planning.planner import Planner, plan
 from .planning.timing import TimedTrajectory, time_parameterize
 from .training.joint_path import PathLossConfig, PathTrainConfig, train_path_model
@@ -70,6 +80,7 @@ __all__ = [
     "AnalyticIM",
     "BabblingConfig",
     "BodySpheres",
+    "CartesianDLS",
     "CheckpointError",
     "ConfigError",
     "DTypeError",
@@ -82,6 +93,7 @@ __all__ = [
     "ForwardModel",
     "IMConfig",
     "InverseModel",
+    "JointInterpolation",
     "JointLimitError",
     "JointPathConfig",
     "JointPathModel",
@@ -102,7 +114,10 @@ __all__ = [
     "PathTrainConfig",
     "Plan",
     "Planner",
+    "PlannerLike",
     "PlanningError",
+    "Problem",
+    "RRTConnect",
     "Robot",
     "RobotDescriptionError",
     "RunDirectoryError",
@@ -126,6 +141,7 @@ __all__ = [
     "check_path",
     "dls_step",
     "joint_interpolation",
+    "judge",
     "kinematics",
     "load_body_model",
     "load_endpoints",

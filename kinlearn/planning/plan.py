@@ -6,6 +6,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
+import numpy as np
 import torch
 
 from ..body.kinematics import kinematics
@@ -92,15 +93,15 @@ class Plan:
     @classmethod
     def from_joints(
         cls,
-        goal: torch.Tensor,
-        joints: torch.Tensor,
-        ef: torch.Tensor,
+        goal: torch.Tensor | np.ndarray,
+        joints: torch.Tensor | np.ndarray,
+        ef: torch.Tensor | np.ndarray,
         *,
-        waypoints: torch.Tensor | None = None,
-        target: torch.Tensor | None = None,
+        waypoints: torch.Tensor | np.ndarray | None = None,
+        target: torch.Tensor | np.ndarray | None = None,
         joint_goal: bool = True,
-        within_limits: torch.Tensor | None = None,
-        collision_free: torch.Tensor | None = None,
+        within_limits: torch.Tensor | np.ndarray | None = None,
+        collision_free: torch.Tensor | np.ndarray | None = None,
         tolerance: Tolerance = DEFAULT_TOLERANCE,
         robot: str | None = None,
     ) -> Plan:
@@ -111,23 +112,27 @@ class Plan:
         goal state's end effector. ``joint_goal``: whether the goal's joints must be reached too.
         ``within_limits (...)``: where the path is known to stay within the joint limits (default: all).
         ``collision_free (...)``: where the path was checked among obstacles and found free (None: not
-        checked); ``success`` requires it.
+        checked); ``success`` requires it. Tensors, or NumPy arrays (the CPU planner's fast path: judged
+        in NumPy, a few microseconds less per plan, and handed back as tensors sharing their memory).
         """
         dof = joints.shape[-1]
         if target is None:
             target = goal[..., dof:]
-        goal_error = torch.linalg.vector_norm(ef[..., -1, :] - target, dim=-1)
+        arrays = isinstance(joints, np.ndarray)
+        end = ef[..., -1, :] - target
+        goal_error = np.linalg.norm(end, axis=-1) if arrays else torch.linalg.vector_norm(end, dim=-1)
         if joint_goal:
-            joint_error = (joints[..., -1, :] - goal[..., :dof]).abs().amax(-1)
+            off = abs(joints[..., -1, :] - goal[..., :dof])
+            joint_error = off.max(-1) if arrays else off.amax(-1)
             ok = (goal_error <= tolerance.position) & (joint_error <= tolerance.joints)
         else:
-            joint_error = torch.full_like(goal_error, float("nan"))
+            joint_error = (np.full_like if arrays else torch.full_like)(goal_error, float("nan"))
             ok = goal_error <= tolerance.position
         if within_limits is not None:
             ok = ok & within_limits
         if collision_free is not None:
             ok = ok & collision_free
-        return cls(
+        fields = dict(
             goal=goal,
             waypoints=ef[..., 1:-1, :] if waypoints is None else waypoints,
             joints=joints,
@@ -136,10 +141,11 @@ class Plan:
             goal_error=goal_error,
             joint_error=joint_error,
             success=ok,
-            tolerance=tolerance,
-            robot=robot,
             collision_free=collision_free,
         )
+        if arrays:
+            fields = {k: None if v is None else torch.from_numpy(np.asarray(v)) for k, v in fields.items()}
+        return cls(**fields, tolerance=tolerance, robot=robot)
 
     @property
     def start(self) -> torch.Tensor:

@@ -394,12 +394,13 @@ class Planner:
         within = ((joints >= self._lo_tol) & (joints <= self._hi_tol)).all((-1, -2))
         single = batch == ()
 
-        def t(a: np.ndarray) -> torch.Tensor:
-            # Float64 views of the arrays; a single plan's leading dimension goes (np.ascontiguousarray
-            # would make its 0-d per-plan values 1-d).
-            if single:
-                return torch.from_numpy(np.array(a[0]))
-            return torch.from_numpy(np.ascontiguousarray(a.reshape((*batch, *a.shape[1:]))))
+        np_dtype = _NUMPY_FLOATS.get(dtype)
+
+        def t(a: np.ndarray) -> np.ndarray:
+            # The batch's shape (a single plan's leading dimension goes: np.ascontiguousarray would make
+            # its 0-d per-plan values 1-d), in the output's float type where NumPy has it.
+            a = np.array(a[0]) if single else np.ascontiguousarray(a.reshape((*batch, *a.shape[1:])))
+            return a.astype(np_dtype, copy=False) if np_dtype is not None and a.dtype != bool else a
 
         plan = Plan.from_joints(
             t(np.concatenate((thetaT, efT), -1)),
@@ -413,7 +414,7 @@ class Planner:
             tolerance=self.tolerance,
             robot=self.robot.name,
         )
-        if dtype == torch.float64 and device.type == "cpu":
+        if np_dtype is not None and device.type == "cpu":
             return plan
         return dataclasses.replace(
             plan,
