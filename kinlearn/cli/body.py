@@ -16,13 +16,13 @@ from ..io import load_checkpoint, write_json
 from ..models.body import BodyModelConfig, save_body_model
 from ..models.forward_inverse import ACTIVATIONS
 from ..training.body import HELDOUT_PROBLEMS, train_body_model, validate_body_model
-from .main import (
+from .common import (
     NONNEGATIVE_INT,
     POSITIVE_FLOAT,
     POSITIVE_INT,
-    _file_identity,
     add_command,
     add_run_options,
+    file_identity,
     open_command_run,
 )
 
@@ -127,12 +127,12 @@ def _run_train_body(args: argparse.Namespace) -> int:
         raise ConfigError("--margin p99 takes the margin from the validation; give --validate > 0")
     configs: dict = {"body": cfg.to_dict()}
     if args.data is not None:
-        configs["data"] = _file_identity(args.data)
+        configs["data"] = file_identity(args.data)
     if args.validate > 0:
         configs["validation"] = {
             "n": args.validate,
             "seed": args.seed + 20_000,
-            "problems": _file_identity(args.problems),
+            "problems": file_identity(args.problems),
             "margin": args.margin,
         }
     else:

@@ -7,7 +7,8 @@ A folder that already holds a run is written only with ``--resume`` (same config
 Exit status: 0 done, 2 bad input or refused (``kinlearn <command>: error: …``), 130 interrupted
 (``kinlearn plan``: 1 when a plan misses its goal).
 
-New subcommands are added with :func:`register_subcommand`::
+Shared helpers live in :mod:`kinlearn.cli.common`; new subcommands, in a module of their own listed in
+:data:`SUBCOMMAND_MODULES`, are added with :func:`~kinlearn.cli.common.register_subcommand`::
 
     @register_subcommand
     def _add_plan(sub):
@@ -19,20 +20,17 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
-import platform
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
 
 from .. import __version__
-from ..body.robot import available_robots
 from ..data.babbling import BabblingConfig, babble, load_transitions, save_transitions
 from ..errors import ConfigError, KinlearnError
-from ..io import atomic_copy, atomic_write, file_sha256, read_json, write_json
+from ..io import atomic_copy, atomic_write, read_json, write_json
 from ..models.forward_inverse import (
     FM_PRESETS,
     AnalyticFM,
@@ -42,7 +40,6 @@ from ..models.forward_inverse import (
     load_fm,
     load_im,
 )
-from ..runs import IGNORED_KEYS, Run, open_run
 from ..training.loop import (
     TrainResult,
     format_validation_table,
@@ -51,6 +48,22 @@ from ..training.loop import (
     train_im,
     train_im_distal,
     validate_models,
+)
+from . import body, planning, view
+from .common import (
+    _SUBCOMMANDS,
+    NONNEGATIVE_FLOAT,
+    NONNEGATIVE_INT,
+    POSITIVE_FLOAT,
+    POSITIVE_INT,
+    PROBABILITY,
+    add_command,
+    add_run_options,
+    file_identity,
+    number_type,
+    open_command_run,
+    register_subcommand,
+    settle_run_dir,
 )
 
 __all__ = [
@@ -72,107 +85,6 @@ __all__ = [
 #: Transitions babbled for training when no ``--data`` is given, per preset.
 DEFAULT_TRANSITIONS = {"paper": 500_000, "improved": 500_000, "tiny": 20_000}
 
-SubcommandAdder = Callable[[argparse._SubParsersAction], None]
-_SUBCOMMANDS: list[SubcommandAdder] = []
-
-
-def register_subcommand(add: SubcommandAdder) -> SubcommandAdder:
-    """Register a function that adds one subcommand to the parser (usable as a decorator)."""
-    _SUBCOMMANDS.append(add)
-    return add
-
-
-def number_type(
-    kind: type,
-    *,
-    low: float | None = None,
-    high: float | None = None,
-    open_low: bool = False,
-    open_high: bool = False,
-) -> Callable[[str], float]:
-    """An argparse ``type``: a finite ``int`` or ``float`` within ``[low, high]`` (ends open when asked),
-    rejected with a message that says what is allowed."""
-    noun = "an integer" if kind is int else "a finite number"
-    parts = []
-    if low is not None:
-        parts.append(f"{'>' if open_low else '≥'} {low:g}")
-    if high is not None:
-        parts.append(f"{'<' if open_high else '≤'} {high:g}")
-    allowed = f"{noun} {' and '.join(parts)}".strip()
-
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {allowed}, got {text!r}") from None
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"expected {allowed}, got {text!r}")
-        too_low = low is not None and (value < low or (open_low and value == low))
-        too_high = high is not None and (value > high or (open_high and value == high))
-        if too_low or too_high:
-            raise argparse.ArgumentTypeError(f"expected {allowed}, got {text!r}")
-        return value
-
-    parse.__name__ = allowed
-    return parse
-
-
-POSITIVE_INT = number_type(int, low=1)
-NONNEGATIVE_INT = number_type(int, low=0)
-POSITIVE_FLOAT = number_type(float, low=0, open_low=True)
-NONNEGATIVE_FLOAT = number_type(float, low=0)
-PROBABILITY = number_type(float, low=0, high=1)
-
-
-def add_command(
-    sub: argparse._SubParsersAction,
-    name: str,
-    help: str,
-    run: Callable[[argparse.Namespace], int | None],
-    *,
-    seed: bool = True,
-    run_dir: bool = True,
-    seed_default: int = 0,
-) -> argparse.ArgumentParser:
-    """Add subcommand ``name`` with the options every subcommand has: robot, threads, and unless
-    turned off (a command that draws nothing at random or writes no run directory), seed and run dir."""
-    p = sub.add_parser(name, help=help, description=help)
-    p.add_argument("--robot", default="iiwa14", help=f"robot name ({', '.join(available_robots())})")
-    if seed:
-        p.add_argument(
-            "--seed",
-            type=int,
-            default=seed_default,
-            help=f"seed of everything random (default: {seed_default})",
-        )
-    if run_dir:
-        p.add_argument(
-            "--run-dir", type=Path, default=None, help="output folder (default: runs/<time>-<command>)"
-        )
-    p.add_argument(
-        "--threads",
-        type=POSITIVE_INT,
-        default=1,
-        help="torch CPU threads (default: 1, fastest for these small models)",
-    )
-    p.set_defaults(run=run, command=name)
-    return p
-
-
-def add_run_options(p: argparse.ArgumentParser, resumable: bool) -> None:
-    """``--overwrite`` (and ``--resume`` for a command that can continue a run): see :mod:`kinlearn.runs`."""
-    if resumable:
-        p.add_argument(
-            "--resume",
-            action="store_true",
-            help="continue the run in --run-dir from its last checkpoint; its configuration must be identical",
-        )
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="replace the run already in the output folder (its outputs are deleted first)",
-    )
-
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every registered subcommand."""
@@ -182,48 +94,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"kinlearn {__version__}")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
-    for add in _SUBCOMMANDS:
+    own = (_add_babble, lambda s: _add_train(s, "fm"), lambda s: _add_train(s, "im"), _add_validate)
+    for add in (*own, *_SUBCOMMANDS):
         add(sub)
     return parser
-
-
-def settle_run_dir(args: argparse.Namespace) -> Path:
-    """``args.run_dir``, set to a new ``runs/<time>-<command>`` when not given."""
-    if args.run_dir is None:
-        args.run_dir = Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.command}"
-    return args.run_dir
-
-
-def open_command_run(
-    args: argparse.Namespace,
-    outputs: Sequence[str],
-    *,
-    resumable: bool = False,
-    ignore: Sequence[str] = (),
-    **configs,
-) -> Run:
-    """Check ``args.run_dir`` (default: a new ``runs/<time>-<command>``) for this command under the
-    run-directory policy (:func:`kinlearn.runs.open_run`) with ``configs`` as its configuration;
-    writes nothing: call ``.begin()`` on the result once every other check has passed."""
-    settle_run_dir(args)
-    argv = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "run"}
-    versions = {"kinlearn": __version__, "torch": torch.__version__, "python": platform.python_version()}
-    return open_run(
-        args.run_dir,
-        command=args.command,
-        config=configs,
-        outputs=outputs,
-        resume=bool(getattr(args, "resume", False)),
-        overwrite=bool(getattr(args, "overwrite", False)),
-        resumable=resumable,
-        meta={"args": argv, "versions": versions},
-        ignore=(*IGNORED_KEYS, *ignore),
-    )
-
-
-def _file_identity(path: Path) -> dict:
-    """An input file as a run records it: its path and its content hash (compared on --resume)."""
-    return {"path": str(path), "sha256": file_sha256(path)}
 
 
 # --------------------------------------------------------------------------------------------------
@@ -266,7 +140,6 @@ def _babbling_config(args: argparse.Namespace, n: int) -> BabblingConfig:
     )
 
 
-@register_subcommand
 def _add_babble(sub) -> None:
     p = add_command(
         sub, "babble", "Motor babbling: write (s, a, s') transitions to babbling.npz.", _run_babble
@@ -362,10 +235,6 @@ def _add_train(sub, kind: str) -> None:
     p.set_defaults(kind=kind)
 
 
-register_subcommand(lambda sub: _add_train(sub, "fm"))
-register_subcommand(lambda sub: _add_train(sub, "im"))
-
-
 def _run_train(args: argparse.Namespace) -> int:
     kind = args.kind
     # Every check first (configs, data, the frozen FM): nothing is written before they pass.
@@ -391,7 +260,7 @@ def _run_train(args: argparse.Namespace) -> int:
     data, bcfg = None, None
     if args.data is not None:
         data = load_transitions(args.data, robot=args.robot)
-        configs.update(data=_file_identity(args.data), babbling=data.config)
+        configs.update(data=file_identity(args.data), babbling=data.config)
     else:
         bcfg = _babbling_config(args, args.transitions or DEFAULT_TRANSITIONS[args.preset])
         configs["babbling"] = bcfg.to_dict()
@@ -400,7 +269,7 @@ def _run_train(args: argparse.Namespace) -> int:
         through_fm = load_fm(args.through_fm, robot=args.robot)
         dcfg = train_config("im", args.preset, **{**overrides, "epochs": args.through_fm_epochs})
         configs["through_fm"] = {
-            **_file_identity(args.through_fm),
+            **file_identity(args.through_fm),
             "action_weight": args.action_weight,
             "train": dcfg.to_dict(),
         }
@@ -449,7 +318,6 @@ def _run_train(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------------------------------
 
 
-@register_subcommand
 def _add_validate(sub) -> None:
     p = add_command(
         sub,
@@ -483,7 +351,7 @@ def _run_validate(args: argparse.Namespace) -> int:
             else load_im(args.im, robot=args.robot)
         )
     models = {
-        name: path if path in (None, "analytic") else _file_identity(Path(path))
+        name: path if path in (None, "analytic") else file_identity(Path(path))
         for name, path in (("fm", args.fm), ("im", args.im))
     }
     settings = {k: getattr(args, k) for k in ("n", "seed", "max_step", "retarget_prob", "im_iterations")}
@@ -505,16 +373,13 @@ def _run_validate(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------------------------------
 
 
-#: Modules holding further subcommands, imported when the parser is built (not when this module is
-#: imported: they import this module's helpers, so importing them here would be a circle).
-SUBCOMMAND_MODULES = ("planning", "body", "view")
+#: Modules holding further subcommands; each registers its commands with
+#: :func:`~kinlearn.cli.common.register_subcommand` (or has a ``register`` function added here).
+SUBCOMMAND_MODULES = (planning, body, view)
 
 
 def _load_subcommand_modules() -> None:
-    import importlib
-
-    for name in SUBCOMMAND_MODULES:
-        module = importlib.import_module(f".{name}", __package__)
+    for module in SUBCOMMAND_MODULES:
         register = getattr(module, "register", None)
         if register is not None and register not in _SUBCOMMANDS:
             register_subcommand(register)

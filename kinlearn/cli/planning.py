@@ -22,14 +22,14 @@ from ..models.rollout import LOSS_PRESETS
 from ..planning.planner import DEFAULT_CHECKPOINTS, Planner
 from ..runs import open_run
 from ..training.tm import MODEL_FIELDS, TM_PRESETS, tm_preset, train_tm
-from .main import (
+from .common import (
     NONNEGATIVE_FLOAT,
     NONNEGATIVE_INT,
     POSITIVE_FLOAT,
     POSITIVE_INT,
-    _file_identity,
     add_command,
     add_run_options,
+    file_identity,
     number_type,
     open_command_run,
     register_subcommand,
@@ -184,7 +184,7 @@ def _run_train_tm(args: argparse.Namespace) -> int:
     endpoints = {"path": str(args.endpoints), "train_sha256": file_sha256(train_path)}
     if heldout is not None:
         endpoints["heldout_sha256"] = file_sha256(heldout_path)
-    models = {k: _file_identity(sources[k]) if k in sources else "analytic" for k in ("fm", "im")}
+    models = {k: file_identity(sources[k]) if k in sources else "analytic" for k in ("fm", "im")}
     outputs = ("tm.pt", "fm.pt", "im.pt", "metrics.jsonl", "tensorboard")
     run = open_command_run(
         args,
@@ -425,9 +425,9 @@ def _run_train_planner(args: argparse.Namespace) -> int:
         model={"hidden": list(args.hidden), "modes": args.modes},
         seed=args.seed,
     )
-    models = {"fm": "analytic" if args.analytic_fm else _file_identity(args.fm_checkpoint)}
+    models = {"fm": "analytic" if args.analytic_fm else file_identity(args.fm_checkpoint)}
     if args.im_checkpoint is not None:
-        models["im"] = _file_identity(args.im_checkpoint)
+        models["im"] = file_identity(args.im_checkpoint)
     run = open_command_run(
         args,
         ("tm.pt", "fm.pt", "im.pt", "metrics.jsonl", "tensorboard"),
@@ -526,8 +526,8 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
             "batch_size": args.batch_size,
             "lr": args.lr,
             "candidates": args.candidates,
-            "body": _file_identity(args.body_checkpoint) if args.body_checkpoint else "analytic",
-            "init": _file_identity(args.init_checkpoint) if args.init_checkpoint else None,
+            "body": file_identity(args.body_checkpoint) if args.body_checkpoint else "analytic",
+            "init": file_identity(args.init_checkpoint) if args.init_checkpoint else None,
         },
     )
     run_dir = run.begin()

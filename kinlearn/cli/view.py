@@ -15,7 +15,7 @@ import argparse
 from pathlib import Path
 
 from ..errors import ConfigError
-from .main import add_command, number_type
+from .common import add_command, number_type
 from .planning import add_plan_inputs, plan_from_args
 
 __all__ = ["register"]

@@ -1,0 +1,175 @@
+"""What every ``kinlearn`` subcommand module shares: the subcommand registry, argument types, the
+options every command has, and opening a run directory. Imported by :mod:`kinlearn.cli.main` and the
+subcommand modules alike, so that none of them imports another's helpers (no circle).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import platform
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import torch
+
+from .. import __version__
+from ..body.robot import available_robots
+from ..io import file_sha256
+from ..runs import IGNORED_KEYS, Run, open_run
+
+__all__ = [
+    "NONNEGATIVE_FLOAT",
+    "NONNEGATIVE_INT",
+    "POSITIVE_FLOAT",
+    "POSITIVE_INT",
+    "PROBABILITY",
+    "add_command",
+    "add_run_options",
+    "file_identity",
+    "number_type",
+    "open_command_run",
+    "register_subcommand",
+    "settle_run_dir",
+]
+
+SubcommandAdder = Callable[[argparse._SubParsersAction], None]
+_SUBCOMMANDS: list[SubcommandAdder] = []
+
+
+def register_subcommand(add: SubcommandAdder) -> SubcommandAdder:
+    """Register a function that adds one subcommand to the parser (usable as a decorator)."""
+    _SUBCOMMANDS.append(add)
+    return add
+
+
+def number_type(
+    kind: type,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    open_low: bool = False,
+    open_high: bool = False,
+) -> Callable[[str], float]:
+    """An argparse ``type``: a finite ``int`` or ``float`` within ``[low, high]`` (ends open when asked),
+    rejected with a message that says what is allowed."""
+    noun = "an integer" if kind is int else "a finite number"
+    parts = []
+    if low is not None:
+        parts.append(f"{'>' if open_low else '≥'} {low:g}")
+    if high is not None:
+        parts.append(f"{'<' if open_high else '≤'} {high:g}")
+    allowed = f"{noun} {' and '.join(parts)}".strip()
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {allowed}, got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"expected {allowed}, got {text!r}")
+        too_low = low is not None and (value < low or (open_low and value == low))
+        too_high = high is not None and (value > high or (open_high and value == high))
+        if too_low or too_high:
+            raise argparse.ArgumentTypeError(f"expected {allowed}, got {text!r}")
+        return value
+
+    parse.__name__ = allowed
+    return parse
+
+
+POSITIVE_INT = number_type(int, low=1)
+NONNEGATIVE_INT = number_type(int, low=0)
+POSITIVE_FLOAT = number_type(float, low=0, open_low=True)
+NONNEGATIVE_FLOAT = number_type(float, low=0)
+PROBABILITY = number_type(float, low=0, high=1)
+
+
+def add_command(
+    sub: argparse._SubParsersAction,
+    name: str,
+    help: str,
+    run: Callable[[argparse.Namespace], int | None],
+    *,
+    seed: bool = True,
+    run_dir: bool = True,
+    seed_default: int = 0,
+) -> argparse.ArgumentParser:
+    """Add subcommand ``name`` with the options every subcommand has: robot, threads, and unless
+    turned off (a command that draws nothing at random or writes no run directory), seed and run dir."""
+    p = sub.add_parser(name, help=help, description=help)
+    p.add_argument("--robot", default="iiwa14", help=f"robot name ({', '.join(available_robots())})")
+    if seed:
+        p.add_argument(
+            "--seed",
+            type=int,
+            default=seed_default,
+            help=f"seed of everything random (default: {seed_default})",
+        )
+    if run_dir:
+        p.add_argument(
+            "--run-dir", type=Path, default=None, help="output folder (default: runs/<time>-<command>)"
+        )
+    p.add_argument(
+        "--threads",
+        type=POSITIVE_INT,
+        default=1,
+        help="torch CPU threads (default: 1, fastest for these small models)",
+    )
+    p.set_defaults(run=run, command=name)
+    return p
+
+
+def add_run_options(p: argparse.ArgumentParser, resumable: bool) -> None:
+    """``--overwrite`` (and ``--resume`` for a command that can continue a run): see :mod:`kinlearn.runs`."""
+    if resumable:
+        p.add_argument(
+            "--resume",
+            action="store_true",
+            help="continue the run in --run-dir from its last checkpoint; its configuration must be identical",
+        )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the run already in the output folder (its outputs are deleted first)",
+    )
+
+
+def settle_run_dir(args: argparse.Namespace) -> Path:
+    """``args.run_dir``, set to a new ``runs/<time>-<command>`` when not given."""
+    if args.run_dir is None:
+        args.run_dir = Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.command}"
+    return args.run_dir
+
+
+def open_command_run(
+    args: argparse.Namespace,
+    outputs: Sequence[str],
+    *,
+    resumable: bool = False,
+    ignore: Sequence[str] = (),
+    **configs,
+) -> Run:
+    """Check ``args.run_dir`` (default: a new ``runs/<time>-<command>``) for this command under the
+    run-directory policy (:func:`kinlearn.runs.open_run`) with ``configs`` as its configuration;
+    writes nothing: call ``.begin()`` on the result once every other check has passed."""
+    settle_run_dir(args)
+    argv = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "run"}
+    versions = {"kinlearn": __version__, "torch": torch.__version__, "python": platform.python_version()}
+    return open_run(
+        args.run_dir,
+        command=args.command,
+        config=configs,
+        outputs=outputs,
+        resume=bool(getattr(args, "resume", False)),
+        overwrite=bool(getattr(args, "overwrite", False)),
+        resumable=resumable,
+        meta={"args": argv, "versions": versions},
+        ignore=(*IGNORED_KEYS, *ignore),
+    )
+
+
+def file_identity(path: Path) -> dict:
+    """An input file as a run records it: its path and its content hash (compared on --resume)."""
+    return {"path": str(path), "sha256": file_sha256(path)}
