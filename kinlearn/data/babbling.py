@@ -47,7 +47,7 @@ __all__ = [
 DTYPES: dict[str, torch.dtype] = {"float32": torch.float32, "float64": torch.float64}
 
 
-@dataclass
+@dataclass(frozen=True)
 class BabblingConfig:
     """Settings of one babbling run. ``walkers × steps`` transitions are produced.
 

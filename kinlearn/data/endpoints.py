@@ -48,7 +48,7 @@ IIWA14_REGION = (0.3, 0.85, -0.5, 0.5, 0.1, 0.3)
 IIWA14_REACH = 0.946  # shoulder-to-end-effector length: 0.42 + 0.40 + 0.126
 
 
-@dataclass
+@dataclass(frozen=True)
 class EndpointConfig:
     """How endpoint pairs are drawn.
 

@@ -52,7 +52,7 @@ OPTIMIZER_SWEEP: dict[int, dict] = {
 }
 
 
-@dataclass
+@dataclass(frozen=True)
 class ReproduceConfig:
     """Sizes of every stage. See :data:`REPRODUCE_PRESETS` for ``smoke``, ``quick`` and ``full``."""
 

@@ -196,7 +196,7 @@ def _config_from_dict(cls, d: dict):
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
-@dataclass
+@dataclass(frozen=True)
 class FMConfig:
     """Learned forward model. Defaults are the paper's (REFERENCE #5).
 
@@ -246,7 +246,7 @@ class FMConfig:
         return _config_from_dict(cls, d)
 
 
-@dataclass
+@dataclass(frozen=True)
 class IMConfig:
     """Learned inverse model. Defaults are the paper's monolithic IM (REFERENCE #6).
 

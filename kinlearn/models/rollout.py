@@ -59,7 +59,7 @@ def rectify(
     return torch.stack(states, dim=1), torch.stack(actions, dim=1)
 
 
-@dataclass
+@dataclass(frozen=True)
 class LossConfig:
     """Weights of the trajectory model's loss terms.
 

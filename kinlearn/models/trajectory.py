@@ -29,7 +29,7 @@ from .forward_inverse import ForwardModel, InverseModel, frozen_fm_im
 __all__ = ["TMConfig", "TrajectoryModel", "load_trajectory_model"]
 
 
-@dataclass
+@dataclass(frozen=True)
 class TMConfig:
     """Architecture of the trajectory model.
 
