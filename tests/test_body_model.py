@@ -160,14 +160,14 @@ def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch):
     def dying_save(model, path, extra=None):
         if len(saves) == 2:
             raise KeyboardInterrupt  # killed during epoch 3: the checkpoint holds epoch 2
-        saves.append(extra["epoch"])
+        saves.append(extra["step"])
         return real_save(model, path, extra)
 
     monkeypatch.setattr(bm, "save_body_model", dying_save)
     with pytest.raises(KeyboardInterrupt):
         train_body_model(cfg, tmp_path / "cut", progress=False)
     monkeypatch.setattr(bm, "save_body_model", real_save)
-    assert load_checkpoint(tmp_path / "cut" / "body.pt", kind=BODY_KIND)["extra"]["epoch"] == 2
+    assert load_checkpoint(tmp_path / "cut" / "body.pt", kind=BODY_KIND)["extra"]["step"] == 2
     resumed = train_body_model(cfg, tmp_path / "cut", progress=False, resume=True)
     for key, value in whole.model.state_dict().items():
         assert torch.equal(value, resumed.model.state_dict()[key]), key

@@ -433,7 +433,7 @@ def test_kill_9_during_checkpoint_writes_then_resume_is_bit_identical(tmp_path):
             status = int(forker.stdout.readline())
             assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL, f"not killed: {status}"
             orphans += len(list(run.glob(".*.tmp")))
-            epoch = torch.load(run / "fm.pt", weights_only=True)["extra"]["epoch"]
+            epoch = torch.load(run / "fm.pt", weights_only=True)["extra"]["step"]
             assert 1 <= epoch < 150
     finally:
         forker.stdin.close()

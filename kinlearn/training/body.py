@@ -20,8 +20,8 @@ from ..checks import check_last_dim
 from ..collision import BodySpheres, Scene, check_path, clearances
 from ..collision.problems import ProblemSet
 from ..data.babbling import Transitions, load_transitions
-from ..errors import CheckpointError, ConfigError, DatasetError, ShapeError
-from ..io import content_sha256, load_checkpoint
+from ..errors import ConfigError, DatasetError, ShapeError
+from ..io import content_sha256
 from ..models.body import (
     BODY_KIND,
     BodyModelConfig,
@@ -30,8 +30,7 @@ from ..models.body import (
     _config_record,
     save_body_model,
 )
-from ..runs import diff_configs
-from .loop import OptimConfig, TrainConfig, fit, seed_everything
+from .loop import OptimConfig, TrainConfig, _load_to_resume, fit, seed_everything
 
 __all__ = ["HELDOUT_PROBLEMS", "BodyTrainResult", "train_body_model", "validate_body_model"]
 
@@ -123,8 +122,6 @@ def train_body_model(
     continues from that checkpoint (:class:`~kinlearn.CheckpointError` if it was made with another
     configuration or other data). Deterministic for a given config and data.
     """
-    # Imported here: the model and its checkpoints do not depend on the training code.
-
     if not isinstance(config, BodyModelConfig):
         raise ConfigError(f"train_body_model needs a BodyModelConfig, got {type(config).__name__}")
     robot = load_robot(config.robot)
@@ -152,20 +149,6 @@ def train_body_model(
     )
     ckpt = Path(run_dir) / "body.pt" if run_dir is not None else None
     identity = {"data_sha256": content_sha256(q)}
-
-    def load(path: Path) -> dict:
-        payload = load_checkpoint(path, kind=BODY_KIND, robot=config.robot)
-        diffs = [f"model {d}" for d in diff_configs(payload.get("config") or {}, _config_record(config))]
-        stored = (payload.get("extra") or {}).get("data_sha256")
-        if stored is not None and stored != identity["data_sha256"]:
-            diffs.append(f"data_sha256: {stored[:16]}… → {identity['data_sha256'][:16]}…")
-        if diffs:
-            raise CheckpointError(
-                f"{path} was trained with another configuration or data ({'; '.join(diffs)}); resume with "
-                "the same settings and data, or train into a new run directory"
-            )
-        return payload
-
     history = fit(
         model,
         train,
@@ -175,9 +158,9 @@ def train_body_model(
         run_dir=run_dir,
         checkpoint=ckpt,
         save_fn=lambda path, m, extra: save_body_model(m, path, extra={**extra, **identity, "data": source}),
-        load_fn=load,
+        load_fn=lambda path: _load_to_resume(path, BODY_KIND, config.robot, _config_record(config), identity),
         resume=resume,
-        desc="train body",
+        desc="body training",
     )
     return BodyTrainResult(model.eval(), history, ckpt, source)
 

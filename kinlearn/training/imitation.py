@@ -18,20 +18,25 @@ learned one, so it plans through the very same IM/FM rollout::
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
+from pathlib import Path
 from typing import Literal
 
 import torch
-from tqdm.auto import tqdm
 
 from ..body.kinematics import kinematics
 from ..body.robot import load_robot
 from ..body.state import StateLayout, straight_line
 from ..data.endpoints import EndpointPairs
-from ..errors import ConfigError
+from ..errors import CheckpointError, ConfigError
+from ..io import content_sha256, load_checkpoint, save_checkpoint
 from ..models.trajectory import TMConfig, TrajectoryModel
-from .loop import OptimConfig, make_optimizer, make_schedule, seed_everything
+from .loop import OptimConfig, TrainingLoop, _load_to_resume, seed_everything
 
-__all__ = ["imitation_loss", "imitation_targets", "train_imitation"]
+__all__ = ["IMITATION_KIND", "imitation_loss", "imitation_targets", "load_imitation", "train_imitation"]
+
+#: The checkpoint kind of an imitation TM (not a waypoint TM's ``tm``: it was trained through no FM/IM).
+IMITATION_KIND = "tm-imitation"
 
 
 def imitation_targets(pairs: EndpointPairs, steps: int = 11) -> torch.Tensor:
@@ -74,6 +79,8 @@ def train_imitation(
     tm_config: TMConfig | None = None,
     schedule: Literal["constant", "cosine"] = "cosine",
     history: list[float] | None = None,
+    run_dir: str | Path | None = None,
+    resume: bool = True,
 ) -> TrajectoryModel:
     """Train a TM by supervised regression onto the interpolated trajectories of ``train``.
 
@@ -81,6 +88,9 @@ def train_imitation(
     ``schedule`` to its cosine decay, so the two differ only in what they are trained on.
     ``tm_config`` defaults to :class:`TMConfig` for the pairs' robot (the same size as the learned
     TM). When ``history`` is given, the mean training loss of every epoch is appended to it.
+    With ``run_dir``, ``run_dir/metrics.jsonl`` and the checkpoint ``run_dir/imitation.pt``
+    (:func:`load_imitation`) are written after every epoch and ``resume`` continues from that
+    checkpoint (:class:`~kinlearn.CheckpointError` if it was made with other settings or pairs).
     Deterministic for a given ``seed``. Returns the model in eval mode.
     """
     if epochs <= 0 or batch_size <= 0:
@@ -100,26 +110,58 @@ def train_imitation(
     tm = TrajectoryModel(tm_config)
     tm.fit_normalization(train.start, train.goal)
     targets = imitation_targets(train, tm_config.steps)
-    opt = make_optimizer(optim, tm.parameters())
     n = len(train)
-    total = epochs * math.ceil(n / batch_size)
-    sched = make_schedule(opt, schedule, total)
+    run = dict(epochs=epochs, batch_size=batch_size, optim=asdict(optim), seed=seed, schedule=schedule)
+    identity = {"data_sha256": content_sha256((train.start, train.goal))} if run_dir is not None else {}
+    loop = TrainingLoop(
+        tm,
+        optim,
+        total=epochs,
+        generator=gen,
+        train_config=run,
+        schedule=schedule,
+        steps_per_unit=math.ceil(n / batch_size),
+        run_dir=run_dir,
+        checkpoint=Path(run_dir) / "imitation.pt" if run_dir is not None else None,
+        save=lambda path, extra: save_checkpoint(
+            path,
+            kind=IMITATION_KIND,
+            robot=robot.name,
+            config=tm_config.to_dict(),
+            state_dict=tm.state_dict(),
+            extra={**extra, **identity},
+        ),
+        desc="imitation TM training",
+        progress=progress,
+        postfix=("train/loss",),
+    )
+    if resume:
+        loop.resume(
+            lambda path: _load_to_resume(path, IMITATION_KIND, robot.name, tm_config.to_dict(), identity)
+        )
 
-    tm.train()
-    bar = tqdm(range(epochs), desc="train imitation TM", disable=not progress)
-    for _ in bar:
+    def epoch(_: int) -> dict:
         perm = torch.randperm(n, generator=gen)
         epoch_loss = 0.0
         for i in range(0, n, batch_size):
             idx = perm[i : i + batch_size]
-            loss = (tm(train.start[idx], train.goal[idx]) - targets[idx]).square().mean()
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            sched.step()
-            epoch_loss += float(loss.detach()) * idx.numel() / n
-        if history is not None:
-            history.append(epoch_loss)
-        bar.set_postfix(mse=f"{epoch_loss:.3g}")
-    tm.eval()
+            loss = loop.step((tm(train.start[idx], train.goal[idx]) - targets[idx]).square().mean())
+            epoch_loss += float(loss) * idx.numel() / n
+        loop.check(epoch_loss)
+        return {"train/loss": epoch_loss}
+
+    records = loop.run(epoch)
+    if history is not None:
+        history.extend(r["train/loss"] for r in records)
     return tm
+
+
+def load_imitation(path: str | Path, robot: str | None = None) -> TrajectoryModel:
+    """The imitation TM of a checkpoint written by :func:`train_imitation` (eval mode)."""
+    payload = load_checkpoint(path, kind=IMITATION_KIND, robot=robot)
+    try:
+        tm = TrajectoryModel(TMConfig(**payload["config"]))
+        tm.load_state_dict(payload["state_dict"])
+    except (TypeError, KeyError, RuntimeError, ConfigError) as exc:
+        raise CheckpointError(f"{path}: the imitation TM does not match this kinlearn ({exc})") from exc
+    return tm.eval()

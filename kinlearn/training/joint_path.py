@@ -40,10 +40,10 @@ from ..body.robot import Robot, load_robot
 from ..body.state import straight_line
 from ..data.endpoints import workspace_box
 from ..errors import ConfigError
-from ..io import write_json
+from ..io import load_checkpoint, write_json
 from ..models.forward_inverse import AnalyticFM, ForwardModel, load_fm
 from ..models.joint_path import JointPathConfig, JointPathModel, densify, save_path_model
-from .loop import fit_iterations, seed_everything
+from .loop import OptimConfig, TrainingLoop, seed_everything
 
 __all__ = ["PathLossConfig", "PathTrainConfig", "build_fm", "path_loss", "train_path_model"]
 
@@ -248,26 +248,32 @@ def train_path_model(
     if write_config and not (resume and (run_dir / "tm.pt").exists()):
         write_json(run_dir / "config.json", cfg_dict)
 
-    def step(it: int):
+    loop = TrainingLoop(
+        tm,
+        OptimConfig("adam", config.lr),
+        total=config.iterations,
+        generator=gen,
+        train_config=cfg_dict,
+        schedule="cosine",
+        unit="iteration",
+        record_every=config.checkpoint_every,
+        run_dir=run_dir,
+        checkpoint=run_dir / "tm.pt",
+        save=lambda path, extra: save_path_model(tm, path, depends=depends, extra=extra),
+        desc="joint-path TM training",
+        progress=progress,
+        postfix=("train/loss", "train/length_ratio"),
+    )
+    if resume:
+        loop.resume(lambda path: load_checkpoint(path, kind=JointPathModel.kind, robot=robot.name))
+
+    def step(_: int) -> dict[str, float]:
         s0, sT = _sample_problems(robot, lo, hi, config.batch_size, gen, kin)
         loss, terms = path_loss(tm, fm, s0, sT, config.loss, config.max_step)
-        return loss, {k: float(v) for k, v in terms.items()}
+        return {
+            "train/loss": float(loop.step(loss, check=True)),
+            **{f"train/{k}": v for k, v in terms.items()},
+        }
 
-    return fit_iterations(
-        tm,
-        step,
-        lambda path, extra: save_path_model(tm, path, depends=depends, extra=extra),
-        run_dir=run_dir,
-        checkpoint="tm.pt",
-        kind=JointPathModel.kind,
-        robot=robot.name,
-        train_config=cfg_dict,
-        iterations=config.iterations,
-        lr=config.lr,
-        checkpoint_every=config.checkpoint_every,
-        generator=gen,
-        resume=resume,
-        progress=progress,
-        desc="train joint-path TM",
-        postfix=("loss", "length_ratio"),
-    )
+    loop.run(step)
+    return tm

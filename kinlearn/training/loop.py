@@ -1,17 +1,18 @@
-"""Training: optimisers, run logging, seeding, a generic resumable loop, FM/IM training and validation.
+"""Training: optimisers, run logging, seeding, the one resumable training loop, FM/IM training and validation.
 
-The generic pieces (:class:`OptimConfig`, :func:`make_optimizer`, :class:`RunLogger`,
-:func:`seed_everything`, :class:`TrainConfig`, :func:`fit`) know nothing about forward or inverse
-models; :func:`train_fm` and :func:`train_im` put them together for the supervised models and
-:func:`validate_models` checks the result against the analytic robot.
+The generic pieces (:class:`OptimConfig`, :func:`make_optimizer`, :func:`make_schedule`,
+:class:`RunLogger`, :func:`seed_everything`, :class:`TrainingLoop`, :class:`TrainConfig`, :func:`fit`)
+know nothing about forward or inverse models; :func:`train_fm` and :func:`train_im` put them together
+for the supervised models and :func:`validate_models` checks the result against the analytic robot.
 
-A training run directory holds ``metrics.jsonl`` (one JSON record per epoch) and a checkpoint written
-atomically after every epoch with the weights, the optimiser's state, the epoch, the shuffling
-generator's state and the history so far. ``resume=True`` continues from it: the learning rate is a
-pure function of the step and the shuffling generator is restored, so a resumed run ends with the
-same weights as an uninterrupted one. Resuming checks that the checkpoint was made with the same
-training configuration, model configuration and data (:class:`~kinlearn.CheckpointError` naming
-what differs); a constant-rate run may be extended to more epochs.
+Every trainer of kinlearn runs in a :class:`TrainingLoop`: it owns the optimiser, the learning-rate
+schedule, the caller's shuffling or sampling generator, the run's ``metrics.jsonl`` (one JSON record
+per epoch, or per checkpoint of an iteration-based trainer), the progress bar, the divergence check and
+a checkpoint written atomically with the weights and the training state. A resumed run ends with the
+same weights as an uninterrupted one: the schedule, both generators and the optimiser are restored.
+Resuming checks that the checkpoint was made with the same training configuration (and, through the
+caller, the same model and data; :class:`~kinlearn.CheckpointError` naming what differs); a
+constant-rate run may be extended to more epochs.
 
 Divergence is an error (:class:`~kinlearn.errors.TrainingDivergedError`): a non-finite loss, or an
 epoch's mean loss above :data:`DIVERGENCE_FACTOR` times the loss of the run's first step.
@@ -24,7 +25,7 @@ import json
 import math
 import random
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -60,10 +61,11 @@ __all__ = [
     "RunLogger",
     "TrainConfig",
     "TrainResult",
+    "TrainingLoop",
     "fit",
-    "fit_iterations",
     "format_validation_table",
     "make_optimizer",
+    "make_schedule",
     "seed_everything",
     "train_config",
     "train_fm",
@@ -113,19 +115,21 @@ _OPTIMIZERS: dict[str, Callable[[OptimConfig, Any], torch.optim.Optimizer]] = {
 }
 
 
+def _schedule_factor(kind: str, total_steps: int) -> Callable[[int], float]:
+    if kind == "constant":
+        return lambda k: 1.0
+    if kind != "cosine":
+        raise ConfigError(f"schedule must be 'constant' or 'cosine', got {kind!r}")
+    total = max(1, int(total_steps))
+    return lambda k: 0.5 * (1 + math.cos(math.pi * min(k, total) / total))
+
+
 def make_schedule(
     opt: torch.optim.Optimizer, kind: str, total_steps: int
 ) -> torch.optim.lr_scheduler.LambdaLR:
     """The learning-rate schedule per optimiser step: ``"constant"``, or ``"cosine"`` decay from the
     optimiser's rate to zero over ``total_steps`` (then zero)."""
-    if kind == "constant":
-        return torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0)
-    if kind != "cosine":
-        raise ConfigError(f"schedule must be 'constant' or 'cosine', got {kind!r}")
-    total = max(1, int(total_steps))
-    return torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda k: 0.5 * (1 + math.cos(math.pi * min(k, total) / total))
-    )
+    return torch.optim.lr_scheduler.LambdaLR(opt, _schedule_factor(kind, total_steps))
 
 
 def make_optimizer(cfg: OptimConfig, params) -> torch.optim.Optimizer:
@@ -189,8 +193,8 @@ class RunLogger:
         self.close()
 
 
-def _truncate_log(path: Path, epoch: int) -> None:
-    """Drop records of epochs after ``epoch`` (written after the last checkpoint) from a JSONL log."""
+def _truncate_log(path: Path, done: int, key: str = "epoch") -> None:
+    """Drop records beyond ``record[key] == done`` (written after the last checkpoint) from a JSONL log."""
     if not path.is_file():
         return
     keep = []
@@ -199,9 +203,207 @@ def _truncate_log(path: Path, epoch: int) -> None:
             rec = json.loads(line)
         except json.JSONDecodeError:
             continue
-        if int(rec.get("epoch", 0)) <= epoch:
+        if int(rec.get(key, 0)) <= done:
             keep.append(line)
     atomic_write(path, lambda p: p.write_text("".join(k + "\n" for k in keep)))
+
+
+def _check_divergence(loss: float, loss_ref: float | None, where: str) -> None:
+    """Raise :class:`TrainingDivergedError` (``where``: e.g. "TM training diverged at epoch 3") for a
+    non-finite ``loss`` or one above :data:`DIVERGENCE_FACTOR` times the first step's ``loss_ref``."""
+    if not math.isfinite(loss):
+        raise TrainingDivergedError(f"{where} (loss {loss}); lower the learning rate")
+    if loss_ref is not None and loss_ref > 0 and loss > DIVERGENCE_FACTOR * loss_ref:
+        raise TrainingDivergedError(
+            f"{where}: the loss grew to {loss:.4g}, more than {DIVERGENCE_FACTOR:g} times its first value "
+            f"{loss_ref:.4g}; lower the learning rate"
+        )
+
+
+def _config_differences(stored: dict, current: dict) -> list[str]:
+    """What differs between a checkpoint's training configuration and the run about to resume from it,
+    in a way that forbids resuming: all but the progress bar and the evaluation batch size; a run of
+    constant learning rate may change its number of epochs (its rate does not depend on it)."""
+    diffs = diff_configs(stored, current, ignore=("progress", "eval_batch_size"))
+    if stored.get("schedule") == current.get("schedule") == "constant":
+        diffs = [d for d in diffs if not d.startswith("epochs:")]
+    return diffs
+
+
+def _stored_step(path: Path, extra: dict) -> int:
+    """The epochs or iterations a checkpoint's training state says are done (``step``; checkpoints of
+    earlier versions named it ``epoch`` or ``iteration``); :class:`CheckpointError` if it has none."""
+    done = next((extra[k] for k in ("step", "epoch", "iteration") if k in extra), None)
+    if done is None or "optimizer" not in extra:
+        raise CheckpointError(f"{path} holds no training state (optimizer, step); cannot resume from it")
+    return int(done)
+
+
+def _training_state(step, unit, optimizer, scheduler, generator, loss_ref, train_config, history) -> dict:
+    """A checkpoint's training state, the same for every trainer (see :class:`TrainingLoop`):
+    ``optimizer`` is the optimiser's state dict, ``scheduler`` and ``generator`` the objects."""
+    return {
+        "step": step,
+        "unit": unit,
+        "optimizer": optimizer,
+        "scheduler": scheduler.state_dict(),
+        "generator": generator.get_state(),
+        "torch_rng": torch.get_rng_state(),
+        "loss_ref": loss_ref,
+        "train_config": train_config,
+        "history": list(history),
+    }
+
+
+class TrainingLoop:
+    """One resumable training run, driven by the caller one epoch or iteration at a time.
+
+    It builds the optimiser (``optim``) over ``params`` (default: the model's) and its per-step
+    learning-rate schedule (``"constant"``, ``"cosine"`` decay to zero over ``total × steps_per_unit``
+    optimiser steps, see :func:`make_schedule`, or a function of the step giving the factor of the
+    rate). The caller's ``step(i)`` (:meth:`run`) trains unit ``i`` (an epoch or an iteration), drawing
+    its batches with ``generator`` and taking optimiser steps through :meth:`step`, and returns a dict
+    of floats. Every ``record_every`` units and at the end, their mean becomes a record, stamped with
+    ``unit`` (the count done), ``lr`` (the rate of the next step) and ``seconds`` (since :meth:`run`
+    began); it is appended to :attr:`history` and ``run_dir/metrics.jsonl``, and then ``save(path,
+    extra)`` writes ``checkpoint`` atomically with the training state ``extra`` of
+    :func:`_training_state`: ``step`` (units done) and ``unit``, ``optimizer``, ``scheduler``,
+    ``generator``, ``torch_rng`` (torch's global generator), ``loss_ref`` (the first step's loss, the
+    scale of the divergence check), ``train_config`` and ``history``.
+
+    :meth:`resume` continues from that checkpoint. Checkpoints of earlier versions resume too: a
+    counter named ``epoch`` or ``iteration``, no schedule (rebuilt from the counter), no torch state.
+    """
+
+    def __init__(
+        self,
+        model: nn.Module,
+        optim: OptimConfig,
+        *,
+        total: int,
+        generator: torch.Generator,
+        train_config: dict,
+        schedule: str | Callable[[int], float] = "constant",
+        steps_per_unit: int = 1,
+        unit: Literal["epoch", "iteration"] = "epoch",
+        record_every: int = 1,
+        params: Iterable[nn.Parameter] | None = None,
+        run_dir: str | Path | None = None,
+        checkpoint: str | Path | None = None,
+        save: Callable[[Path, dict], object] | None = None,
+        desc: str = "training",
+        progress: bool = True,
+        postfix: Sequence[str] = (),
+    ):
+        self.model, self.total, self.unit = model, int(total), unit
+        self.generator, self.train_config = generator, train_config
+        self.optimizer = make_optimizer(optim, model.parameters() if params is None else params)
+        self._factor = schedule if callable(schedule) else _schedule_factor(schedule, total * steps_per_unit)
+        self.scheduler = torch.optim.lr_scheduler.LambdaLR(self.optimizer, self._factor)
+        self.steps_per_unit, self.record_every = steps_per_unit, record_every
+        self.run_dir = Path(run_dir) if run_dir is not None else None
+        self.checkpoint = Path(checkpoint) if checkpoint is not None else None
+        self.save, self.desc, self.progress, self.postfix = save, desc, progress, tuple(postfix)
+        self.done, self.history, self.loss_ref = 0, [], None
+        if self.checkpoint is not None:
+            remove_stale_tmp(self.checkpoint.parent, self.checkpoint.name)  # left by a killed write
+
+    def resume(self, load: Callable[[Path], dict] | None) -> bool:
+        """Continue from the checkpoint if there is one (``False`` if not). ``load(path)`` reads it,
+        refusing (:class:`CheckpointError`) one made with another model or data; the training
+        configuration it records must match (:func:`_config_differences`), its weights and optimiser
+        state fit, or :class:`CheckpointError` is raised before anything is written."""
+        path = self.checkpoint
+        if path is None or not path.is_file():
+            return False
+        if load is None:
+            raise ConfigError("resuming needs a function that reads the checkpoint")
+        payload = load(path)
+        extra = payload.get("extra") or {}
+        done = _stored_step(path, extra)
+        stored = extra.get("train_config")
+        diffs = _config_differences(stored, self.train_config) if isinstance(stored, dict) else []
+        if diffs:
+            raise CheckpointError(
+                f"{path} was trained with another configuration ({'; '.join(diffs)}); resume with the "
+                "same settings or train into a new run directory"
+            )
+        try:
+            self.model.load_state_dict(payload["state_dict"])
+            self.optimizer.load_state_dict(extra["optimizer"])
+            if "scheduler" in extra:
+                self.scheduler.load_state_dict(extra["scheduler"])
+            else:  # a checkpoint of an earlier version: the schedule at the step it stopped
+                for group, base in zip(self.optimizer.param_groups, self.scheduler.base_lrs, strict=True):
+                    group.setdefault("initial_lr", base)
+                steps = done * self.steps_per_unit
+                self.scheduler = torch.optim.lr_scheduler.LambdaLR(self.optimizer, self._factor, steps - 1)
+            self.generator.set_state(extra["generator"])
+        except (RuntimeError, ValueError, KeyError, TypeError) as exc:
+            raise CheckpointError(f"{path} does not fit the model being trained ({exc})") from exc
+        if "torch_rng" in extra:
+            torch.set_rng_state(extra["torch_rng"])
+        self.done, self.history, self.loss_ref = done, list(extra.get("history", [])), extra.get("loss_ref")
+        return True
+
+    def step(self, loss: torch.Tensor, check: bool = False) -> torch.Tensor:
+        """One optimiser step on ``loss`` (and one of the schedule); returns the loss, detached. With
+        ``check``, :meth:`check` the loss first (no step is taken on a diverged one)."""
+        if check:
+            self.check(float(loss.detach()))
+        if self.loss_ref is None:
+            self.loss_ref = float(loss.detach())
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optimizer.step()
+        self.scheduler.step()
+        return loss.detach()
+
+    def check(self, loss: float) -> None:
+        """Raise :class:`TrainingDivergedError` if ``loss`` (of the current unit) says training diverged."""
+        _check_divergence(loss, self.loss_ref, f"{self.desc} diverged at {self.unit} {self.done + 1}")
+
+    def state(self) -> dict:
+        """The training state a checkpoint holds now (:func:`_training_state`)."""
+        opt, sched, gen, ref = self.optimizer.state_dict(), self.scheduler, self.generator, self.loss_ref
+        return _training_state(self.done, self.unit, opt, sched, gen, ref, self.train_config, self.history)
+
+    def run(self, step: Callable[[int], dict[str, float]]) -> list[dict]:
+        """Call ``step(i)`` for every unit ``i`` not done yet (model in training mode), recording and
+        checkpointing as described above; returns the history of records (a resumed run's included)
+        and leaves the model in eval mode."""
+        logger = None
+        if self.run_dir is not None:
+            _truncate_log(self.run_dir / "metrics.jsonl", self.done, self.unit)  # beyond the checkpoint
+            logger = RunLogger(self.run_dir)
+        bar = tqdm(
+            total=self.total, initial=self.done, desc=self.desc, disable=not self.progress, unit=self.unit
+        )
+        t0, sums, count = time.perf_counter(), {}, 0
+        try:
+            for i in range(self.done, self.total):
+                self.model.train()
+                for k, v in step(i).items():
+                    sums[k] = sums.get(k, 0.0) + float(v)
+                self.done, count = i + 1, count + 1
+                bar.update(1)
+                if self.done % self.record_every and self.done != self.total:
+                    continue
+                record = {self.unit: self.done, "lr": self.scheduler.get_last_lr()[0]}
+                record.update(seconds=time.perf_counter() - t0, **{k: v / count for k, v in sums.items()})
+                sums, count = {}, 0
+                self.history.append(record)
+                if logger is not None:  # before the checkpoint: a resume drops records beyond it
+                    logger.log(record)
+                if self.checkpoint is not None and self.save is not None:
+                    self.save(self.checkpoint, self.state())
+                bar.set_postfix({k.split("/")[-1]: f"{record[k]:.3g}" for k in self.postfix if k in record})
+        finally:
+            bar.close()
+            if logger is not None:
+                logger.close()
+        self.model.eval()
+        return self.history
 
 
 @dataclass
@@ -244,25 +446,19 @@ class TrainConfig:
         if not 0.0 <= self.min_lr_ratio <= 1.0:
             raise ConfigError(f"min_lr_ratio must lie in [0, 1], got {self.min_lr_ratio}")
 
+    def lr_factor(self, step: int, total_steps: int) -> float:
+        """Learning rate at optimiser step ``step`` (0-based) of ``total_steps``, relative to ``optim.lr``."""
+        if self.schedule == "constant" or total_steps <= 1:
+            return 1.0
+        frac = min(step / (total_steps - 1), 1.0)
+        return self.min_lr_ratio + (1.0 - self.min_lr_ratio) * 0.5 * (1.0 + math.cos(math.pi * frac))
+
     def lr_at(self, step: int, total_steps: int) -> float:
         """Learning rate at optimiser step ``step`` (0-based) of ``total_steps``."""
-        lr = self.optim.lr
-        if self.schedule == "constant" or total_steps <= 1:
-            return lr
-        frac = min(step / (total_steps - 1), 1.0)
-        return lr * (self.min_lr_ratio + (1.0 - self.min_lr_ratio) * 0.5 * (1.0 + math.cos(math.pi * frac)))
+        return self.optim.lr * self.lr_factor(step, total_steps)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
-
-    def resume_differences(self, stored: dict) -> list[str]:
-        """What differs between this config and ``stored`` (a checkpoint's) in a way that forbids
-        resuming: all but the progress bar and the evaluation batch size; a constant-rate run may
-        change its number of epochs (its learning rate does not depend on it)."""
-        diffs = diff_configs(stored, self.to_dict(), ignore=("progress", "eval_batch_size"))
-        if self.schedule == "constant" and stored.get("schedule") == "constant":
-            diffs = [d for d in diffs if not d.startswith("epochs:")]
-        return diffs
 
     @classmethod
     def from_dict(cls, d: dict) -> TrainConfig:
@@ -290,9 +486,10 @@ def fit(
     save_fn: Callable[[Path, nn.Module, dict], object] | None = None,
     load_fn: Callable[[Path], dict] | None = None,
     resume: bool = False,
-    desc: str = "train",
+    desc: str = "training",
 ) -> list[dict]:
-    """Minibatch training of ``model`` on in-memory tensors; returns the per-epoch history.
+    """Minibatch training of ``model`` on in-memory tensors in a :class:`TrainingLoop`; returns the
+    per-epoch history.
 
     ``train`` (and ``val``) are tensors sharing their first dimension; each step calls
     ``loss_fn(model, *batch)`` (default: ``model.training_loss(*batch)``). After each epoch the held-out
@@ -301,7 +498,7 @@ def fit(
     to ``run_dir/metrics.jsonl``; with ``checkpoint`` and ``save_fn(path, model, extra)`` a checkpoint
     is written after every epoch, and ``resume=True`` restores the latest one through
     ``load_fn(path) -> {"state_dict": ..., "extra": ...}``, after checking that it was trained with the
-    same ``cfg`` (:meth:`TrainConfig.resume_differences`; :class:`CheckpointError` otherwise).
+    same ``cfg`` (:meth:`TrainingLoop.resume`; :class:`CheckpointError` otherwise).
     Raises :class:`TrainingDivergedError` when the loss diverges (see the module docstring).
     """
     train = tuple(train)
@@ -310,212 +507,41 @@ def fit(
         raise DatasetError(
             f"training tensors must share a non-empty first dimension, got {[tuple(t.shape) for t in train]}"
         )
-    opt = make_optimizer(cfg.optim, model.parameters())
-    gen = torch.Generator().manual_seed(int(cfg.seed) + 1)
     steps_per_epoch = -(-n // cfg.batch_size)
     total_steps = steps_per_epoch * cfg.epochs
-    start_epoch, history = 0, []
-    loss_ref: float | None = None  # the loss of the run's first step: the scale divergence is judged on
-    ckpt = Path(checkpoint) if checkpoint is not None else None
-    if ckpt is not None:
-        remove_stale_tmp(ckpt.parent, ckpt.name)  # left by a write that was killed
-    if resume and ckpt is not None and ckpt.is_file():
-        if load_fn is None:
-            raise ConfigError("resume=True needs load_fn to read the checkpoint")
-        payload = load_fn(ckpt)
-        extra = payload.get("extra") or {}
-        if "optimizer" not in extra or "epoch" not in extra:
-            raise CheckpointError(f"{ckpt} holds no training state (optimizer, epoch); cannot resume from it")
-        if isinstance(extra.get("train_config"), dict):
-            diffs = cfg.resume_differences(extra["train_config"])
-            if diffs:
-                raise CheckpointError(
-                    f"{ckpt} was trained with another training configuration ({'; '.join(diffs)}); resume "
-                    "with the same settings or train into a new run directory"
-                )
-        try:
-            model.load_state_dict(payload["state_dict"])
-            opt.load_state_dict(extra["optimizer"])
-        except (RuntimeError, ValueError, KeyError) as exc:
-            raise CheckpointError(f"{ckpt} does not fit the model being trained ({exc})") from exc
-        gen.set_state(extra["generator"])
-        start_epoch, history = int(extra["epoch"]), list(extra.get("history", []))
-        loss_ref = extra.get("loss_ref")
-    logger = None
-    if run_dir is not None:
-        if start_epoch > 0:
-            _truncate_log(Path(run_dir) / "metrics.jsonl", start_epoch)
-        elif not resume:
-            (Path(run_dir) / "metrics.jsonl").unlink(missing_ok=True)
-        logger = RunLogger(run_dir)
-    bar = tqdm(
-        total=cfg.epochs, initial=start_epoch, desc=desc, disable=not cfg.progress, unit="epoch", leave=False
+    loop = TrainingLoop(
+        model,
+        cfg.optim,
+        total=cfg.epochs,
+        generator=torch.Generator().manual_seed(int(cfg.seed) + 1),
+        train_config=cfg.to_dict(),
+        schedule=lambda k: cfg.lr_factor(k, total_steps),
+        steps_per_unit=steps_per_epoch,
+        run_dir=run_dir,
+        checkpoint=checkpoint,
+        save=None if save_fn is None else lambda path, extra: save_fn(path, model, extra),
+        desc=desc,
+        progress=cfg.progress,
+        postfix=("train_loss", "val_loss"),
     )
-    try:
-        for epoch in range(start_epoch, cfg.epochs):
-            t0 = time.perf_counter()
-            model.train()
-            perm = torch.randperm(n, generator=gen)
-            shuffled = [t[perm] for t in train]
-            total = torch.zeros((), dtype=torch.float64)
-            step0 = epoch * steps_per_epoch
-            for k in range(steps_per_epoch):
-                lo = k * cfg.batch_size
-                batch = [t[lo : lo + cfg.batch_size] for t in shuffled]
-                if cfg.schedule != "constant":
-                    lr = cfg.lr_at(step0 + k, total_steps)
-                    for group in opt.param_groups:
-                        group["lr"] = lr
-                loss = loss_fn(model, *batch)
-                if loss_ref is None:
-                    loss_ref = float(loss.detach())
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                total += loss.detach()
-            record: dict[str, Any] = {
-                "epoch": epoch + 1,
-                "train_loss": float(total) / steps_per_epoch,
-                "lr": opt.param_groups[0]["lr"],
-            }
-            _check_divergence(record["train_loss"], loss_ref, epoch)
-            if val is not None and val[0].shape[0] > 0:
-                record.update(_evaluate(model, tuple(val), cfg.eval_batch_size, loss_fn, metrics_fn))
-            record["epoch_time_s"] = time.perf_counter() - t0
-            history.append(record)
-            if logger is not None:  # before the checkpoint: a resume drops records beyond it
-                logger.log(record)
-            if ckpt is not None and save_fn is not None:
-                extra = {
-                    "epoch": epoch + 1,
-                    "optimizer": opt.state_dict(),
-                    "generator": gen.get_state(),
-                    "history": history,
-                    "train_config": cfg.to_dict(),
-                    "loss_ref": loss_ref,
-                }
-                save_fn(ckpt, model, extra)
-            bar.update(1)
-            bar.set_postfix({k: f"{v:.3g}" for k, v in record.items() if k in ("train_loss", "val_loss")})
-    finally:
-        bar.close()
-        if logger is not None:
-            logger.close()
-    model.eval()
-    return history
+    if resume:
+        loop.resume(load_fn)
 
+    def epoch(_: int) -> dict:
+        t0 = time.perf_counter()
+        perm = torch.randperm(n, generator=loop.generator)
+        shuffled = [t[perm] for t in train]
+        total = torch.zeros((), dtype=torch.float64)
+        for lo in range(0, n, cfg.batch_size):
+            total += loop.step(loss_fn(model, *(t[lo : lo + cfg.batch_size] for t in shuffled)))
+        record: dict[str, Any] = {"train_loss": float(total) / steps_per_epoch}
+        loop.check(record["train_loss"])
+        if val is not None and val[0].shape[0] > 0:
+            record.update(_evaluate(model, tuple(val), cfg.eval_batch_size, loss_fn, metrics_fn))
+        record["epoch_time_s"] = time.perf_counter() - t0
+        return record
 
-def fit_iterations(
-    model: nn.Module,
-    step: Callable[[int], tuple[torch.Tensor, dict[str, float]]],
-    save: Callable[[Path, dict], object],
-    *,
-    run_dir: str | Path,
-    checkpoint: str,
-    kind: str,
-    robot: str,
-    train_config: dict,
-    iterations: int,
-    lr: float,
-    checkpoint_every: int,
-    generator: torch.Generator,
-    resume: bool = True,
-    progress: bool = True,
-    desc: str = "train",
-    postfix: Sequence[str] = ("loss",),
-) -> nn.Module:
-    """The resumable loop of the self-supervised trainers, which draw fresh problems every iteration.
-
-    ``step(iteration)`` draws its batch with ``generator``, returns the loss (a tensor to minimise) and
-    the terms to log (floats). Adam with cosine decay to zero over ``iterations``. Every
-    ``checkpoint_every`` iterations and at the end, the mean of each term since the last record goes to
-    ``run_dir/metrics.jsonl`` and ``save(path, extra)`` writes ``run_dir/checkpoint`` atomically with
-    ``extra`` = the iteration, ``train_config``, the optimiser's, schedule's and generator's states.
-    ``resume``: continue from that checkpoint (``kind``, ``robot``), which must record the same
-    ``train_config`` (:class:`~kinlearn.CheckpointError` otherwise); the resumed run ends with the same
-    weights as an uninterrupted one. A non-finite or huge loss raises
-    :class:`~kinlearn.errors.TrainingDivergedError`.
-    """
-    run_dir = Path(run_dir)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    sched = make_schedule(opt, "cosine", iterations)
-    path = run_dir / checkpoint
-    start = 0
-    if resume and path.exists():
-        payload = load_checkpoint(path, kind=kind, robot=robot)
-        if payload["extra"].get("train_config") != train_config:
-            raise CheckpointError(f"{path} was trained with another configuration; use a new run directory")
-        model.load_state_dict(payload["state_dict"])
-        extra = payload["extra"]
-        opt.load_state_dict(extra["optimizer"])
-        sched.load_state_dict(extra["scheduler"])
-        generator.set_state(extra["generator"])
-        start = extra["iteration"]
-    run_dir.mkdir(parents=True, exist_ok=True)
-
-    def write(iteration: int) -> None:
-        save(
-            path,
-            {
-                "iteration": iteration,
-                "train_config": train_config,
-                "optimizer": opt.state_dict(),
-                "scheduler": sched.state_dict(),
-                "generator": generator.get_state(),
-            },
-        )
-
-    t0 = time.perf_counter()
-    with RunLogger(run_dir) as logger:
-        bar = tqdm(range(start, iterations), desc=desc, disable=not progress, initial=start, total=iterations)
-        sums: dict[str, float] = {}
-        for it in bar:
-            model.train()
-            loss, terms = step(it)
-            value = float(loss.detach())
-            if not math.isfinite(value) or value > 1e6:
-                raise TrainingDivergedError(
-                    f"{desc}: diverged at iteration {it + 1} (loss {value:.3g}); lower the learning rate"
-                )
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            sched.step()
-            for k, v in {"loss": value, **terms}.items():
-                sums[k] = sums.get(k, 0.0) + float(v)
-            done = it + 1
-            if done % checkpoint_every == 0 or done == iterations:
-                n = done - (done - 1) // checkpoint_every * checkpoint_every
-                record = {
-                    "iteration": done,
-                    "lr": sched.get_last_lr()[0],
-                    "seconds": time.perf_counter() - t0,
-                }
-                record.update({f"train/{k}": v / max(n, 1) for k, v in sums.items()})
-                logger.log(record)
-                bar.set_postfix({k: f"{record[f'train/{k}']:.3g}" for k in postfix if f"train/{k}" in record})
-                sums = {}
-                write(done)
-    model.eval()
-    return model
-
-
-def _check_divergence(loss: float, loss_ref: float | None, epoch: int, what: str = "training") -> None:
-    """Raise :class:`TrainingDivergedError` for a non-finite ``loss`` or one that exploded."""
-    if not math.isfinite(loss):
-        raise TrainingDivergedError(
-            f"{what} diverged at epoch {epoch + 1} (loss {loss}); lower the learning rate"
-        )
-    if (
-        loss_ref is not None
-        and math.isfinite(loss_ref)
-        and loss_ref > 0
-        and loss > DIVERGENCE_FACTOR * loss_ref
-    ):
-        raise TrainingDivergedError(
-            f"{what} diverged at epoch {epoch + 1}: the loss grew to {loss:.4g}, more than "
-            f"{DIVERGENCE_FACTOR:g} times its first value {loss_ref:.4g}; lower the learning rate"
-        )
+    return loop.run(epoch)
 
 
 @torch.no_grad()
@@ -624,37 +650,42 @@ def _train_supervised(
     dtype = next(model.parameters()).dtype
     train, val = data.to(dtype).split(cfg.val_fraction, seed=cfg.seed)
     model.fit_normalization(*train.tensors())
+    metrics_fn = _fm_metrics if kind == "fm" else _im_metrics
+    desc = f"{kind.upper()} training"
+    return _fit_run(kind, model, data, (train, val), cfg, run_dir, resume, metrics_fn=metrics_fn, desc=desc)
+
+
+def _fit_run(kind, model, data, split, cfg, run_dir, resume, through_fm=None, **fit_kwargs) -> TrainResult:
+    """:func:`fit` ``model`` on ``split`` (train and held-out parts of ``data``), with the checkpoint
+    ``run_dir/<kind>.pt`` recording the data and the frozen FM (``through_fm``) it was trained with."""
     ckpt = Path(run_dir) / f"{kind}.pt" if run_dir is not None else None
-    identity = {"data_sha256": content_sha256(data.tensors())} if ckpt is not None else {}
-
-    def load(path: Path) -> dict:
-        return _load_to_resume(path, kind, model, identity)
-
-    def save(path: Path, m: nn.Module, extra: dict) -> None:
-        save_model(m, path, extra={**extra, **identity})
-
+    identity = {}
+    if ckpt is not None:
+        identity["data_sha256"] = content_sha256(data.tensors())
+        if through_fm is not None:
+            identity["through_fm_sha256"] = content_sha256(through_fm)
+    model_config = {"type": "learned", **model.config_dict()}
+    train, val = split
     history = fit(
         model,
         train.tensors(),
         val.tensors() if len(val) else None,
         cfg,
-        metrics_fn=_fm_metrics if kind == "fm" else _im_metrics,
         run_dir=run_dir,
         checkpoint=ckpt,
-        save_fn=save,
-        load_fn=load,
+        save_fn=lambda path, m, extra: save_model(m, path, extra={**extra, **identity}),
+        load_fn=lambda path: _load_to_resume(path, kind, model.robot_name, model_config, identity),
         resume=resume,
-        desc=f"train {kind.upper()}",
+        **fit_kwargs,
     )
     return TrainResult(model, history, ckpt)
 
 
-def _load_to_resume(path: Path, kind: str, model: nn.Module, identity: dict) -> dict:
-    """Load checkpoint ``path`` to continue training ``model``: it must hold the same architecture and
-    (where it records them) the same data and frozen models (``identity``)."""
-    payload = load_checkpoint(path, kind=kind, robot=model.robot_name)
-    diffs = diff_configs(payload.get("config") or {}, {"type": "learned", **model.config_dict()})
-    diffs = [f"model {d}" for d in diffs]
+def _load_to_resume(path: Path, kind: str, robot: str, model_config: dict, identity: dict) -> dict:
+    """Load checkpoint ``path`` to continue training a model: it must hold the same architecture
+    (``model_config``) and, where it records them, the same data and frozen models (``identity``)."""
+    payload = load_checkpoint(path, kind=kind, robot=robot)
+    diffs = [f"model {d}" for d in diff_configs(payload.get("config") or {}, model_config)]
     extra = payload.get("extra") or {}
     for key, value in identity.items():
         if key in extra and extra[key] != value:
@@ -662,7 +693,7 @@ def _load_to_resume(path: Path, kind: str, model: nn.Module, identity: dict) -> 
     if diffs:
         raise CheckpointError(
             f"{path} was trained with another model or data ({'; '.join(diffs)}); resume with the same "
-            "preset and data, or train into a new run directory"
+            "settings and data, or train into a new run directory"
         )
     return payload
 
@@ -759,26 +790,9 @@ def train_im_distal(
         reached = fm(s, model(s, target))[..., L.ef]
         return {"val_fm_reach_err_mm": float((reached - target).norm(dim=-1).mean()) * 1e3}
 
-    ckpt = Path(run_dir) / "im.pt" if run_dir is not None else None
-    identity = {}
-    if ckpt is not None:
-        fm_id = {"config": fm.config_dict(), "state_dict": fm.state_dict(), "action_weight": action_weight}
-        identity = {"data_sha256": content_sha256(data.tensors()), "through_fm_sha256": content_sha256(fm_id)}
-    history = fit(
-        im,
-        train.tensors(),
-        val.tensors() if len(val) else None,
-        cfg,
-        loss_fn=loss_fn,
-        metrics_fn=metrics_fn,
-        run_dir=run_dir,
-        checkpoint=ckpt,
-        save_fn=lambda path, m, extra: save_model(m, path, extra={**extra, **identity}),
-        load_fn=lambda path: _load_to_resume(path, "im", im, identity),
-        resume=resume,
-        desc="train IM through FM",
-    )
-    return TrainResult(im, history, ckpt)
+    fm_id = {"config": fm.config_dict(), "state_dict": fm.state_dict(), "action_weight": action_weight}
+    kwargs = {"loss_fn": loss_fn, "metrics_fn": metrics_fn, "desc": "IM training through the FM"}
+    return _fit_run("im", im, data, (train, val), cfg, run_dir, resume, through_fm=fm_id, **kwargs)
 
 
 # --------------------------------------------------------------------------------------------------

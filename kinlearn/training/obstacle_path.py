@@ -37,7 +37,7 @@ from ..body.robot import Robot, load_robot
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
 from ..errors import ConfigError
-from ..io import write_json
+from ..io import load_checkpoint, write_json
 from ..models.obstacle_path import (
     ObstaclePathConfig,
     ObstaclePathModel,
@@ -45,7 +45,7 @@ from ..models.obstacle_path import (
     save_obstacle_model,
     scene_primitives,
 )
-from .loop import fit_iterations, seed_everything
+from .loop import OptimConfig, TrainingLoop, seed_everything
 
 __all__ = [
     "TRAINING_SEEDS",
@@ -333,7 +333,26 @@ def train_obstacle_model(
     if write_config and not (resume and (run_dir / "tm_obstacles.pt").exists()):
         write_json(run_dir / "config.json", cfg_dict)
 
-    def step(it: int):
+    loop = TrainingLoop(
+        tm,
+        OptimConfig("adam", config.lr),
+        total=config.iterations,
+        generator=gen,
+        train_config=cfg_dict,
+        schedule="cosine",
+        unit="iteration",
+        record_every=config.checkpoint_every,
+        run_dir=run_dir,
+        checkpoint=run_dir / "tm_obstacles.pt",
+        save=lambda path, extra: save_obstacle_model(tm, path, extra=extra),
+        desc="obstacle TM training",
+        progress=progress,
+        postfix=("train/loss", "train/best_free"),
+    )
+    if resume:
+        loop.resume(lambda path: load_checkpoint(path, kind=ObstaclePathModel.kind, robot=robot.name))
+
+    def step(_: int) -> dict[str, float]:
         idx = torch.randint(n_pool, (config.batch_size,), generator=gen)
         swap = torch.rand(config.batch_size, generator=gen) < 0.5
         s0, sT, scene = _batch(pool, ef_all, idx, swap)
@@ -341,27 +360,11 @@ def train_obstacle_model(
         fractions = (torch.arange(config.points) + torch.rand(config.points, generator=gen)) / config.points
         per, terms = candidate_losses(tm, body, s0, sT, scene, config.loss, fractions)
         best = per.min(dim=1)
-        loss = best.values.mean() + config.loss.spread * per.mean()
+        loss = loop.step(best.values.mean() + config.loss.spread * per.mean(), check=True)
         rows = torch.arange(per.shape[0])
-        logged = {f"best_{k}": float(v.detach()[rows, best.indices].mean()) for k, v in terms.items()}
-        logged["best_free"] = float((terms["collision"].detach()[rows, best.indices] == 0).float().mean())
-        return loss, logged
+        logged = {f"train/best_{k}": float(v.detach()[rows, best.indices].mean()) for k, v in terms.items()}
+        free = (terms["collision"].detach()[rows, best.indices] == 0).float().mean()
+        return {"train/loss": float(loss), **logged, "train/best_free": float(free)}
 
-    return fit_iterations(
-        tm,
-        step,
-        lambda path, extra: save_obstacle_model(tm, path, extra=extra),
-        run_dir=run_dir,
-        checkpoint="tm_obstacles.pt",
-        kind=ObstaclePathModel.kind,
-        robot=robot.name,
-        train_config=cfg_dict,
-        iterations=config.iterations,
-        lr=config.lr,
-        checkpoint_every=config.checkpoint_every,
-        generator=gen,
-        resume=resume,
-        progress=progress,
-        desc="train obstacle TM",
-        postfix=("loss", "best_free"),
-    )
+    loop.run(step)
+    return tm

@@ -22,7 +22,6 @@ from typing import Literal
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from ..body.robot import Robot, load_robot
 from ..data.endpoints import EndpointPairs
@@ -31,7 +30,6 @@ from ..io import (
     content_sha256,
     file_sha256,
     load_checkpoint,
-    remove_stale_tmp,
     resolve_dependency,
     save_checkpoint,
     write_json,
@@ -40,16 +38,7 @@ from ..models.forward_inverse import frozen_fm_im
 from ..models.rollout import LossConfig, rectify, tm_loss
 from ..models.trajectory import TMConfig, TrajectoryModel
 from ..polyline import trajectory_metrics
-from ..runs import diff_configs
-from .loop import (
-    OptimConfig,
-    RunLogger,
-    _check_divergence,
-    _truncate_log,
-    make_optimizer,
-    make_schedule,
-    seed_everything,
-)
+from .loop import OptimConfig, TrainingLoop, seed_everything
 
 __all__ = [
     "TM_PRESETS",
@@ -247,85 +236,54 @@ def train_tm(
     if config.trainable == "shared":
         for name, p in tm.named_parameters():
             p.requires_grad_(name.startswith("shared."))
-    params = [p for p in tm.parameters() if p.requires_grad]
-    opt = make_optimizer(config.optim, params)
     n = len(train)
-    steps_per_epoch = math.ceil(n / config.batch_size)
-    total = config.epochs * steps_per_epoch
-    sched = make_schedule(opt, config.schedule, total)
-
-    ckpt = run_dir / "tm.pt"
     data_sha256 = content_sha256((train.start, train.goal))
     bound = WAYPOINT_BOUND_REACHES * arm_reach(robot)
-    start_epoch, loss_ref = 0, None
-    remove_stale_tmp(run_dir, ckpt.name)  # left by a write that was killed
-    if resume and ckpt.exists():
-        payload = load_checkpoint(ckpt, kind="tm", robot=robot.name)
-        diffs = _resume_differences(payload, config, depends, data_sha256)
-        if diffs:
-            raise CheckpointError(
-                f"{ckpt} was trained with another configuration ({'; '.join(diffs)}); resume with the same "
-                "settings, models and pairs, or train into a new run directory"
-            )
-        extra = payload["extra"]
-        try:
-            tm.load_state_dict(payload["state_dict"])
-            opt.load_state_dict(extra["optimizer"])
-            sched.load_state_dict(extra["scheduler"])
-        except (RuntimeError, ValueError, KeyError) as exc:
-            raise CheckpointError(f"{ckpt} does not fit the TM being trained ({exc})") from exc
-        gen.set_state(extra["generator"])
-        torch.set_rng_state(extra["torch_rng"])
-        start_epoch, loss_ref = extra["epoch"], extra.get("loss_ref")
-    _truncate_log(run_dir / "metrics.jsonl", start_epoch)  # records written after the last checkpoint
+    loop = TrainingLoop(
+        tm,
+        config.optim,
+        total=config.epochs,
+        generator=gen,
+        train_config=_training_record(config),
+        schedule=config.schedule,
+        steps_per_unit=math.ceil(n / config.batch_size),
+        params=[p for p in tm.parameters() if p.requires_grad],
+        run_dir=run_dir,
+        checkpoint=run_dir / "tm.pt",
+        save=lambda path, extra: _save_run_checkpoint(path, config, tm, extra, data_sha256, depends),
+        desc="TM training",
+        progress=progress,
+        postfix=("train/loss", "train/paper_l_tm"),
+    )
+    if resume:
+        loop.resume(lambda path: _load_run(path, robot.name, depends, data_sha256))
     if write_config:
         write_json(run_dir / "config.json", _train_config_dict(config))
 
-    with RunLogger(run_dir) as logger:
-        bar = tqdm(
-            range(start_epoch, config.epochs),
-            desc="train TM",
-            disable=not progress,
-            initial=start_epoch,
-            total=config.epochs,
-        )
-        for epoch in bar:
-            tm.train()
-            perm = torch.randperm(n, generator=gen)
-            sums: dict[str, float] = {}
-            for i in range(0, n, config.batch_size):
-                idx = perm[i : i + config.batch_size]
-                wp, (loss, terms) = _step_loss(tm, fm, im, train.start[idx], train.goal[idx], config.loss)
-                far = wp.detach().abs().amax()
-                if not bool(torch.isfinite(loss) & (far <= bound)):  # one check per step
-                    raise TrainingDivergedError(
-                        f"TM training diverged at epoch {epoch + 1} (loss {loss.item():.4g}, a waypoint "
-                        f"{far.item():.4g} m from the base, beyond {bound:.3g} m = {WAYPOINT_BOUND_REACHES:g} "
-                        f"× the arm's reach); lower the learning rate"
-                    )
-                if loss_ref is None:
-                    loss_ref = float(loss.detach())
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                sched.step()
-                w = idx.numel() / n
-                for k, v in {"loss": loss.detach(), **terms}.items():
-                    sums[k] = sums.get(k, 0.0) + float(v) * w
-            _check_divergence(sums["loss"], loss_ref, epoch, what="TM training")
-            record = {
-                "epoch": epoch + 1,
-                "lr": sched.get_last_lr()[0],
-                **{f"train/{k}": v for k, v in sums.items()},
-            }
-            if val is not None:
-                record.update({f"val/{k}": v for k, v in evaluate_tm(tm, fm, im, val, config.loss).items()})
-            logger.log(record)
-            bar.set_postfix(loss=f"{sums['loss']:.3g}", l_tm=f"{sums['paper_l_tm']:.3g}")
-            _save_run_checkpoint(
-                ckpt, config, tm, epoch + 1, opt.state_dict(), sched, gen, loss_ref, data_sha256, depends
-            )
-    tm.eval()
+    def epoch(e: int) -> dict:
+        perm = torch.randperm(n, generator=gen)
+        sums: dict[str, float] = {}
+        for i in range(0, n, config.batch_size):
+            idx = perm[i : i + config.batch_size]
+            wp, (loss, terms) = _step_loss(tm, fm, im, train.start[idx], train.goal[idx], config.loss)
+            far = wp.detach().abs().amax()
+            if not bool(torch.isfinite(loss) & (far <= bound)):  # one check per step
+                raise TrainingDivergedError(
+                    f"TM training diverged at epoch {e + 1} (loss {loss.item():.4g}, a waypoint "
+                    f"{far.item():.4g} m from the base, beyond {bound:.3g} m = {WAYPOINT_BOUND_REACHES:g} "
+                    f"× the arm's reach); lower the learning rate"
+                )
+            loop.step(loss)
+            w = idx.numel() / n
+            for k, v in {"loss": loss.detach(), **terms}.items():
+                sums[k] = sums.get(k, 0.0) + float(v) * w
+        loop.check(sums["loss"])
+        record = {f"train/{k}": v for k, v in sums.items()}
+        if val is not None:
+            record.update({f"val/{k}": v for k, v in evaluate_tm(tm, fm, im, val, config.loss).items()})
+        return record
+
+    loop.run(epoch)
     return tm
 
 
@@ -353,34 +311,16 @@ def _learned_dependencies(config: TMTrainConfig, kinds=("fm", "im")) -> dict[str
 
 
 def _save_run_checkpoint(
-    path: Path,
-    config: TMTrainConfig,
-    tm: TrajectoryModel,
-    epoch: int,
-    optimizer_state: dict,
-    sched,
-    gen: torch.Generator,
-    loss_ref: float | None,
-    data_sha256: str,
-    depends: dict,
+    path: Path, config: TMTrainConfig, tm: TrajectoryModel, extra: dict, data_sha256: str, depends: dict
 ) -> None:
-    """A training run's ``tm.pt``: the model's config and weights, and everything a resume needs."""
+    """A training run's ``tm.pt``: the model's config and weights, and the training state ``extra``."""
     save_checkpoint(
         path,
         kind="tm",
         robot=load_robot(config.robot).name,
         config=_checkpoint_config(config),
         state_dict=tm.state_dict(),
-        extra={
-            "epoch": epoch,
-            "optimizer": optimizer_state,
-            "scheduler": sched.state_dict(),
-            "generator": gen.get_state(),
-            "torch_rng": torch.get_rng_state(),
-            "loss_ref": loss_ref,
-            "data_sha256": data_sha256,
-            "train_config": _training_record(config),
-        },
+        extra={**extra, "data_sha256": data_sha256},
         depends=depends,
     )
 
@@ -425,21 +365,27 @@ def _check_pairs(pairs: EndpointPairs, what: str, robot: Robot) -> None:
             raise DatasetError(f"the {what}' {name} states hold NaN or infinity; make the endpoints again")
 
 
-def _resume_differences(payload: dict, config: TMTrainConfig, depends: dict, data_sha256: str) -> list[str]:
-    """What differs between checkpoint ``payload`` and the run about to resume from it."""
-    recorded_cfg = _recorded_training(payload) or {}
-    diffs = diff_configs({**recorded_cfg, "models_dir": None}, _training_record(config), ignore=("progress",))
-    if config.schedule == "constant" and recorded_cfg.get("schedule") == "constant":
-        diffs = [d for d in diffs if not d.startswith("epochs:")]  # the rate does not depend on it
-    recorded = payload.get("depends") or {}
-    for kind, (path, sha) in depends.items():
+def _load_run(path: Path, robot: str, depends: dict, data_sha256: str) -> dict:
+    """A run's ``tm.pt`` to resume, its training config where every trainer keeps it; it must have been
+    trained through the same learned FM/IM (``depends``) on the same pairs (:class:`CheckpointError`)."""
+    payload = load_checkpoint(path, kind="tm", robot=robot)
+    diffs, recorded = [], payload.get("depends") or {}
+    for kind, (dep, sha) in depends.items():
         old = (recorded.get(kind) or {}).get("sha256")
         if old is not None and old != sha:
-            diffs.append(f"{kind} {path}: sha256 {old[:16]}… → {sha[:16]}… (another model)")
+            diffs.append(f"{kind} {dep}: sha256 {old[:16]}… → {sha[:16]}… (another model)")
     old_data = payload["extra"].get("data_sha256")
     if old_data is not None and old_data != data_sha256:
         diffs.append(f"training pairs: sha256 {old_data[:16]}… → {data_sha256[:16]}…")
-    return diffs
+    if diffs:
+        raise CheckpointError(
+            f"{path} was trained with another configuration ({'; '.join(diffs)}); resume with the same "
+            "models and pairs, or train into a new run directory"
+        )
+    training = _recorded_training(payload)
+    if training is not None:
+        payload["extra"]["train_config"] = {**training, "models_dir": None}
+    return payload
 
 
 def load_tm(

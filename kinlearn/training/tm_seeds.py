@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -25,18 +26,29 @@ from tqdm.auto import tqdm
 
 from ..data.endpoints import EndpointPairs
 from ..errors import CheckpointError, ConfigError, TrainingDivergedError
-from ..io import content_sha256, load_checkpoint, remove_stale_tmp, write_json
+from ..io import content_sha256, remove_stale_tmp, write_json
 from ..models.rollout import rectify, tm_loss
 from ..models.trajectory import TMConfig, TrajectoryModel
-from .loop import RunLogger, _check_divergence, _truncate_log, make_optimizer, make_schedule, seed_everything
+from .loop import (
+    RunLogger,
+    _check_divergence,
+    _config_differences,
+    _stored_step,
+    _training_state,
+    _truncate_log,
+    make_optimizer,
+    make_schedule,
+    seed_everything,
+)
 from .tm import (
     WAYPOINT_BOUND_REACHES,
     TMTrainConfig,
     _checked_robot,
     _learned_dependencies,
-    _resume_differences,
+    _load_run,
     _save_run_checkpoint,
     _train_config_dict,
+    _training_record,
     arm_reach,
     build_fm_im,
 )
@@ -133,6 +145,7 @@ def train_tm_seeds(
     _check_lockstep(config.tm)
     robot = _checked_robot(config, train)
     configs = [dataclasses.replace(config, seed=s) for s in seeds]
+    records = [_training_record(c) for c in configs]  # as each run's checkpoint records its training
     fm, im = build_fm_im(config)
     depends = _learned_dependencies(config)
     for m in (fm, im):
@@ -152,7 +165,7 @@ def train_tm_seeds(
     data_sha256 = content_sha256((train.start, train.goal))
     bound = WAYPOINT_BOUND_REACHES * arm_reach(robot)
 
-    start_epoch, loss_ref = 0, [None] * M
+    start_epoch, loss_ref, histories = 0, [None] * M, [[] for _ in range(M)]
     dead: dict[int, TrainingDivergedError] = {}
     for i, d in enumerate(run_dirs):
         remove_stale_tmp(d, "tm.pt")
@@ -160,16 +173,15 @@ def train_tm_seeds(
             dead[i] = TrainingDivergedError(json.loads((d / "diverged.json").read_text())["reason"])
     live_ckpts = [i for i in range(len(seeds)) if i not in dead and (run_dirs[i] / "tm.pt").exists()]
     if resume and live_ckpts:
-        payloads = {
-            i: load_checkpoint(run_dirs[i] / "tm.pt", kind="tm", robot=robot.name) for i in live_ckpts
-        }
+        payloads = {i: _load_run(run_dirs[i] / "tm.pt", robot.name, depends, data_sha256) for i in live_ckpts}
+        epochs = set()
         for i, p in payloads.items():
-            diffs = _resume_differences(p, configs[i], depends, data_sha256)
+            epochs.add(_stored_step(run_dirs[i] / "tm.pt", p["extra"]))
+            diffs = _config_differences(p["extra"].get("train_config", {}), records[i])
             if diffs:
                 raise CheckpointError(
                     f"{run_dirs[i] / 'tm.pt'} was trained with another configuration ({'; '.join(diffs)})"
                 )
-        epochs = {p["extra"]["epoch"] for p in payloads.values()}
         if len(epochs) != 1 or len(payloads) != len(seeds) - len(dead):
             raise CheckpointError(
                 "the seeds' runs stopped at different epochs; resume them one by one with train_tm"
@@ -179,6 +191,7 @@ def train_tm_seeds(
             members[i].load_state_dict(p["state_dict"])
             gens[i].set_state(p["extra"]["generator"])
             loss_ref[i] = p["extra"].get("loss_ref")
+            histories[i] = list(p["extra"].get("history", []))
         states = [payloads[i]["extra"]["optimizer"] if i in payloads else empty for i in range(len(seeds))]
         opt.load_state_dict(_joined_optimizer_state(states, n_params))
         sched.load_state_dict(payloads[live_ckpts[0]]["extra"]["scheduler"])
@@ -191,7 +204,7 @@ def train_tm_seeds(
     per_member_loss = torch.func.vmap(
         lambda wp, rect, s0, sT: tm_loss(wp, rect, s0, sT, members[0].layout, config.loss)
     )
-    loggers = [RunLogger(d) for d in run_dirs]
+    loggers, t0 = [RunLogger(d) for d in run_dirs], time.perf_counter()
     try:
         bar = tqdm(
             range(start_epoch, config.epochs),
@@ -246,33 +259,27 @@ def train_tm_seeds(
                 for j in keep:
                     for name, v in zip(("loss", *terms), vals[j], strict=True):
                         sums[run[j]][name] = sums[run[j]].get(name, 0.0) + v * w
-            state = opt.state_dict()
+            state, where = opt.state_dict(), f"TM training diverged at epoch {epoch + 1}"
             for k in range(M):
                 if k in dead:
                     continue
                 try:
-                    _check_divergence(sums[k]["loss"], loss_ref[k], epoch, what="TM training")
+                    _check_divergence(sums[k]["loss"], loss_ref[k], where)
                 except TrainingDivergedError as exc:
                     dead[k] = exc
                     continue
-                loggers[k].log(
-                    {
-                        "epoch": epoch + 1,
-                        "lr": sched.get_last_lr()[0],
-                        **{f"train/{name}": v for name, v in sums[k].items()},
-                    }
-                )
+                record = {
+                    "epoch": epoch + 1,
+                    "lr": sched.get_last_lr()[0],
+                    "seconds": time.perf_counter() - t0,
+                }
+                record.update({f"train/{name}": v for name, v in sums[k].items()})
+                loggers[k].log(record)
+                histories[k].append(record)
+                member = (_member_optimizer_state(state, k, n_params), sched, gens[k], loss_ref[k])
+                extra = _training_state(epoch + 1, "epoch", *member, records[k], histories[k])
                 _save_run_checkpoint(
-                    run_dirs[k] / "tm.pt",
-                    configs[k],
-                    members[k],
-                    epoch + 1,
-                    _member_optimizer_state(state, k, n_params),
-                    sched,
-                    gens[k],
-                    loss_ref[k],
-                    data_sha256,
-                    depends,
+                    run_dirs[k] / "tm.pt", configs[k], members[k], extra, data_sha256, depends
                 )
             for k, exc in dead.items():
                 if not (run_dirs[k] / "diverged.json").exists():
