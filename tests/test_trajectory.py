@@ -177,8 +177,7 @@ def test_resume_continues_from_saved_epoch(pairs, tmp_path):
     three = _tiny(schedule="constant")
     full = train_tm(three, tmp_path / "full", pairs, progress=False)
     # An interrupted run: the checkpoint of a 3-epoch run as it stood after epoch 2.
-    two = _tiny(schedule="constant")
-    two.epochs = 2
+    two = dataclasses.replace(_tiny(schedule="constant"), epochs=2)
     train_tm(two, tmp_path / "cut", pairs, progress=False)
     resumed = train_tm(three, tmp_path / "cut", pairs, progress=False)
     lines = (tmp_path / "cut" / "metrics.jsonl").read_text().splitlines()

@@ -83,7 +83,7 @@ __all__ = [
 DIVERGENCE_FACTOR = 1e6
 
 
-@dataclass
+@dataclass(frozen=True)
 class OptimConfig:
     """An optimiser. ``alpha`` is RMSprop's smoothing constant γ; ``momentum`` applies to RMSprop and SGD."""
 
@@ -406,7 +406,7 @@ class TrainingLoop:
         return self.history
 
 
-@dataclass
+@dataclass(frozen=True)
 class TrainConfig:
     """A supervised training run.
 
@@ -433,7 +433,7 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         if isinstance(self.optim, dict):
-            self.optim = OptimConfig(**self.optim)
+            object.__setattr__(self, "optim", OptimConfig(**self.optim))  # frozen: set once, here
         if int(self.epochs) < 1 or int(self.batch_size) < 1 or int(self.eval_batch_size) < 1:
             raise ConfigError(
                 f"epochs, batch_size and eval_batch_size must be ≥ 1, got {self.epochs}, "

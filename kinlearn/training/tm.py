@@ -65,7 +65,7 @@ def arm_reach(robot: Robot) -> float:
     return links + travel + float(np.linalg.norm(robot.T_tip[:3, 3]))
 
 
-@dataclass
+@dataclass(frozen=True)
 class TMTrainConfig:
     """Everything that decides a TM training run; saved as the run's ``config.json``.
 
