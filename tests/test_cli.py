@@ -8,7 +8,8 @@ import pytest
 import torch
 
 from kinlearn import ConfigError, DatasetError
-from kinlearn.cli.main import add_command, build_parser, main, register_subcommand
+from kinlearn.cli.common import add_command, register_subcommand
+from kinlearn.cli.main import build_parser, main
 from kinlearn.data.babbling import BabblingConfig, load_transitions
 from kinlearn.data.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
 from kinlearn.models.forward_inverse import LearnedFM, LearnedIM, load_fm, load_im
@@ -130,7 +131,7 @@ def test_subcommands_can_be_added():
         assert main(["hello", "--robot", "panda", "--run-dir", "unused"]) == 0
         assert seen == ["panda"]
     finally:
-        from kinlearn.cli import main as cli
+        from kinlearn.cli import common as cli
 
         cli._SUBCOMMANDS.remove(add)
 
@@ -424,6 +425,6 @@ def test_interrupted_commands_exit_with_130(capsys):
         assert main(["stop"]) == 130
         assert "interrupted" in capsys.readouterr().err
     finally:
-        from kinlearn.cli import main as cli
+        from kinlearn.cli import common as cli
 
         cli._SUBCOMMANDS.remove(add)

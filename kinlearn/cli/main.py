@@ -63,24 +63,9 @@ from .common import (
     number_type,
     open_command_run,
     register_subcommand,
-    settle_run_dir,
 )
 
-__all__ = [
-    "NONNEGATIVE_FLOAT",
-    "NONNEGATIVE_INT",
-    "POSITIVE_FLOAT",
-    "POSITIVE_INT",
-    "PROBABILITY",
-    "add_command",
-    "add_run_options",
-    "build_parser",
-    "main",
-    "number_type",
-    "open_command_run",
-    "register_subcommand",
-    "settle_run_dir",
-]
+__all__ = ["SUBCOMMAND_MODULES", "build_parser", "main"]
 
 #: Transitions babbled for training when no ``--data`` is given, per preset.
 DEFAULT_TRANSITIONS = {"paper": 500_000, "improved": 500_000, "tiny": 20_000}

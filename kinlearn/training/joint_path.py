@@ -26,7 +26,6 @@ for it. With the analytic FM (``fm="analytic"``) the same loss runs through the 
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 from dataclasses import dataclass, field
@@ -40,10 +39,9 @@ from ..body.robot import Robot, load_robot
 from ..body.state import straight_line
 from ..data.endpoints import workspace_box
 from ..errors import ConfigError
-from ..io import load_checkpoint, write_json
 from ..models.forward_inverse import AnalyticFM, ForwardModel, load_fm
 from ..models.joint_path import JointPathConfig, JointPathModel, densify, save_path_model
-from .loop import OptimConfig, TrainingLoop, seed_everything
+from .loop import iteration_loop, seed_everything
 
 __all__ = ["PathLossConfig", "PathTrainConfig", "build_fm", "path_loss", "train_path_model"]
 
@@ -243,29 +241,21 @@ def train_path_model(
     for k in (0, S):  # the joints of start and goal; the end effector follows from them
         box_lo[k : k + robot.dof], box_hi[k : k + robot.dof] = lo, hi
     tm.fit_normalization(s0, sT, domain=(box_lo, box_hi))
-    run_dir.mkdir(parents=True, exist_ok=True)
-    cfg_dict = copy.deepcopy(config.to_dict())
-    if write_config and not (resume and (run_dir / "tm.pt").exists()):
-        write_json(run_dir / "config.json", cfg_dict)
-
-    loop = TrainingLoop(
+    loop = iteration_loop(
         tm,
-        OptimConfig("adam", config.lr),
-        total=config.iterations,
+        config,
+        run_dir,
+        "tm.pt",
+        lambda path, extra: save_path_model(tm, path, depends=depends, extra=extra),
+        kind=JointPathModel.kind,
+        robot=robot.name,
         generator=gen,
-        train_config=cfg_dict,
-        schedule="cosine",
-        unit="iteration",
-        record_every=config.checkpoint_every,
-        run_dir=run_dir,
-        checkpoint=run_dir / "tm.pt",
-        save=lambda path, extra: save_path_model(tm, path, depends=depends, extra=extra),
+        resume=resume,
+        write_config=write_config,
         desc="joint-path TM training",
         progress=progress,
         postfix=("train/loss", "train/length_ratio"),
     )
-    if resume:
-        loop.resume(lambda path: load_checkpoint(path, kind=JointPathModel.kind, robot=robot.name))
 
     def step(_: int) -> dict[str, float]:
         s0, sT = _sample_problems(robot, lo, hi, config.batch_size, gen, kin)

@@ -20,6 +20,7 @@ epoch's mean loss above :data:`DIVERGENCE_FACTOR` times the loss of the run's fi
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import math
@@ -40,7 +41,7 @@ from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
 from ..data.babbling import BabblingConfig, Transitions, babble
 from ..errors import CheckpointError, ConfigError, DatasetError, TrainingDivergedError
-from ..io import atomic_write, content_sha256, load_checkpoint, remove_stale_tmp
+from ..io import atomic_write, content_sha256, load_checkpoint, remove_stale_tmp, write_json
 from ..models.forward_inverse import (
     FMConfig,
     ForwardModel,
@@ -64,6 +65,7 @@ __all__ = [
     "TrainingLoop",
     "fit",
     "format_validation_table",
+    "iteration_loop",
     "make_optimizer",
     "make_schedule",
     "seed_everything",
@@ -471,6 +473,52 @@ class TrainConfig:
 
 def _loss_by_method(model: nn.Module, *batch: torch.Tensor) -> torch.Tensor:
     return model.training_loss(*batch)
+
+
+def iteration_loop(
+    model: nn.Module,
+    config,
+    run_dir: Path,
+    checkpoint: str,
+    save: Callable[[Path, dict], object],
+    *,
+    kind: str,
+    robot: str,
+    generator: torch.Generator,
+    resume: bool,
+    write_config: bool,
+    desc: str,
+    progress: bool,
+    postfix: Sequence[str],
+) -> TrainingLoop:
+    """The :class:`TrainingLoop` of a self-supervised trainer that draws fresh problems every iteration
+    (``config``: ``lr``, ``iterations``, ``checkpoint_every``, ``to_dict()``): Adam at ``config.lr`` with
+    cosine decay over ``config.iterations``, a record and a checkpoint ``run_dir/checkpoint`` every
+    ``config.checkpoint_every`` iterations. Writes ``run_dir/config.json`` (unless ``write_config`` is
+    False or a run is resumed) and, with ``resume``, continues from the checkpoint (``kind``, ``robot``)."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    cfg_dict = copy.deepcopy(config.to_dict())
+    if write_config and not (resume and (run_dir / checkpoint).exists()):
+        write_json(run_dir / "config.json", cfg_dict)
+    loop = TrainingLoop(
+        model,
+        OptimConfig("adam", config.lr),
+        total=config.iterations,
+        generator=generator,
+        train_config=cfg_dict,
+        schedule="cosine",
+        unit="iteration",
+        record_every=config.checkpoint_every,
+        run_dir=run_dir,
+        checkpoint=run_dir / checkpoint,
+        save=save,
+        desc=desc,
+        progress=progress,
+        postfix=postfix,
+    )
+    if resume:
+        loop.resume(lambda path: load_checkpoint(path, kind=kind, robot=robot))
+    return loop
 
 
 def fit(

@@ -23,7 +23,6 @@ other trainers.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 from dataclasses import dataclass, field
@@ -37,7 +36,6 @@ from ..body.robot import Robot, load_robot
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
 from ..errors import ConfigError
-from ..io import load_checkpoint, write_json
 from ..models.obstacle_path import (
     ObstaclePathConfig,
     ObstaclePathModel,
@@ -45,7 +43,7 @@ from ..models.obstacle_path import (
     save_obstacle_model,
     scene_primitives,
 )
-from .loop import OptimConfig, TrainingLoop, seed_everything
+from .loop import iteration_loop, seed_everything
 
 __all__ = [
     "TRAINING_SEEDS",
@@ -328,29 +326,21 @@ def train_obstacle_model(
             mask_all.repeat(2, 1),
             floor_all.repeat(2, 1),
         )
-    run_dir.mkdir(parents=True, exist_ok=True)
-    cfg_dict = copy.deepcopy(config.to_dict())
-    if write_config and not (resume and (run_dir / "tm_obstacles.pt").exists()):
-        write_json(run_dir / "config.json", cfg_dict)
-
-    loop = TrainingLoop(
+    loop = iteration_loop(
         tm,
-        OptimConfig("adam", config.lr),
-        total=config.iterations,
+        config,
+        run_dir,
+        "tm_obstacles.pt",
+        lambda path, extra: save_obstacle_model(tm, path, extra=extra),
+        kind=ObstaclePathModel.kind,
+        robot=robot.name,
         generator=gen,
-        train_config=cfg_dict,
-        schedule="cosine",
-        unit="iteration",
-        record_every=config.checkpoint_every,
-        run_dir=run_dir,
-        checkpoint=run_dir / "tm_obstacles.pt",
-        save=lambda path, extra: save_obstacle_model(tm, path, extra=extra),
+        resume=resume,
+        write_config=write_config,
         desc="obstacle TM training",
         progress=progress,
         postfix=("train/loss", "train/best_free"),
     )
-    if resume:
-        loop.resume(lambda path: load_checkpoint(path, kind=ObstaclePathModel.kind, robot=robot.name))
 
     def step(_: int) -> dict[str, float]:
         idx = torch.randint(n_pool, (config.batch_size,), generator=gen)
