@@ -66,8 +66,9 @@ from .planning.baselines import (
 from .planning.plan import Plan, PlannerLike, Tolerance, judge
 from .planning.planner import Planner, plan
 from .planning.timing import TimedTrajectory, time_parameterize
+from .training.forward_inverse import train_config, train_fm, train_im, validate_models
 from .training.joint_path import PathLossConfig, PathTrainConfig, train_path_model
-from .training.loop import OptimConfig, TrainConfig, train_config, train_fm, train_im, validate_models
+from .training.loop import OptimConfig, TrainConfig
 from .training.obstacle_path import ObstacleLossConfig, ObstacleTrainConfig, train_obstacle_model
 from .training.tm import TMTrainConfig, load_tm, tm_preset, train_tm
 

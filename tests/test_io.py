@@ -27,7 +27,7 @@ from kinlearn.io import (
 )
 from kinlearn.models.forward_inverse import LearnedFM, fm_config, im_config, load_fm
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
-from kinlearn.training.loop import train_config, train_fm, train_im
+from kinlearn.training.forward_inverse import train_config, train_fm, train_im
 from kinlearn.training.tm import build_fm_im, load_tm, tm_preset, train_tm
 
 

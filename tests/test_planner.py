@@ -11,7 +11,7 @@ from kinlearn.errors import CheckpointError, ConfigError, StateError
 from kinlearn.models.forward_inverse import AnalyticFM, AnalyticIM, fm_config, im_config
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
-from kinlearn.training.loop import train_config, train_fm, train_im
+from kinlearn.training.forward_inverse import train_config, train_fm, train_im
 from kinlearn.training.tm import tm_preset, train_tm
 
 

@@ -21,20 +21,15 @@ from kinlearn.models.forward_inverse import (
     load_fm,
     load_im,
 )
-from kinlearn.training.loop import (
-    OptimConfig,
-    RunLogger,
-    TrainConfig,
-    fit,
+from kinlearn.training.forward_inverse import (
     format_validation_table,
-    make_optimizer,
-    seed_everything,
     train_config,
     train_fm,
     train_im,
     train_im_distal,
     validate_models,
 )
+from kinlearn.training.loop import OptimConfig, RunLogger, TrainConfig, fit, make_optimizer, seed_everything
 
 
 @pytest.fixture(scope="module")

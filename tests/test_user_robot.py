@@ -19,8 +19,8 @@ from kinlearn.errors import (
 from kinlearn.evaluation.workspace import heldout_pairs
 from kinlearn.models.forward_inverse import fm_config, im_config, load_fm
 from kinlearn.planning.planner import Planner
+from kinlearn.training.forward_inverse import train_config, train_fm, train_im
 from kinlearn.training.joint_path import PathTrainConfig, train_path_model
-from kinlearn.training.loop import train_config, train_fm, train_im
 from kinlearn.training.tm import tm_preset, train_tm
 
 #: A 4-joint arm: a base yaw, then three pitch joints, links of 0.30, 0.25, 0.20 m and a 0.10 m tool.

@@ -40,7 +40,7 @@ from ..models.forward_inverse import (
     load_fm,
     load_im,
 )
-from ..training.loop import (
+from ..training.forward_inverse import (
     TrainResult,
     format_validation_table,
     train_config,

@@ -33,8 +33,8 @@ from ..io import write_json
 from ..models.forward_inverse import fm_config, im_config
 from ..planning.baselines import cartesian_dls, joint_interpolation
 from ..planning.planner import Planner
+from ..training.forward_inverse import train_config, train_fm, train_im, train_im_distal, validate_models
 from ..training.imitation import train_imitation
-from ..training.loop import train_config, train_fm, train_im, train_im_distal, validate_models
 from ..training.tm import TMTrainConfig, tm_preset, train_tm
 from ..training.tm_seeds import train_tm_seeds
 from .metrics import METRICS, PAPER_TABLE2, TABLE2_COLUMNS, format_table, plan_metrics, summarize

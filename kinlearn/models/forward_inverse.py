@@ -24,7 +24,7 @@ Analytic models (for the ablation): :class:`AnalyticFM` (θ' = θ + a, ef' = FK(
 :class:`AnalyticIM` (damped-least-squares steps toward the target, kept within the joint limits).
 
 Checkpoints: :func:`save_model`, :func:`load_fm`, :func:`load_im` (weights + config + robot + format
-version, via :mod:`kinlearn.io`). :func:`kinlearn.training.loop.validate_models` measures models against
+version, via :mod:`kinlearn.io`). :func:`kinlearn.training.forward_inverse.validate_models` measures models against
 the analytic robot on fresh babbling data.
 """
 
