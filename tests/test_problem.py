@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 import torch
 
@@ -175,3 +177,23 @@ def test_judge_refuses_paths_that_do_not_fit(robot, joints):
     found = torch.tensor([True, False, True, True])
     plan = judge(p, torch.stack((p.start_joints, p.goal_joints), -2), found=found)
     assert plan.success.tolist() == [True, False, True, True]
+
+
+def test_problems_from_endpoint_pairs_and_obstacle_sets(robot):
+    from kinlearn.collision.problems import ProblemSet
+    from kinlearn.data.endpoints import EndpointConfig, make_endpoints
+
+    pairs = make_endpoints(EndpointConfig(robot="iiwa14", n=8, seed=3))
+    p = Problem.from_pairs(pairs)
+    assert p.goal_kind == "state" and p.batch_shape == (8,) and p.robot.name == "iiwa14"
+    assert torch.equal(p.start, pairs.start.double())
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "obstacle_problems_heldout.npz"
+    sets = ProblemSet.load(path)[:4]
+    q = Problem.from_problem_set(sets)
+    assert q.batch_shape == (4,) and tuple(q.obstacles.batch_shape) == (4,)
+    assert torch.equal(q.start_joints, sets.start)
+    # The learned planner and a baseline plan the same obstacle problems; both say whether they collide.
+    a = Planner.default("iiwa14").plan(q)
+    b = JointInterpolation(robot).plan(q)
+    assert a.collision_free.shape == b.collision_free.shape == (4,)
+    assert bool((b.collision_free == ~sets.hard).all())  # "hard": the straight joint line collides

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from ..body.kinematics import kinematics
-from ..body.robot import Robot
+from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import check_finite, check_real_dtype
 from ..collision.scene import Scene, as_scene
@@ -188,6 +188,17 @@ class Problem:
         """What a trajectory model reads of the problems: ``[s(0), s(T)]`` ``(..., 2 (dof + 3))``."""
         self.require("state", "a trajectory model's input")
         return torch.cat((self.start, self.goal), dim=-1)
+
+    @classmethod
+    def from_pairs(cls, pairs) -> Problem:
+        """The problems of endpoint pairs (:class:`~kinlearn.data.endpoints.EndpointPairs`: goal states)."""
+        return cls.from_states(load_robot(pairs.config.robot), pairs.start, pairs.goal)
+
+    @classmethod
+    def from_problem_set(cls, problems) -> Problem:
+        """The problems of an obstacle benchmark set (:class:`~kinlearn.collision.problems.ProblemSet`:
+        start and goal joints, one scene each), checked like :meth:`make`."""
+        return cls.make(load_robot(problems.robot), problems.start, problems.goal, obstacles=problems.scene)
 
     @classmethod
     def from_states(cls, robot: Robot, start: torch.Tensor, goal: torch.Tensor, obstacles=None) -> Problem:

@@ -62,7 +62,7 @@ def evaluate_workspace(
         if not isinstance(planner, PlannerLike):
             raise ConfigError(f"planner {name!r} has no plan(problem) method (the planner protocol)")
     start, goal = pairs.start.double(), pairs.goal.double()
-    problems = Problem.from_states(robot, start, goal)
+    problems = Problem.from_pairs(pairs)
     if goal_kind == "position":
         problems = problems.position_goals()
     lerp_len = dense_path_length(robot, straight_line(start[:, : robot.dof], goal[:, : robot.dof], 11))
