@@ -13,7 +13,11 @@ so the same metrics (:mod:`kinlearn.evaluation.metrics`) apply to all of them:
   position, not necessarily at θ(T).
 - :func:`rrt_connect`: OMPL's RRT-Connect in joint space (optional dependency ``ompl``).
 
-None of them knows about obstacles; neither does the learned planner.
+None of them knows about obstacles (for those see :mod:`kinlearn.planning.obstacle_baselines`). Each also
+comes as a planner of the planner protocol (:class:`~kinlearn.planning.plan.PlannerLike`):
+:class:`JointInterpolation`, :class:`CartesianDLS` and :class:`RRTConnect` take a
+:class:`~kinlearn.data.problem.Problem` and return a :class:`~kinlearn.planning.plan.Plan` judged by
+:func:`~kinlearn.planning.plan.judge` (among obstacles, a plan says whether it collides).
 """
 
 from __future__ import annotations
