@@ -100,3 +100,12 @@ def test_check_joints():
         r.check_joints(torch.zeros(6))
     with pytest.raises(NonFiniteError):
         r.check_joints(torch.full((7,), math.nan))
+
+
+def test_within_limits_per_configuration():
+    robot = load_robot("iiwa14")
+    lo, hi = robot.limits(torch.float64)
+    q = torch.stack((lo, hi, hi + 1e-7, hi + 1e-3, torch.full_like(lo, float("nan"))))
+    assert robot.within_limits(q).tolist() == [True, True, True, False, False]
+    assert robot.within_limits(q, tol=1e-2).tolist() == [True, True, True, True, False]
+    assert robot.within_limits(q.reshape(1, 5, -1)).shape == (1, 5)

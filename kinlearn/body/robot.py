@@ -241,6 +241,12 @@ class Robot:
         u = torch.rand((*shape, self.dof), generator=generator, dtype=dtype, device=device)
         return lo + (hi - lo) * u
 
+    def within_limits(self, q: torch.Tensor, tol: float = 1e-6) -> torch.Tensor:
+        """``(...)`` bool: where configurations ``q (..., dof)`` stay within the position limits to ``tol``
+        rad (NaN counts as outside). A joint path is within them where ``within_limits(path).all(-1)``."""
+        lo, hi = self.limits(q.dtype, q.device)
+        return ((q >= lo - tol) & (q <= hi + tol)).all(-1)
+
     def check_joints(self, q: torch.Tensor, tol: float = 1e-6, what: str = "joint angles") -> None:
         """Raise :class:`JointLimitError` where ``q`` leaves the position limits by more than ``tol``."""
         check_last_dim(q, self.dof, what)

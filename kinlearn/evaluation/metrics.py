@@ -197,8 +197,7 @@ def plan_metrics(
     executed = polyline_metrics(ef, prefix="executed_")
     goal_error = torch.linalg.vector_norm(ef[..., -1, :] - ef_goal.double(), dim=-1)
     joint_goal_error = (plan.joints[..., -1, :] - plan.goal[..., : robot.dof]).double().abs().amax(-1)
-    lo, hi = robot.limits(plan.joints.dtype, plan.joints.device)
-    outside = (plan.joints < lo - limit_tol) | (plan.joints > hi + limit_tol)
+    within = robot.within_limits(plan.joints, limit_tol).all(-1)
     extra = {
         "goal_error": goal_error,
         "success": (goal_error <= success_radius).double(),
@@ -214,7 +213,7 @@ def plan_metrics(
         "executed_max_spacing_deviation": executed["executed_max_spacing_deviation"],
         "executed_mean_angle": executed["executed_mean_angle"],
         "executed_min_angle": executed["executed_min_angle"],
-        "limit_violation": outside.flatten(-2).any(-1).double(),
+        "limit_violation": (~within).double(),
         "sharp_turn": (out["min_angle"] < SHARP_ANGLE).double(),
         "sharp_turn_paper": (out["min_angle"] < PAPER_MIN_ANGLE).double(),
     }

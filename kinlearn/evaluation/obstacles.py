@@ -182,8 +182,7 @@ def obstacle_outcome(
     joint_error = (padded[:, -1] - sT).abs().amax(-1)
     goal_reached = (goal_error <= tolerance.position) & (joint_error <= tolerance.joints)
     starts = (padded[:, 0] - s0).abs().amax(-1) <= START_TOLERANCE
-    lo, hi = robot.limits(_F64)
-    within = ((padded >= lo - LIMIT_TOLERANCE) & (padded <= hi + LIMIT_TOLERANCE)).flatten(1).all(-1)
+    within = robot.within_limits(padded, LIMIT_TOLERANCE).all(-1)
     sc = scene[idx] if len(scene.batch_shape) else scene
     check = check_path(body, padded, sc, max_travel=max_travel)
     free = check.collision_free.cpu()

@@ -32,7 +32,7 @@ from ..body.kinematics import dls_step, kinematics
 from ..body.robot import Robot
 from ..body.state import StateLayout, straight_line
 from ..checks import check_finite, check_last_dim
-from ..data.problem import Problem
+from ..data.problem import LIMIT_TOLERANCE, Problem
 from ..errors import ConfigError, MissingDependencyError, PlanningError, ShapeError
 from .plan import Plan, judge
 
@@ -48,6 +48,20 @@ __all__ = [
 ]
 
 
+def _check_steps(steps) -> None:
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 2:
+        raise ConfigError(
+            f"steps must be an integer >= 2 (at least one intermediate waypoint), got {steps!r}"
+        )
+
+
+def _check_dls(iterations, damping) -> None:
+    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+        raise ConfigError(f"iterations must be an integer >= 1, got {iterations!r}")
+    if not damping > 0.0:
+        raise ConfigError(f"damping must be > 0 (metres), got {damping!r}")
+
+
 def _endpoints(robot: Robot, start: torch.Tensor, goal: torch.Tensor, steps: int) -> StateLayout:
     layout = StateLayout(robot.dof)
     check_last_dim(start, layout.size, "start states")
@@ -58,10 +72,7 @@ def _endpoints(robot: Robot, start: torch.Tensor, goal: torch.Tensor, steps: int
         )
     check_finite(start, "start states")
     check_finite(goal, "goal states")
-    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 2:
-        raise ConfigError(
-            f"steps must be an integer >= 2 (at least one intermediate waypoint), got {steps!r}"
-        )
+    _check_steps(steps)
     return layout
 
 
@@ -69,8 +80,7 @@ def _plan_from_joints(robot: Robot, start, goal, joints: torch.Tensor, waypoints
     """A Plan whose joint path is ``joints (..., T+1, dof)``, judged against the goal state (joints and
     end effector); waypoints default to its interior FK points."""
     ef = kinematics(robot, "fast").position(joints, validate=False)
-    lo, hi = robot.limits(joints.dtype, joints.device)
-    within = ((joints >= lo - 1e-6) & (joints <= hi + 1e-6)).flatten(-2).all(-1)
+    within = robot.within_limits(joints, LIMIT_TOLERANCE).all(-1)
     return Plan.from_joints(goal, joints, ef, waypoints=waypoints, within_limits=within, robot=robot.name)
 
 
@@ -111,10 +121,7 @@ def cartesian_dls(
     goal state is not used: the path ends at whatever IK solution the warm start leads to.
     """
     layout = _endpoints(robot, start, goal, steps)
-    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
-        raise ConfigError(f"iterations must be an integer >= 1, got {iterations!r}")
-    if not damping > 0.0:
-        raise ConfigError(f"damping must be > 0 (metres), got {damping!r}")
+    _check_dls(iterations, damping)
     theta, ef0 = layout.split(start)
     _, efT = layout.split(goal)
     joints, line = _dls_path(robot, theta, ef0, efT, steps, iterations, damping)
@@ -290,13 +297,6 @@ def _check_problem(planner, problem: Problem, who: str) -> None:
         )
 
 
-def _check_steps(steps) -> None:
-    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 2:
-        raise ConfigError(
-            f"steps must be an integer >= 2 (at least one intermediate waypoint), got {steps!r}"
-        )
-
-
 @dataclass(frozen=True)
 class JointInterpolation:
     """:func:`joint_interpolation` as a planner (:class:`~kinlearn.planning.plan.PlannerLike`): goal states
@@ -327,10 +327,7 @@ class CartesianDLS:
 
     def __post_init__(self) -> None:
         _check_steps(self.steps)
-        if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or self.iterations < 1:
-            raise ConfigError(f"iterations must be an integer >= 1, got {self.iterations!r}")
-        if not self.damping > 0.0:
-            raise ConfigError(f"damping must be > 0 (metres), got {self.damping!r}")
+        _check_dls(self.iterations, self.damping)
 
     @torch.no_grad()
     def plan(self, problem: Problem) -> Plan:

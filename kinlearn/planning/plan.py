@@ -304,8 +304,7 @@ def judge(
     check_finite(joints, "joint paths")
     joints = joints.detach().double()
     ef = kinematics(robot, "fast").position(joints, validate=False)
-    lo, hi = robot.limits(joints.dtype, joints.device)
-    within = ((joints >= lo - LIMIT_TOLERANCE) & (joints <= hi + LIMIT_TOLERANCE)).flatten(-2).all(-1)
+    within = robot.within_limits(joints, LIMIT_TOLERANCE).all(-1)
     if found is not None:
         within = within & found.to(within.device)
     free = None
