@@ -15,7 +15,10 @@ from kinlearn.data.babbling import BabblingConfig, babble
 from kinlearn.models.forward_inverse import (
     AnalyticFM,
     AnalyticIM,
+    FMConfig,
+    IMConfig,
     LearnedFM,
+    LearnedIM,
     fm_config,
     im_config,
     load_fm,
@@ -183,6 +186,13 @@ def test_learned_im_beats_the_zero_action(data, fresh):
     mse = float((executed - target).square().sum(-1).mean())
     trivial = float((fresh.s[:, L.ef] - target).square().sum(-1).mean())
     assert mse * 5 <= trivial
+
+
+def test_each_trainer_refuses_the_other_kind_of_model(data):
+    with pytest.raises(ConfigError, match="train_fm trains a LearnedFM, got LearnedIM"):
+        train_fm(data, LearnedIM(IMConfig(robot="iiwa14", dof=7)), tiny("fm"))
+    with pytest.raises(ConfigError, match="train_im trains a LearnedIM, got LearnedFM"):
+        train_im(data, LearnedFM(FMConfig(robot="iiwa14", dof=7)), tiny("im"))
 
 
 def test_panda_babble_and_train(tmp_path):

@@ -168,6 +168,25 @@ def _fit_run(kind, model, data, split, cfg, run_dir, resume, through_fm=None, **
     return TrainResult(model, history, ckpt)
 
 
+#: Per learned model kind: its config class and model class.
+_KINDS = {"fm": (FMConfig, LearnedFM), "im": (IMConfig, LearnedIM)}
+
+
+def _train_kind(kind: str, data, model, cfg: TrainConfig | None, run_dir, resume: bool) -> TrainResult:
+    """:func:`train_fm` / :func:`train_im`: the preset's config by default, seeding, then the model built
+    from ``model`` (None: the data's robot; a config; or a model to train further) and trained."""
+    config_cls, model_cls = _KINDS[kind]
+    cfg = cfg or train_config(kind, "paper")
+    seed_everything(cfg.seed)
+    if model is None:
+        model = model_cls(config_cls(robot=data.robot, dof=data.layout.dof))
+    elif isinstance(model, config_cls):
+        model = model_cls(model)
+    if not isinstance(model, model_cls):
+        raise ConfigError(f"train_{kind} trains a {model_cls.__name__}, got {type(model).__name__}")
+    return _train_supervised(kind, model, data, cfg, run_dir, resume)
+
+
 def train_fm(
     data: Transitions,
     model: FMConfig | LearnedFM | None = None,
@@ -181,15 +200,7 @@ def train_fm(
     further. With ``run_dir`` the checkpoint ``run_dir/fm.pt`` (loadable by :func:`kinlearn.models.forward_inverse.load_fm`)
     and ``metrics.jsonl`` are written every epoch; ``resume=True`` continues from that checkpoint.
     """
-    cfg = cfg or train_config("fm", "paper")
-    seed_everything(cfg.seed)
-    if model is None:
-        model = LearnedFM(FMConfig(robot=data.robot, dof=data.layout.dof))
-    elif isinstance(model, FMConfig):
-        model = LearnedFM(model)
-    if not isinstance(model, LearnedFM):
-        raise ConfigError(f"train_fm trains a LearnedFM, got {type(model).__name__}")
-    return _train_supervised("fm", model, data, cfg, run_dir, resume)
+    return _train_kind("fm", data, model, cfg, run_dir, resume)
 
 
 def train_im(
@@ -200,15 +211,7 @@ def train_im(
     resume: bool = False,
 ) -> TrainResult:
     """Train a :class:`LearnedIM` on babbling transitions (paper settings by default); see :func:`train_fm`."""
-    cfg = cfg or train_config("im", "paper")
-    seed_everything(cfg.seed)
-    if model is None:
-        model = LearnedIM(IMConfig(robot=data.robot, dof=data.layout.dof))
-    elif isinstance(model, IMConfig):
-        model = LearnedIM(model)
-    if not isinstance(model, LearnedIM):
-        raise ConfigError(f"train_im trains a LearnedIM, got {type(model).__name__}")
-    return _train_supervised("im", model, data, cfg, run_dir, resume)
+    return _train_kind("im", data, model, cfg, run_dir, resume)
 
 
 def train_im_distal(
