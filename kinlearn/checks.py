@@ -11,7 +11,7 @@ import torch
 
 from .errors import ConfigError, DTypeError, NonFiniteError, ShapeError
 
-__all__ = ["check_finite", "check_last_dim", "check_real_dtype", "check_region"]
+__all__ = ["check_finite", "check_last_dim", "check_real_dtype", "check_region", "real_array"]
 
 
 def check_last_dim(x: torch.Tensor, n: int | tuple[int, ...], what: str) -> None:
@@ -34,6 +34,18 @@ def check_real_dtype(x: torch.Tensor, what: str) -> None:
         raise ShapeError(f"{what} must be a torch.Tensor, got {type(x).__name__}")
     if x.dtype == torch.bool or x.is_complex():
         raise DTypeError(f"{what} must hold real numbers, got a {x.dtype} tensor")
+
+
+def real_array(x, what: str) -> np.ndarray:
+    """``x`` (an array or nested sequence of numbers, not a tensor) as a NumPy array of real numbers;
+    :class:`DTypeError` for anything else (bools, strings, complex numbers, ragged sequences)."""
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError) as exc:
+        raise DTypeError(f"{what} must be an array of numbers, got {type(x).__name__}") from exc
+    if a.dtype.kind not in "fiu":
+        raise DTypeError(f"{what} must hold real numbers, got {a.dtype} ({type(x).__name__})")
+    return a
 
 
 def check_finite(x: torch.Tensor, what: str) -> None:

@@ -139,3 +139,20 @@ def test_load_refuses_bad_files(tmp_path):
         Scene.load(bad_path)
     with pytest.raises(DatasetError, match="robot"):
         Scene.load(Scene(SPHERES).save(tmp_path / "for_panda.npz", robot="panda"), robot="iiwa14")
+
+
+def test_as_scene_takes_scenes_or_spheres_and_checks_the_batch():
+    from kinlearn.collision.scene import as_scene
+    from kinlearn.errors import ShapeError
+
+    one = as_scene([[0.5, 0.0, 0.6, 0.1]])
+    assert tuple(one.batch_shape) == () and one.num_spheres == 1
+    assert as_scene(one) is one
+    per = as_scene(torch.ones(3, 2, 4), batch=(3,))
+    assert tuple(per.batch_shape) == (3,)
+    assert as_scene(one, batch=(3,)) is one  # one scene for every problem
+    with pytest.raises(ShapeError, match="one scene for all"):
+        as_scene(torch.ones(2, 2, 4), batch=(3,))
+    for bad in ("spheres", None, torch.ones(2, 3), torch.ones(2, 4, dtype=torch.bool), [[1, 2], [3]]):
+        with pytest.raises(ObstacleError):
+            as_scene(bad)

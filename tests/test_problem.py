@@ -84,6 +84,10 @@ def test_bad_problems_raise_typed_errors(robot, joints):
         Problem.make(robot, joints[0, :3], joints[1])
     with pytest.raises(DTypeError):
         Problem.make(robot, torch.ones(robot.dof, dtype=torch.bool), goal)
+    with pytest.raises(DTypeError, match="real numbers"):
+        Problem.make(robot, [True] * robot.dof, goal)
+    with pytest.raises(DTypeError, match="array of numbers"):
+        Problem.make(robot, start, [[0.0] * robot.dof, [0.0]])
     bad = start.clone()
     bad[2] = float("nan")
     with pytest.raises(NonFiniteError):

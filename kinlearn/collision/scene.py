@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..errors import DatasetError, ObstacleError
+from ..errors import DatasetError, ObstacleError, ShapeError
 from ..io import load_npz, save_npz
 
 __all__ = ["SCENE_FORMAT", "Scene", "as_scene"]
@@ -404,11 +404,22 @@ class Scene:
         )
 
 
-def as_scene(obstacles) -> Scene:
+def as_scene(obstacles, batch: tuple | None = None) -> Scene:
     """``obstacles`` as a :class:`Scene`: a Scene as is, or spheres ``(K, 4)`` / ``(..., K, 4)``
-    [x, y, z, radius] (m) as a scene of spheres. :class:`ObstacleError` for anything else."""
-    if isinstance(obstacles, Scene):
-        return obstacles
+    [x, y, z, radius] (m) as a scene of spheres. :class:`ObstacleError` for anything else. With
+    ``batch`` (the shape of the problems the scene is for), its batch shape must be ``()`` (one scene
+    for all) or ``batch`` (:class:`ShapeError` otherwise)."""
+    scene = obstacles if isinstance(obstacles, Scene) else _sphere_scene(obstacles)
+    shape = tuple(scene.batch_shape)
+    if batch is not None and shape not in ((), tuple(batch)):
+        raise ShapeError(
+            f"the obstacles' batch shape {shape} must be () (one scene for all problems) or the "
+            f"problems' {tuple(batch)}"
+        )
+    return scene
+
+
+def _sphere_scene(obstacles) -> Scene:
     if isinstance(obstacles, (str, bytes)) or obstacles is None:
         raise ObstacleError("obstacles must be spheres (K, 4) [x, y, z, radius] or a kinlearn Scene")
     if isinstance(obstacles, torch.Tensor) and (obstacles.dtype == torch.bool or obstacles.is_complex()):

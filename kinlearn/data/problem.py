@@ -28,7 +28,7 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
-from ..checks import check_finite, check_real_dtype
+from ..checks import check_finite, check_real_dtype, real_array
 from ..collision.scene import Scene, as_scene
 from ..errors import ConfigError, ShapeError, StateError
 
@@ -46,11 +46,7 @@ def _tensor(x, what: str) -> torch.Tensor:
     if isinstance(x, torch.Tensor):
         check_real_dtype(x, what)
         return x.detach().to(torch.float64)
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ShapeError(f"{what} must be an array of numbers, got {type(x).__name__}") from exc
-    return torch.from_numpy(a)
+    return torch.from_numpy(real_array(x, what).astype(np.float64))
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,12 +123,7 @@ class Problem:
             check_finite(goal_state, "goal_position")
         scene = None
         if obstacles is not None:
-            scene = as_scene(obstacles).to(dtype=torch.float64, device="cpu")
-            if tuple(scene.batch_shape) not in ((), tuple(batch)):
-                raise ShapeError(
-                    f"the obstacles' batch shape {tuple(scene.batch_shape)} must be () (one scene for all "
-                    f"problems) or the problems' {tuple(batch)}"
-                )
+            scene = as_scene(obstacles, batch).to(dtype=torch.float64, device="cpu")
         return cls(robot, start_state, goal_state, "position" if position else "state", scene)
 
     def __post_init__(self) -> None:
@@ -218,6 +209,14 @@ class Problem:
         return cls(robot, start.double(), goal.double(), "state", scene)
 
 
+def state_error(what: str, worst: float) -> StateError:
+    """The error for a state whose end-effector part is ``worst`` m from FK of its joints."""
+    return StateError(
+        f"{what}: its end-effector part differs from FK of its joints by up to {worst:.4g} m "
+        f"(allowed {STATE_EF_TOLERANCE} m); pass joint values alone to have ef computed"
+    )
+
+
 def _state(robot: Robot, x: torch.Tensor, what: str) -> torch.Tensor:
     """Joints or a state ``(..., dof [+ 3])`` as a checked state: joints within the limits, ef = FK."""
     dof = robot.dof
@@ -228,8 +227,5 @@ def _state(robot: Robot, x: torch.Tensor, what: str) -> torch.Tensor:
     if x.shape[-1] > dof:
         err = torch.linalg.vector_norm(x[..., dof:] - ef, dim=-1)
         if bool((err > STATE_EF_TOLERANCE).any()):
-            raise StateError(
-                f"{what}: its end-effector part differs from FK of its joints by up to {float(err.max()):.4g} m "
-                f"(allowed {STATE_EF_TOLERANCE} m); pass joint values alone to have ef computed"
-            )
+            raise state_error(what, float(err.max()))
     return torch.cat((q, ef), dim=-1)

@@ -36,19 +36,18 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
-from ..checks import check_finite
+from ..checks import check_finite, real_array
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
 from ..collision.fast import NumpyBody, NumpyScene, check_paths, first_free
 from ..collision.scene import Scene, as_scene
-from ..data.problem import LIMIT_TOLERANCE, STATE_EF_TOLERANCE, Problem
+from ..data.problem import LIMIT_TOLERANCE, STATE_EF_TOLERANCE, Problem, state_error
 from ..errors import (
     ConfigError,
     DomainError,
     DomainWarning,
     DTypeError,
     ShapeError,
-    StateError,
 )
 from ..io import load_checkpoint
 from ..models.forward_inverse import ForwardModel, InverseModel, load_fm, load_im
@@ -82,12 +81,7 @@ def _as_array(x, what: str) -> tuple[np.ndarray, torch.dtype, torch.device]:
         if x.dtype in _NUMPY_FLOATS and x.device.type == "cpu":
             return x.detach().numpy().astype(np.float64, copy=False), dtype, x.device
         return x.detach().cpu().double().numpy(), dtype, x.device
-    try:
-        a = np.asarray(x)
-    except (TypeError, ValueError) as exc:
-        raise DTypeError(f"{what} must be an array of numbers, got {type(x).__name__}") from exc
-    if a.dtype.kind not in "fiu":
-        raise DTypeError(f"{what} must hold real numbers, got {a.dtype} ({type(x).__name__})")
+    a = real_array(x, what)
     dtype = torch.float64 if a.dtype == np.float64 else torch.get_default_dtype()
     return a.astype(np.float64, copy=False), dtype, torch.device("cpu")
 
@@ -298,10 +292,7 @@ class Planner:
                 continue
             err = np.linalg.norm(given - fk, axis=-1)
             if (err > STATE_EF_TOLERANCE).any():
-                raise StateError(
-                    f"{what}: its end-effector part differs from FK of its joints by up to {err.max():.4g} m "
-                    f"(allowed {STATE_EF_TOLERANCE} m); pass joint values alone to have ef computed"
-                )
+                raise state_error(what, float(err.max()))
 
     def _check_domain(self, s0: np.ndarray, sT: np.ndarray | None, strict: bool) -> None:
         if self._domain is None:
@@ -452,15 +443,8 @@ class Planner:
                 f"this planner has no obstacle-aware TM ({OBSTACLE_TM}); load a planner folder holding one, "
                 "or train one with kinlearn.train_obstacles"
             )
-        scene = as_scene(obstacles).to(dtype=torch.float64, device="cpu")
-        shape = tuple(scene.batch_shape)
-        if shape == ():
-            return scene
-        if shape != tuple(batch):
-            raise ShapeError(
-                f"the obstacles' batch shape {shape} must be () (one scene for all plans) or the plans' {tuple(batch)}"
-            )
-        return scene.reshape(n) if len(shape) != 1 else scene
+        scene = as_scene(obstacles, batch).to(dtype=torch.float64, device="cpu")
+        return scene.reshape(n) if len(scene.batch_shape) > 1 else scene
 
     def _plan_around(
         self, theta0, ef0, thetaT, efT, scene: Scene, steps: int
