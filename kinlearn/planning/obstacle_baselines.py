@@ -364,7 +364,8 @@ class _PathPlanner:
         longest = max(p.shape[0] for p in paths)
         joints = torch.stack([torch.cat((p, p[-1:].expand(longest - p.shape[0], -1))) for p in paths])
         shape = (*problem.batch_shape, longest, self.robot.dof)
-        return judge(problem, joints.reshape(shape), found=torch.tensor(found).reshape(problem.batch_shape))
+        found_at = torch.tensor(found).reshape(problem.batch_shape)
+        return judge(problem, joints.reshape(shape), found=found_at, body=self.body)
 
 
 @dataclass(frozen=True)

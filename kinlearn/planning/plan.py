@@ -12,7 +12,7 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import Robot
 from ..checks import check_finite, check_last_dim
-from ..collision.body import body_spheres
+from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
 from ..data.problem import LIMIT_TOLERANCE, Problem
 from ..errors import ConfigError, ShapeError
@@ -286,6 +286,7 @@ def judge(
     found: torch.Tensor | None = None,
     tolerance: Tolerance = DEFAULT_TOLERANCE,
     max_travel: float = CHECK_TRAVEL,
+    body: BodySpheres | None = None,
 ) -> Plan:
     """The :class:`Plan` of the joint paths ``joints (..., T+1, dof)`` a planner made for ``problem``,
     judged on the robot itself: the analytic FK gives the end effector, the limits are checked on every
@@ -293,7 +294,8 @@ def judge(
     every path is checked densely (:func:`~kinlearn.collision.check_path`, ``max_travel`` m of sphere
     travel between checked configurations). ``waypoints`` default to the interior configurations' FK.
     ``found (...)``: where the planner found a path at all (a search that ran out of time gives a
-    stand-in path with ``found`` False): ``success`` requires it."""
+    stand-in path with ``found`` False): ``success`` requires it. ``body``: the collision spheres to check
+    with (default: :func:`~kinlearn.collision.body_spheres` of the robot, built for this call)."""
     robot = problem.robot
     check_last_dim(joints, robot.dof, "joint paths")
     if joints.ndim < 2 or joints.shape[:-2] != problem.batch_shape or joints.shape[-2] < 2:
@@ -309,9 +311,8 @@ def judge(
         within = within & found.to(within.device)
     free = None
     if problem.obstacles is not None:
-        free = check_path(
-            body_spheres(robot), joints, problem.obstacles, max_travel=max_travel
-        ).collision_free
+        body = body_spheres(robot) if body is None else body
+        free = check_path(body, joints, problem.obstacles, max_travel=max_travel).collision_free
     state = problem.goal_kind == "state"
     goal = problem.goal if state else torch.cat((joints[..., -1, :], ef[..., -1, :]), dim=-1)
     return Plan.from_joints(
