@@ -201,3 +201,20 @@ def test_problems_from_endpoint_pairs_and_obstacle_sets(robot):
     b = JointInterpolation(robot).plan(q)
     assert a.collision_free.shape == b.collision_free.shape == (4,)
     assert bool((b.collision_free == ~sets.hard).all())  # "hard": the straight joint line collides
+
+
+def test_evaluate_workspace_takes_planners_and_says_what_it_wants(robot):
+    from kinlearn.data.endpoints import EndpointConfig, make_endpoints
+    from kinlearn.evaluation.workspace import evaluate_workspace
+
+    pairs = make_endpoints(EndpointConfig(robot="iiwa14", n=16, seed=4, preset="workspace"))
+    res = evaluate_workspace(robot, pairs, {"line": JointInterpolation(robot), "dls": CartesianDLS(robot)})
+    assert res["line"]["state_success"] == 1.0
+    # The Cartesian line ends at an IK solution: it misses the goal joints, but with position goals
+    # only the end effector counts.
+    pos = evaluate_workspace(robot, pairs, {"dls": CartesianDLS(robot)}, goal_kind="position")
+    assert res["dls"]["state_success"] < pos["dls"]["state_success"] == pos["dls"]["ef_success"]
+    with pytest.raises(ConfigError, match="plan\\(problem\\)"):
+        evaluate_workspace(robot, pairs, {"lambda": lambda a, b: None})
+    with pytest.raises(ConfigError, match="goal_kind"):
+        evaluate_workspace(robot, pairs, {"line": JointInterpolation(robot)}, goal_kind="pose")
