@@ -38,6 +38,11 @@ class DatasetError(KinlearnError):
     """A dataset file that is corrupt, of another format version, or of another robot."""
 
 
+class RecordedDataError(DatasetError):
+    """A recorded log (``.npz``/``.csv`` of joint values and end-effector positions) that cannot be used:
+    missing columns, wrong joint count, non-numbers, NaN rows, wrong units, unsorted time, ..."""
+
+
 class ConfigError(KinlearnError, ValueError):
     """A configuration value outside what is allowed."""
 

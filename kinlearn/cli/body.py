@@ -11,6 +11,7 @@ import argparse
 import time
 from pathlib import Path
 
+from ..data.recorded import load_data
 from ..errors import ConfigError
 from ..io import load_checkpoint, write_json
 from ..models.body import BodyModelConfig, save_body_model
@@ -21,6 +22,7 @@ from .common import (
     POSITIVE_FLOAT,
     POSITIVE_INT,
     add_command,
+    add_data_options,
     add_run_options,
     file_identity,
     open_command_run,
@@ -63,12 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         _run_train_body,
     )
     d = BodyModelConfig()
-    p.add_argument(
-        "--data",
-        type=Path,
-        default=None,
-        help="babbling.npz whose configurations to learn at (default: --samples uniform configurations)",
-    )
+    add_data_options(p, "whose configurations to learn at (default: --samples uniform configurations)")
     p.add_argument("--dense", action="store_true", help="learn the 46-sphere body (default: 12 + base cover)")
     p.add_argument(
         "--hidden",
@@ -126,7 +123,9 @@ def _run_train_body(args: argparse.Namespace) -> int:
     if args.margin == "p99" and args.validate == 0:
         raise ConfigError("--margin p99 takes the margin from the validation; give --validate > 0")
     configs: dict = {"body": cfg.to_dict()}
+    data = None
     if args.data is not None:
+        data = load_data(args.data, robot=args.robot, drop_nan=args.drop_nan)
         configs["data"] = file_identity(args.data)
     if args.validate > 0:
         configs["validation"] = {
@@ -143,7 +142,7 @@ def _run_train_body(args: argparse.Namespace) -> int:
     run_dir = run.begin()
 
     t0 = time.perf_counter()
-    result = train_body_model(cfg, run_dir, args.data, progress=not args.no_progress, resume=run.resumed)
+    result = train_body_model(cfg, run_dir, data, progress=not args.no_progress, resume=run.resumed)
     dt = time.perf_counter() - t0
     model = result.model.set_margin(0.0)
     last = result.history[-1] if result.history else {}

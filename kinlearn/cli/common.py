@@ -16,6 +16,7 @@ import torch
 
 from .. import __version__
 from ..body.robot import available_robots
+from ..data.babbling import Transitions
 from ..io import file_sha256
 from ..runs import IGNORED_KEYS, Run, open_run
 
@@ -26,7 +27,9 @@ __all__ = [
     "POSITIVE_INT",
     "PROBABILITY",
     "add_command",
+    "add_data_options",
     "add_run_options",
+    "data_record",
     "file_identity",
     "number_type",
     "open_command_run",
@@ -134,6 +137,29 @@ def add_run_options(p: argparse.ArgumentParser, resumable: bool) -> None:
         action="store_true",
         help="replace the run already in the output folder (its outputs are deleted first)",
     )
+
+
+def add_data_options(p: argparse.ArgumentParser, purpose: str) -> None:
+    """``--data`` (a babbling ``.npz`` or a recorded log, see :func:`kinlearn.data.recorded.load_data`)
+    and ``--drop-nan``."""
+    p.add_argument(
+        "--data",
+        type=Path,
+        default=None,
+        help=f"babbling.npz, or a recorded log (.npz/.csv: joints in rad, ef_x/ef_y/ef_z in m), {purpose}",
+    )
+    p.add_argument(
+        "--drop-nan",
+        action="store_true",
+        help="drop the rows of a recorded log that hold NaN/inf (default: refuse the file)",
+    )
+
+
+def data_record(data: Transitions) -> dict:
+    """What a run records of its loaded ``--data`` beside the file's identity: a babbling file's config
+    (``babbling``) or a recorded log's counts (``recorded``)."""
+    recorded = data.config.get("source") == "recorded"
+    return {"recorded" if recorded else "babbling": data.config}
 
 
 def settle_run_dir(args: argparse.Namespace) -> Path:

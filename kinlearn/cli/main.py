@@ -28,7 +28,8 @@ from pathlib import Path
 import torch
 
 from .. import __version__
-from ..data.babbling import BabblingConfig, babble, load_transitions, save_transitions
+from ..data.babbling import BabblingConfig, babble, save_transitions
+from ..data.recorded import load_data
 from ..errors import ConfigError, KinlearnError
 from ..io import atomic_copy, atomic_write, read_json, write_json
 from ..models.forward_inverse import (
@@ -58,7 +59,9 @@ from .common import (
     POSITIVE_INT,
     PROBABILITY,
     add_command,
+    add_data_options,
     add_run_options,
+    data_record,
     file_identity,
     number_type,
     open_command_run,
@@ -163,9 +166,7 @@ def _add_train(sub, kind: str) -> None:
         default="paper",
         help="model + training preset: paper (REFERENCE #5-6), improved, tiny (seconds; for tests)",
     )
-    p.add_argument(
-        "--data", type=Path, default=None, help="babbling.npz to train on (default: babble afresh)"
-    )
+    add_data_options(p, "to train on (default: babble afresh)")
     _add_babbling_options(p, None)
     if kind == "fm":
         p.add_argument(
@@ -244,8 +245,8 @@ def _run_train(args: argparse.Namespace) -> int:
     configs: dict = {"model": model_cfg.to_dict(), "train": cfg.to_dict()}
     data, bcfg = None, None
     if args.data is not None:
-        data = load_transitions(args.data, robot=args.robot)
-        configs.update(data=file_identity(args.data), babbling=data.config)
+        data = load_data(args.data, robot=args.robot, drop_nan=args.drop_nan)
+        configs.update(data=file_identity(args.data), **data_record(data))
     else:
         bcfg = _babbling_config(args, args.transitions or DEFAULT_TRANSITIONS[args.preset])
         configs["babbling"] = bcfg.to_dict()

@@ -19,7 +19,8 @@ from ..body.state import StateLayout
 from ..checks import check_last_dim
 from ..collision import BodySpheres, Scene, check_path, clearances
 from ..collision.problems import ProblemSet
-from ..data.babbling import Transitions, load_transitions
+from ..data.babbling import Transitions
+from ..data.recorded import load_data
 from ..errors import ConfigError, DatasetError, ShapeError
 from ..io import content_sha256
 from ..models.body import (
@@ -60,10 +61,10 @@ def _training_joints(
         q = robot.sample(config.samples, gen, dtype=torch.float64)
         return q, {"source": "uniform", "samples": config.samples, "seed": config.seed}
     if isinstance(data, (str, Path)):
-        trans = load_transitions(data, robot=config.robot)
-        source: dict = {"source": "babbling", "path": str(data)}
+        trans = load_data(data, robot=config.robot)
+        source: dict = {"source": trans.config.get("source", "babbling"), "path": str(data)}
     elif isinstance(data, Transitions):
-        trans, source = data, {"source": "babbling"}
+        trans, source = data, {"source": data.config.get("source", "babbling")}
     elif isinstance(data, torch.Tensor):
         if data.ndim != 2:
             raise ShapeError(
@@ -113,7 +114,8 @@ def train_body_model(
 ) -> BodyTrainResult:
     """Train a :class:`LearnedBody` on the analytic sphere centres at babbled or sampled joints.
 
-    ``data``: a babbling ``.npz`` (``kinlearn babble``; its states' joints are used), loaded
+    ``data``: a babbling ``.npz`` (``kinlearn babble``) or a recorded log (:func:`kinlearn.data.recorded.load_data`;
+    the joints of its transitions' states are used), loaded
     :class:`~kinlearn.Transitions`, a joint tensor ``(N, dof)``, or ``None``: ``config.samples``
     configurations drawn uniformly in the joint box with ``config.seed``. A share
     ``config.val_fraction`` is held out for the per-epoch record. Uses :func:`kinlearn.training.loop.fit`:
