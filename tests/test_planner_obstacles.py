@@ -149,7 +149,9 @@ def test_shipped_planner_plans_around_an_obstacle_and_refines(robot, tmp_path):
     assert plain.collision_free.float().mean() >= 0.5  # the straight line collides on every one
     refined = kinlearn.plan(sub.start, sub.goal, obstacles=sub.scene, refine_steps=10)
     assert (refined.collision_free | ~plain.collision_free).all()
-    assert torch.equal(refined.joints[plain.collision_free], plain.joints[plain.collision_free])
+    # Refinement plans on the proposals' halved segments (the same paths): the free ones are kept.
+    assert refined.joints.shape == (12, 23, 7)
+    assert torch.equal(refined.joints[plain.collision_free, ::2], plain.joints[plain.collision_free])
     check = check_path(Planner.default("iiwa14").body, refined.joints.double(), sub.scene)
     assert torch.equal(refined.collision_free, check.collision_free)
     with pytest.raises(ConfigError):
@@ -225,3 +227,20 @@ def test_refinement_from_a_path_of_the_wrong_shape_raises():
     scene = Scene(torch.tensor([[0.5, 0.0, 0.5, 0.1]], dtype=torch.float64))
     with pytest.raises(ShapeError):
         trajectory_optimiser(torch.zeros(7), torch.full((7,), 0.3), scene, steps=1, init=torch.zeros(5, 6))
+
+
+@pytest.mark.parametrize("n", [5, 20])  # the NumPy path (≤ 16 plans) and the torch one
+def test_refined_batches_keep_one_shape_and_agree_with_batch_one(planner, problems, n):
+    """Refinement changes some plans of a batch and not others: every plan keeps the batch's one shape
+    (2T + 1 configurations), and each is the plan of its problem planned alone."""
+    sub = problems[torch.arange(n)]
+    batch = planner.plan(sub.start, sub.goal, obstacles=sub.scene, refine_steps=2)
+    knots = planner.obstacle_tm.fractions.shape[0] + 2  # T + 1: the proposals' configurations
+    assert batch.joints.shape == (n, 2 * knots - 1, 7)
+    assert not batch.collision_free.all()  # some plans were refined (or tried), the test means something
+    for i in range(n):
+        start, goal, scene = sub.problem(i)
+        alone = planner.plan(start, goal, obstacles=scene, refine_steps=2)
+        assert alone.joints.shape == batch.joints.shape[1:]
+        assert torch.allclose(alone.joints, batch.joints[i], atol=1e-6, rtol=0)
+        assert bool(alone.collision_free) == bool(batch.collision_free[i])

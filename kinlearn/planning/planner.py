@@ -36,7 +36,7 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
-from ..checks import check_finite, real_array
+from ..checks import as_int, check_finite, real_array
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
 from ..collision.fast import NumpyBody, NumpyScene, check_paths, first_free
@@ -67,6 +67,8 @@ DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
 SMALL_BATCH = 16
 #: The babbling step bound (rad per joint and step, REFERENCE #4): the largest action the IM takes.
 MAX_STEP = 0.083
+#: The most refinement steps a plan may take (each costs milliseconds: a bound on a plan's time).
+MAX_REFINE_STEPS = 10_000
 #: The obstacle-aware TM's file in a planner folder.
 OBSTACLE_TM = "tm_obstacles.pt"
 
@@ -356,6 +358,7 @@ class Planner:
         """
         if isinstance(start, Problem):
             start, goal, goal_position, obstacles = self._unpack(start, goal, goal_position, obstacles)
+        steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
         theta0, goal_arr, position, ef_given, batch, dtype, device = self._arrays(start, goal, goal_position)
         n = theta0.shape[0]
         if position:
@@ -374,7 +377,6 @@ class Planner:
         free = None
         if obstacles is not None:
             scene = self._scene(obstacles, batch, n)
-            steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
             joints, free = self._plan_around(theta0, ef0, thetaT, efT, scene, steps)
             ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(n, -1, 3)
             waypoints = ef[:, 1:-1]
@@ -446,12 +448,13 @@ class Planner:
         scene = as_scene(obstacles, batch).to(dtype=torch.float64, device="cpu")
         return scene.reshape(n) if len(scene.batch_shape) > 1 else scene
 
-    def _plan_around(
-        self, theta0, ef0, thetaT, efT, scene: Scene, steps: int
+    def _proposals(
+        self, theta0, ef0, thetaT, efT, rows, mask, floor, steps: int
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Joint paths ``(N, T + 1, dof)`` around ``scene`` and whether each is collision-free ``(N,)``."""
+        """The candidate joint paths ``(N, C + 1, K, dof)`` (the straight joint line first, then the
+        obstacle-aware TM's; segments halved when refining) and each problem's order of them, shortest
+        first (the straight line leads among equals). NumPy for small batches, torch for large ones."""
         n, dof = theta0.shape
-        rows, mask, floor = scene_primitives(scene, n, torch.float64)
         if n <= SMALL_BATCH:
             mid = self._np_obstacle_tm(theta0, ef0, thetaT, efT, rows.numpy(), mask.numpy(), floor.numpy())
         else:
@@ -473,59 +476,79 @@ class Planner:
             ),
             axis=2,
         )
+        if steps:  # each segment halved (the same paths): the knots a refined path is optimised on
+            paths = _halve_segments(paths)
         length = np.linalg.norm(np.diff(paths, axis=2), axis=-1).sum(-1)  # (N, C + 1)
-        order = np.argsort(length, axis=1, kind="stable")  # shortest first: the straight line leads
+        return paths, np.argsort(length, axis=1, kind="stable")
+
+    def _plan_around(
+        self, theta0, ef0, thetaT, efT, scene: Scene, steps: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Joint paths ``(N, K, dof)`` around ``scene`` and whether each is collision-free ``(N,)``.
+
+        Each plan is its problem's alone: the proposals' verdicts are exact, and a problem that needs
+        refining has its proposals made again at batch 1, so that the optimiser (whose first steps
+        magnify rounding) starts from the very path a batch-1 plan starts from."""
+        n = theta0.shape[0]
+        rows, mask, floor = scene_primitives(scene, n, torch.float64)
+        paths, order = self._proposals(theta0, ef0, thetaT, efT, rows, mask, floor, steps)
         batched = len(scene.batch_shape) > 0
+        shared = None if batched else NumpyScene.from_scene(scene)
         if n <= SMALL_BATCH:
-            chosen, free = [], np.zeros(n, dtype=bool)
-            shared = None if batched else NumpyScene.from_scene(scene)
+            free = np.zeros(n, dtype=bool)
+            pick = order[:, 0].copy()  # none free: the shortest, flagged
             for i in range(n):
-                one = scene[i] if batched else scene
-                nscene = NumpyScene.from_scene(one) if batched else shared
+                nscene = NumpyScene.from_scene(scene[i]) if batched else shared
                 k = first_free(self._np_body, paths[i], nscene, order[i], max_travel=CHECK_TRAVEL)
-                if k < 0:  # none is free: the shortest one, flagged (refined first, if asked)
-                    best = paths[i, order[i, 0]]
-                    if steps:  # from the least colliding one
-                        _, clear, _ = check_paths(self._np_body, paths[i], nscene, max_travel=CHECK_TRAVEL)
-                        best = paths[i, int(np.argmax(clear))]
-                    best, ok = self._refine(best, one, nscene, steps)
-                    chosen.append(best)
-                    free[i] = ok
-                else:
-                    chosen.append(paths[i, k])
-                    free[i] = True
-            return np.stack(chosen), free
-        check = check_path(
-            self.body,
-            torch.from_numpy(paths),
-            scene.unsqueeze(-1) if batched else scene,
-            max_travel=CHECK_TRAVEL,
-        )
-        free = check.collision_free.numpy()
-        clearance = torch.minimum(check.clearance, check.self_clearance).numpy()
-        ranked_free = np.take_along_axis(free, order, axis=1)
-        first = ranked_free.argmax(axis=1)
-        any_free = ranked_free.any(axis=1)
-        fallback = clearance.argmax(axis=1) if steps else order[:, 0]
-        pick = np.where(any_free, np.take_along_axis(order, first[:, None], 1)[:, 0], fallback)
+                if k >= 0:
+                    pick[i], free[i] = k, True
+        else:
+            check = check_path(
+                self.body,
+                torch.from_numpy(paths),
+                scene.unsqueeze(-1) if batched else scene,
+                max_travel=CHECK_TRAVEL,
+            )
+            ranked_free = np.take_along_axis(check.collision_free.numpy(), order, axis=1)
+            free = ranked_free.any(axis=1)
+            first = np.take_along_axis(order, ranked_free.argmax(axis=1)[:, None], 1)[:, 0]
+            pick = np.where(free, first, order[:, 0])
         out = paths[np.arange(n), pick]
         if steps:
-            for i in np.flatnonzero(~any_free):
+            for i in np.flatnonzero(~free):
                 one = scene[int(i)] if batched else scene
-                out_i, any_free[i] = self._refine(out[i], one, NumpyScene.from_scene(one), steps)
-                if any_free[i]:
-                    out[i] = out_i
-        return out, any_free
+                nscene = NumpyScene.from_scene(one) if batched else shared
+                # As a batch-1 plan makes them: its FK in NumPy, its scene without padding.
+                ends = np.concatenate((theta0[i : i + 1], thetaT[i : i + 1]))
+                e0, eT = self._fk.position(ends)
+                keep = mask[i]
+                alone, _ = self._proposals(
+                    ends[:1],
+                    e0[None],
+                    ends[1:],
+                    eT[None],
+                    rows[i : i + 1, keep],
+                    mask[i : i + 1, keep],
+                    floor[i : i + 1],
+                    steps,
+                )
+                _, clear, _ = check_paths(self._np_body, alone[0], nscene, max_travel=CHECK_TRAVEL)
+                best = alone[0, int(np.argmax(clear))]  # from the least colliding one
+                out[i], free[i] = self._refine(best, one, nscene, steps)
+        return out, free
 
     def _refine(self, path: np.ndarray, scene: Scene, nscene, steps: int) -> tuple[np.ndarray, bool]:
         """``steps`` steps of the gradient trajectory optimiser from ``path`` (if any); the refined path
         and whether the dense check finds it free. Without steps: ``(path, False)``."""
         if not steps:
             return path, False
-        from .obstacle_baselines import trajectory_optimiser
+        from .obstacle_baselines import OptimiserConfig, trajectory_optimiser
 
         p = torch.from_numpy(path)
-        refined, _ = trajectory_optimiser(p[0], p[-1], scene, steps=steps, body=self.body, init=p)
+        config = OptimiserConfig(knots=p.shape[0])  # the plan's own length: every plan of a batch has it
+        refined, _ = trajectory_optimiser(
+            p[0], p[-1], scene, steps=steps, config=config, body=self.body, init=p
+        )
         refined = refined.numpy()
         free, _, _ = check_paths(self._np_body, refined[None], nscene, max_travel=CHECK_TRAVEL)
         return (refined, True) if bool(free[0]) else (path, False)
@@ -630,10 +653,17 @@ class Planner:
         return theta.double().numpy()
 
 
+def _halve_segments(paths: np.ndarray) -> np.ndarray:
+    """Joint paths ``(..., K, dof)`` with a knot inserted halfway along each segment: ``(..., 2K − 1, dof)``,
+    the same piecewise-linear paths."""
+    out = np.empty((*paths.shape[:-2], 2 * paths.shape[-2] - 1, paths.shape[-1]))
+    out[..., 0::2, :] = paths
+    out[..., 1::2, :] = 0.5 * (paths[..., :-1, :] + paths[..., 1:, :])
+    return out
+
+
 def _check_steps(steps) -> int:
-    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
-        raise ConfigError(f"refine_steps must be an integer ≥ 0, got {steps!r}")
-    return steps
+    return as_int(steps, "refine_steps", minimum=0, maximum=MAX_REFINE_STEPS)
 
 
 def _robot(robot: str | Robot | None, name: str) -> Robot:
