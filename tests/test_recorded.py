@@ -334,3 +334,18 @@ def test_a_foreign_kinlearn_dataset_is_a_dataset_error(tmp_path):
     other = save_npz(tmp_path / "o.npz", kind="pairs", robot="iiwa14", config={}, arrays={"x": np.zeros(3)})
     with pytest.raises(DatasetError, match=r"pairs"):
         load_data(other)
+
+
+def test_a_urdf_robots_log_and_babbling_load_for_that_robot(tmp_path):
+    from kinlearn.evaluation.model_error import write_perturbed_urdf
+
+    urdf = write_perturbed_urdf("iiwa14", tmp_path / "bent.urdf", seed=3)
+    robot = load_robot(urdf, ee_frame="iiwa_link_ee")
+    cfg = BabblingConfig(walkers=5, steps=8, urdf=str(urdf), ee_frame="iiwa_link_ee", ef_noise=0.001)
+    babbled = babble(cfg)
+    npz = save_transitions(babbled, tmp_path / "babbling.npz")
+    assert rows_of(load_data(npz, robot=robot)) == rows_of(babbled)
+    log = save_recorded(tmp_path / "log.csv", Observations.from_transitions(babbled, robot.joint_names))
+    back = load_recorded(log, robot=robot)
+    assert back.joint_names == robot.joint_names and len(back) == 5 * 9
+    assert rows_of(load_data(log, robot=robot)) == rows_of(babbled.to(torch.float64))

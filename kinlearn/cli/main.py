@@ -118,6 +118,9 @@ def _add_babbling_options(p: argparse.ArgumentParser, transitions: int | None) -
 
 
 def _babbling_config(args: argparse.Namespace, n: int) -> BabblingConfig:
+    source = {}
+    if getattr(args, "urdf", None) is not None:
+        source = {"urdf": str(args.urdf), "ee_frame": args.ee_frame}
     return BabblingConfig.for_transitions(
         n,
         walkers=args.walkers,
@@ -125,6 +128,7 @@ def _babbling_config(args: argparse.Namespace, n: int) -> BabblingConfig:
         seed=args.seed,
         max_step=args.max_step,
         retarget_prob=args.retarget_prob,
+        **source,
     )
 
 
@@ -133,11 +137,48 @@ def _add_babble(sub) -> None:
         sub, "babble", "Motor babbling: write (s, a, s') transitions to babbling.npz.", _run_babble
     )
     _add_babbling_options(p, 500_000)
+    p.add_argument(
+        "--ef-noise",
+        type=NONNEGATIVE_FLOAT,
+        default=0.0,
+        metavar="SIGMA",
+        help="Gaussian noise on each observed end-effector coordinate, standard deviation in m (default: 0)",
+    )
+    p.add_argument(
+        "--outliers",
+        type=number_type(float, low=0, high=1, open_high=True),
+        default=0.0,
+        metavar="FRACTION",
+        help="share of the observed states whose end effector is displaced by --outlier-size (default: 0)",
+    )
+    p.add_argument(
+        "--outlier-size",
+        type=POSITIVE_FLOAT,
+        default=0.05,
+        metavar="METRES",
+        help="how far an outlier is displaced, in a random direction (default: 0.05)",
+    )
+    p.add_argument(
+        "--urdf",
+        type=Path,
+        default=None,
+        help="babble with the robot of this URDF file (needs --ee-frame; the data are named after the "
+        "file unless --robot is given)",
+    )
+    p.add_argument("--ee-frame", default=None, help="the end-effector link of --urdf")
+    p.set_defaults(robot=None)  # with --urdf: the file's stem; otherwise iiwa14
     add_run_options(p, resumable=False)
 
 
 def _run_babble(args: argparse.Namespace) -> int:
-    cfg = _babbling_config(args, args.transitions)
+    if (args.urdf is None) != (args.ee_frame is None):
+        raise ConfigError("--urdf and --ee-frame go together: the URDF file and its end-effector link")
+    cfg = dataclasses.replace(
+        _babbling_config(args, args.transitions),
+        ef_noise=args.ef_noise,
+        outliers=args.outliers,
+        outlier_size=args.outlier_size,
+    )
     run_dir = open_command_run(args, ("babbling.npz",), babbling=cfg.to_dict()).begin()
     t0 = time.perf_counter()
     data = babble(cfg)

@@ -593,9 +593,9 @@ def load_data(path: str | Path, robot: str | Robot | None = None, *, drop_nan: b
     :class:`~kinlearn.errors.RecordedDataError`) for a bad file.
     """
     path = Path(path)
-    name = robot.name if isinstance(robot, Robot) else robot
     if path.suffix.lower() == ".npz" and path.is_file() and _is_kinlearn_npz(path):
-        return load_transitions(path, robot=name)
+        return load_transitions(path, robot=robot)
+    name = robot.name if isinstance(robot, Robot) else robot
     return load_recorded(path, robot=robot, drop_nan=drop_nan).transitions(name or "")
 
 
