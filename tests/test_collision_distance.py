@@ -104,7 +104,7 @@ def test_sphere_plane_matches_coal_halfspace():
 
 def _coal_scene(scene: Scene):
     shapes = [(coal.Sphere(float(s[3])), s[:3].tolist()) for s in scene.spheres]
-    shapes += [(coal.Box(*(2 * b[3:]).tolist()), b[:3].tolist()) for b in scene.boxes]
+    shapes += [(coal.Box(*(2 * b[3:6]).tolist()), b[:3].tolist()) for b in scene.boxes]
     return shapes
 
 

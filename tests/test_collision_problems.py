@@ -69,8 +69,8 @@ def test_generation_is_seeded_and_shelf_goals_are_inside(robot, body):
     ee = kinematics(robot, "fast").position(a.goal)
     for i in range(2):
         boxes = a.problem(i)[2].boxes
-        lo = (boxes[:, :3] - boxes[:, 3:]).amin(0)
-        hi = (boxes[:, :3] + boxes[:, 3:]).amax(0)
+        lo = (boxes[:, :3] - boxes[:, 3:6]).amin(0)
+        hi = (boxes[:, :3] + boxes[:, 3:6]).amax(0)
         assert bool(((ee[i] > lo) & (ee[i] < hi)).all())
 
 

@@ -76,7 +76,7 @@ def test_valid_scenes_and_padding():
     # stack pads to the largest counts with masks, unstack drops the padding.
     a, b = Scene(SPHERES, BOXES, floor=0.0), Scene(SPHERES[:1], floor=0.1)
     st = Scene.stack([a, b])
-    assert st.batch_shape == (2,) and st.spheres.shape == (2, 2, 4) and st.boxes.shape == (2, 1, 6)
+    assert st.batch_shape == (2,) and st.spheres.shape == (2, 2, 4) and st.boxes.shape == (2, 1, 15)
     assert st.sphere_mask.tolist() == [[True, True], [True, False]] and st.box_mask.tolist() == [
         [True],
         [False],

@@ -81,9 +81,9 @@ def test_animation_bad_inputs(tmp_path, monkeypatch):
         animate_plan(robot, joints, out, spheres=np.zeros((2, 3)))
     with pytest.raises(ObstacleError, match=r"\(n, 6\)"):
         animate_plan(robot, joints, out, boxes=np.zeros(5))
-    with pytest.raises(ObstacleError, match="radii"):
+    with pytest.raises(ObstacleError, match="radius"):
         animate_plan(robot, joints, out, spheres=[[0, 0, 0, -0.1]])
-    with pytest.raises(ObstacleError, match="half extents"):
+    with pytest.raises(ObstacleError, match="half extent"):
         animate_plan(robot, joints, out, boxes=[[0, 0, 0, 0.1, 0.0, 0.1]])
     with pytest.raises(ObstacleError, match="NaN"):
         animate_plan(robot, joints, out, boxes=[[0, 0, float("nan"), 0.1, 0.1, 0.1]])
@@ -194,3 +194,23 @@ def test_viewer_playback_and_errors(monkeypatch):
     monkeypatch.setitem(sys.modules, "viser", None)  # as if viser were absent
     with pytest.raises(MissingDependencyError, match=r"kinlearn\[viewer\]"):
         show_plan(robot, joints, port=_free_port(), block=False)
+
+
+def test_animation_draws_every_kind_of_primitive(tmp_path):
+    pytest.importorskip("matplotlib")
+    from kinlearn.collision import Scene
+    from kinlearn.collision.geometry import Box, Cylinder, Sphere, rotation_from_quaternion
+
+    robot = kinlearn.load_robot("iiwa14")
+    R = rotation_from_quaternion([0.2, 0.1, 0.4, 0.9])
+    scene = Scene.from_primitives(
+        [
+            Sphere((0.5, 0, 0.6), 0.1),
+            Box((0.6, 0.3, 0.2), (0.1, 0.1, 0.2), R),
+            Cylinder((0.4, -0.3, 0.3), 0.05, 0.2, R),
+        ]
+    )
+    out = animate_plan(robot, _path(robot, 2), tmp_path / "s.gif", scene=scene, figsize=(2, 2), dpi=30)
+    assert out.is_file()
+    with pytest.raises(ObstacleError, match="not both"):
+        animate_plan(robot, _path(robot, 2), tmp_path / "t.gif", scene=scene, spheres=[[0, 0, 0, 0.1]])

@@ -72,10 +72,5 @@ def _run_view(args: argparse.Namespace) -> int:
 
 
 def _obstacles(scene) -> dict:
-    """A scene as the ``spheres=``/``boxes=`` of :meth:`Plan.show` and :meth:`Plan.animate`."""
-    if scene is None:
-        return {}
-    from ..collision.fast import NumpyScene
-
-    unpadded = NumpyScene.from_scene(scene)
-    return {"spheres": unpadded.spheres, "boxes": unpadded.boxes}
+    """A scene as the ``scene=`` of :meth:`Plan.show` and :meth:`Plan.animate`."""
+    return {} if scene is None else {"scene": scene}

@@ -2,12 +2,16 @@
 
 A signed distance is the gap between two shapes in metres: positive when apart, zero when touching,
 negative when overlapping (then minus the penetration depth, exact for every pair here). All functions
-broadcast over leading batch dimensions and follow the dtype and device of their inputs.
+broadcast over leading batch dimensions and follow the dtype and device of their inputs. Each
+sphere–primitive distance is the primitive kind's own (:mod:`kinlearn.collision.geometry`, dispatched by
+:data:`~kinlearn.collision.geometry.KINDS`); this module adds the body-level reductions.
 
 =================================  ==============================================================
+:func:`sphere_distance`            spheres against primitives of one kind (the dispatch)
 :func:`sphere_sphere_distance`     ‖c₁ − c₂‖ − r₁ − r₂
-:func:`sphere_box_distance`        exact signed distance from the sphere's centre to an axis-aligned
-                                   box (negative inside: minus the depth to the nearest face), − r
+:func:`sphere_box_distance`        exact signed distance from the sphere's centre to a box in any
+                                   orientation (negative inside: minus the depth to the nearest face), − r
+:func:`sphere_cylinder_distance`   the same for a cylinder (axis along its local z)
 :func:`sphere_plane_distance`      z − h − r for a floor at height h (solid below it)
 :func:`body_obstacle_distance`     minimum over a body's spheres and a :class:`Scene`'s obstacles
 :func:`self_collision_distance`    minimum over a body's self-collision sphere pairs
@@ -18,33 +22,47 @@ from __future__ import annotations
 
 import torch
 
-from .scene import Scene
+from .geometry import KINDS, Box, Cylinder, Sphere, safe_sqrt
+from .scene import _FIELDS, Scene, _axis_aligned
 
 __all__ = [
     "body_obstacle_distance",
     "self_collision_distance",
     "sphere_box_distance",
+    "sphere_cylinder_distance",
+    "sphere_distance",
     "sphere_plane_distance",
     "sphere_sphere_distance",
 ]
 
 
+def sphere_distance(spheres: torch.Tensor, kind: str, rows: torch.Tensor) -> torch.Tensor:
+    """Signed distance ``(...)`` between spheres ``(..., 4)`` [x, y, z, r] and primitives ``rows
+    (..., width)`` of ``kind`` (``"sphere"``, ``"box"``, ``"cylinder"``, ``"plane"``), broadcasting."""
+    return KINDS[kind].sphere_distance(spheres, rows)
+
+
 def sphere_sphere_distance(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """Signed distance between spheres ``a (..., 4)`` and ``b (..., 4)`` ([x, y, z, r]) → ``(...)``."""
-    return torch.linalg.vector_norm(a[..., :3] - b[..., :3], dim=-1) - a[..., 3] - b[..., 3]
+    return Sphere.sphere_distance(a, b)
 
 
 def sphere_box_distance(s: torch.Tensor, box: torch.Tensor) -> torch.Tensor:
-    """Signed distance between spheres ``s (..., 4)`` and axis-aligned boxes ``box (..., 6)`` → ``(...)``.
+    """Signed distance between spheres ``s (..., 4)`` and boxes ``box (..., 15)`` → ``(...)``.
 
-    ``box`` rows are ``[cx, cy, cz, hx, hy, hz]`` (centre, half extents). With q = |p − c| − h per axis,
-    the centre's signed distance to the box is ‖max(q, 0)‖ + min(max_i q_i, 0): the Euclidean distance
-    outside, minus the depth to the nearest face inside. The sphere's radius is subtracted.
+    ``box`` rows are ``[cx, cy, cz, hx, hy, hz, R (9)]`` (or axis-aligned ``(..., 6)``, centre and half
+    extents). With q = |Rᵀ(p − c)| − h per axis, the centre's signed distance to the box is
+    ‖max(q, 0)‖ + min(max_i q_i, 0): the Euclidean distance outside, minus the depth to the nearest
+    face inside. The sphere's radius is subtracted.
     """
-    q = (s[..., :3] - box[..., :3]).abs() - box[..., 3:6]
-    outside = torch.linalg.vector_norm(q.clamp_min(0.0), dim=-1)
-    inside = q.amax(dim=-1).clamp_max(0.0)
-    return outside + inside - s[..., 3]
+    return Box.sphere_distance(s, _axis_aligned(box) if box.shape[-1] == 6 else box)
+
+
+def sphere_cylinder_distance(s: torch.Tensor, cylinder: torch.Tensor) -> torch.Tensor:
+    """Signed distance between spheres ``s (..., 4)`` and cylinders ``(..., 14)`` [centre, radius,
+    half length, R (9)] → ``(...)``: with the centre at radial distance ρ and height z in the cylinder's
+    frame, a = ρ − radius, b = |z| − half length, √(max(a, 0)² + max(b, 0)²) + min(max(a, b), 0) − r."""
+    return Cylinder.sphere_distance(s, cylinder)
 
 
 def sphere_plane_distance(s: torch.Tensor, height: torch.Tensor | float) -> torch.Tensor:
@@ -57,11 +75,6 @@ def sphere_plane_distance(s: torch.Tensor, height: torch.Tensor | float) -> torc
 CHUNK = 4096
 
 
-def _safe_sqrt(x: torch.Tensor) -> torch.Tensor:
-    """sqrt with a finite gradient at 0 (where a distance's direction is undefined, the gradient is 0)."""
-    return x.clamp_min(torch.finfo(x.dtype).tiny).sqrt()
-
-
 def _nearest(d: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
     """``(..., M, K)`` → ``(..., M)``: the smallest distance over the obstacles the mask keeps."""
     if mask is not None:
@@ -69,48 +82,35 @@ def _nearest(d: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
     return d.amin(dim=-1)
 
 
-def _obstacles(scene: Scene, like: torch.Tensor, batch: torch.Size, flat: bool) -> list:
-    """``[spheres, sphere_mask, boxes, box_mask, floor]`` in ``like``'s dtype and device, flattened to
-    one row per configuration ``(n, ...)`` over ``batch`` if ``flat`` and batched."""
-    out = []
-    for t, tail in _FIELDS:
-        t = getattr(scene, t)
+def _obstacles(scene: Scene, like: torch.Tensor, batch: torch.Size, flat: bool) -> dict:
+    """Every scene field in ``like``'s dtype and device, flattened to one row per configuration
+    ``(n, ...)`` over ``batch`` if ``flat`` and batched."""
+    out = {}
+    for name, tail in _FIELDS:
+        t = getattr(scene, name)
         if t is not None:
             t = t.to(device=like.device, dtype=like.dtype if t.is_floating_point() else t.dtype)
             if flat and t.ndim > tail:
                 tail_shape = t.shape[t.ndim - tail :]
-                t = t.expand(*batch, *tail_shape).reshape(
-                    batch.numel(), *tail_shape
-                )  # (n, …): works when empty
-        out.append(t)
+                t = t.expand(*batch, *tail_shape).reshape(batch.numel(), *tail_shape)  # works when empty
+        out[name] = t
     return out
-
-
-#: Scene fields and the number of their trailing (non-batch) dimensions.
-_FIELDS = (("spheres", 2), ("sphere_mask", 1), ("boxes", 2), ("box_mask", 1), ("floor", 0))
 
 
 def _slice(t: torch.Tensor | None, tail: int, lo: int, hi: int):
     return t[lo:hi] if t is not None and t.ndim > tail else t
 
 
-def _per_sphere_core(c, r, spheres, sphere_mask, boxes, box_mask, floor, floor_mask) -> torch.Tensor:
-    x, y, z = c[..., 0:1], c[..., 1:2], c[..., 2:3]  # (..., M, 1)
+def _per_sphere_core(c, r, fields: dict, floor_mask) -> torch.Tensor:
+    p = c.unsqueeze(-2)  # (..., M, 1, 3)
     out = None
-    if spheres.shape[-2]:
-        col = spheres.unsqueeze(-3)  # (..., 1, K, 4)
-        dx, dy, dz = x - col[..., 0], y - col[..., 1], z - col[..., 2]
-        out = _nearest(_safe_sqrt(dx * dx + dy * dy + dz * dz) - col[..., 3], sphere_mask)
-    if boxes.shape[-2]:
-        col = boxes.unsqueeze(-3)  # (..., 1, B, 6)
-        qx = (x - col[..., 0]).abs() - col[..., 3]
-        qy = (y - col[..., 1]).abs() - col[..., 4]
-        qz = (z - col[..., 2]).abs() - col[..., 5]
-        ox, oy, oz = qx.clamp_min(0.0), qy.clamp_min(0.0), qz.clamp_min(0.0)
-        d = _safe_sqrt(ox * ox + oy * oy + oz * oz) + torch.maximum(torch.maximum(qx, qy), qz).clamp_max(0.0)
-        d = _nearest(d, box_mask)
-        out = d if out is None else torch.minimum(out, d)
+    for kind in (Sphere, Box, Cylinder):
+        rows = fields[kind.table]
+        if rows.shape[-2]:
+            d = _nearest(kind.point_distance(p, rows.unsqueeze(-3)), fields[f"{kind.kind}_mask"])
+            out = d if out is None else torch.minimum(out, d)
     out = (torch.full_like(c[..., 0], torch.inf) if out is None else out) - r
+    floor = fields["floor"]
     if floor is not None:
         d = c[..., 2] - r - floor.unsqueeze(-1)
         if floor_mask is not None:
@@ -127,14 +127,15 @@ def _per_sphere(centres: torch.Tensor, radii: torch.Tensor, scene: Scene, floor_
     n = batch.numel()
     M = centres.shape[-2]
     if n <= CHUNK:
-        return _per_sphere_core(centres, radii, *_obstacles(scene, centres, batch, False), floor_mask)
+        return _per_sphere_core(centres, radii, _obstacles(scene, centres, batch, False), floor_mask)
     c = centres.expand(*batch, M, 3).reshape(n, M, 3)
     fields = _obstacles(scene, centres, batch, True)
+    tails = dict(_FIELDS)
     parts = [
         _per_sphere_core(
             c[lo : lo + CHUNK],
             radii,
-            *(_slice(t, tail, lo, lo + CHUNK) for t, (_, tail) in zip(fields, _FIELDS, strict=True)),
+            {k: _slice(t, tails[k], lo, lo + CHUNK) for k, t in fields.items()},
             floor_mask,
         )
         for lo in range(0, n, CHUNK)
@@ -213,7 +214,7 @@ def self_collision_distance(
 
     def core(c: torch.Tensor) -> torch.Tensor:
         v = (c @ D).view(c.shape[0], -1, 3)
-        return _safe_sqrt((v * v).sum(dim=-1)) - reach
+        return safe_sqrt((v * v).sum(dim=-1)) - reach
 
     per = torch.cat([core(c) for c in flat.split(CHUNK)]) if flat.shape[0] > CHUNK else core(flat)
     per = per.reshape(*batch, -1)

@@ -280,8 +280,13 @@ class NumpyScene:
                 f"a NumpyScene holds one scene, got batch shape {tuple(scene.batch_shape)}; "
                 "take one with scene.unstack() or scene[i]"
             )
+        if not scene.axis_aligned:
+            raise ObstacleError(
+                "a NumpyScene holds spheres and axis-aligned boxes only; this scene has rotated boxes or "
+                "cylinders (check it with kinlearn.collision.check_path)"
+            )
         s = scene.spheres.detach().cpu().numpy().astype(np.float64)
-        b = scene.boxes.detach().cpu().numpy().astype(np.float64)
+        b = scene.boxes[..., :6].detach().cpu().numpy().astype(np.float64)
         if scene.sphere_mask is not None:
             s = s[scene.sphere_mask.cpu().numpy()]
         if scene.box_mask is not None:

@@ -1,21 +1,28 @@
-"""Obstacle scenes: spheres, axis-aligned boxes and an optional floor, in the robot's base frame.
+"""Obstacle scenes: batches of typed primitives (spheres, boxes in any orientation, cylinders) and an
+optional floor, in the robot's base frame.
 
-A :class:`Scene` holds batched tensors (leading batch dimensions ``...``, shared by all of them):
+A :class:`Scene` holds one table per kind of :mod:`~kinlearn.collision.geometry` primitive, with
+leading batch dimensions ``...`` shared by all of them (the rows' layouts are the kinds'):
 
 - ``spheres`` ``(..., K, 4)``: ``[x, y, z, radius]``, metres;
-- ``boxes`` ``(..., B, 6)``: ``[cx, cy, cz, hx, hy, hz]``, centre and half extents of an axis-aligned box;
+- ``boxes`` ``(..., B, 15)``: ``[cx, cy, cz, hx, hy, hz, R (9, row-major)]``, centre, half extents and
+  orientation; an axis-aligned table ``(..., B, 6)`` ``[centre, half extents]`` is accepted and given
+  the identity rotation;
+- ``cylinders`` ``(..., C, 14)``: ``[cx, cy, cz, radius, half_length, R (9)]``, axis along the local z;
 - ``floor``: ``None`` or the height ``(...)`` (or a scalar) of a floor plane; everything below it is solid;
-- optional masks ``sphere_mask (..., K)`` and ``box_mask (..., B)``: ``False`` marks padding, so that
-  scenes with different numbers of obstacles can share one batch (see :meth:`Scene.stack`). Masked
-  entries are ignored by validation and by every distance.
+- optional masks ``sphere_mask (..., K)``, ``box_mask (..., B)``, ``cylinder_mask (..., C)``: ``False``
+  marks padding, so that scenes with different numbers of obstacles can share one batch (see
+  :meth:`Scene.stack`). Masked entries are ignored by validation and by every distance.
 
-K or B may be 0. Batch shapes broadcast against each other and against configurations (right-aligned,
-as in torch); :meth:`Scene.unsqueeze` inserts a batch dimension (for example a time axis).
+Any count may be 0. Batch shapes broadcast against each other and against configurations
+(right-aligned, as in torch); :meth:`Scene.unsqueeze` inserts a batch dimension (for example a time
+axis). :meth:`Scene.from_primitives` builds one scene from typed objects, :meth:`Scene.primitives`
+gives them back.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,14 +31,23 @@ import torch
 
 from ..errors import DatasetError, ObstacleError, ShapeError
 from ..io import load_npz, save_npz
+from .geometry import IDENTITY, SCENE_KINDS, Plane, Primitive, check_rotations
 
 __all__ = ["SCENE_FORMAT", "Scene", "as_scene"]
 
-#: Version of the scene ``.npz`` layout written by :meth:`Scene.save`.
-SCENE_FORMAT = 1
+#: Version of the scene ``.npz`` layout written by :meth:`Scene.save` (2: oriented boxes, cylinders).
+SCENE_FORMAT = 2
+#: Scene formats :meth:`Scene.load` reads (1: spheres and axis-aligned boxes).
+SCENE_FORMATS = (1, 2)
 
-_PAD_SPHERE = (0.0, 0.0, 0.0, 1.0)
-_PAD_BOX = (0.0, 0.0, 0.0, 1.0, 1.0, 1.0)
+#: Per kind: (table field, mask field, primitive class).
+_TABLES = tuple((k.table, f"{k.kind}_mask", k) for k in SCENE_KINDS)
+#: Every tensor field and its number of trailing (non-batch) dimensions.
+_FIELDS = (
+    *((t, 2) for t, _, _ in _TABLES),
+    ("floor", 0),
+    *((m, 1) for _, m, _ in _TABLES),
+)
 
 
 def _tensor(x, what: str, dtype=None, device=None) -> torch.Tensor:
@@ -83,19 +99,26 @@ def _check_mask(mask: torch.Tensor | None, table: torch.Tensor, what: str) -> to
     return mask.to(table.device)
 
 
-def _check_values(
-    table: torch.Tensor, mask: torch.Tensor | None, size: slice, what: str, size_name: str
-) -> None:
+def _check_values(table: torch.Tensor, mask: torch.Tensor | None, kind: type[Primitive]) -> None:
     live = table if mask is None else table[torch.broadcast_to(mask, table.shape[:-1])]
     if live.numel() == 0:
         return
+    what = kind.table
     bad = ~torch.isfinite(live)
     if bool(bad.any()):
         raise ObstacleError(f"{what} hold {int(bad.sum())} NaN/inf value(s); all values must be finite")
-    small = live[..., size] <= 0
+    small = live[..., kind.sizes] <= 0
     if bool(small.any()):
-        worst = float(live[..., size].min())
-        raise ObstacleError(f"every {size_name} in {what} must be > 0 (metres), found {worst:.6g}")
+        worst = float(live[..., kind.sizes].min())
+        raise ObstacleError(f"every {kind.size_name} in {what} must be > 0 (metres), found {worst:.6g}")
+    if kind.rotation_columns is not None:
+        check_rotations(live[..., kind.rotation_columns], what)
+
+
+def _axis_aligned(boxes: torch.Tensor) -> torch.Tensor:
+    """Boxes ``(..., B, 6)`` [centre, half extents] → ``(..., B, 15)`` with the identity rotation."""
+    eye = boxes.new_tensor(IDENTITY).expand(*boxes.shape[:-1], 9)
+    return torch.cat((boxes, eye), dim=-1)
 
 
 @dataclass(frozen=True, eq=False, init=False, repr=False)
@@ -107,6 +130,8 @@ class Scene:
     floor: torch.Tensor | None = None
     sphere_mask: torch.Tensor | None = None
     box_mask: torch.Tensor | None = None
+    cylinders: torch.Tensor | None = None
+    cylinder_mask: torch.Tensor | None = None
 
     def __init__(
         self,
@@ -115,68 +140,66 @@ class Scene:
         floor=None,
         sphere_mask: torch.Tensor | None = None,
         box_mask: torch.Tensor | None = None,
+        cylinders=None,
+        cylinder_mask: torch.Tensor | None = None,
     ):
+        given = {"spheres": spheres, "boxes": boxes, "cylinders": cylinders}
+        ref = next((t for t in given.values() if isinstance(t, torch.Tensor) and t.is_floating_point()), None)
         ref = (
-            spheres
-            if isinstance(spheres, torch.Tensor)
-            else boxes
-            if isinstance(boxes, torch.Tensor)
-            else None
+            ref if ref is not None else next((t for t in given.values() if isinstance(t, torch.Tensor)), None)
         )
         dtype = ref.dtype if ref is not None and ref.is_floating_point() else None
         device = ref.device if ref is not None else None
-        s = _tensor(spheres, "spheres", dtype, device) if spheres is not None else None
-        b = _tensor(boxes, "boxes", dtype, device) if boxes is not None else None
-        dtype = (s if s is not None else b).dtype if (s is not None or b is not None) else None
-        if s is None:
-            s = torch.zeros(0, 4, dtype=dtype or torch.get_default_dtype(), device=device)
-        if b is None:
-            b = torch.zeros(0, 6, dtype=s.dtype, device=s.device)
-        _check_table(s, 4, "spheres", "[x, y, z, radius]")
-        _check_table(b, 6, "boxes", "[cx, cy, cz, hx, hy, hz]")
-        if b.dtype != s.dtype or b.device != s.device:
-            b = b.to(dtype=s.dtype, device=s.device)
-        sm = _check_mask(sphere_mask, s, "sphere_mask")
-        bm = _check_mask(box_mask, b, "box_mask")
-        _check_values(s, sm, slice(3, 4), "spheres", "radius")
-        _check_values(b, bm, slice(3, 6), "boxes", "half extent")
+        tables = {k: (_tensor(v, k, dtype, device) if v is not None else None) for k, v in given.items()}
+        first = next((t for t in tables.values() if t is not None), None)
+        dtype = first.dtype if first is not None else torch.get_default_dtype()
+        device = first.device if first is not None else device
+        masks = {"sphere_mask": sphere_mask, "box_mask": box_mask, "cylinder_mask": cylinder_mask}
+        for name, mask_name, kind in _TABLES:
+            t = tables[name]
+            if t is None:
+                t = torch.zeros(0, kind.width, dtype=dtype, device=device)
+            if name == "boxes" and t.ndim >= 2 and t.shape[-1] == 6 and t.is_floating_point():
+                t = _axis_aligned(t)
+            _check_table(t, kind.width, name, kind.layout)
+            if t.dtype != dtype or t.device != device:
+                t = t.to(dtype=dtype, device=device)
+            m = _check_mask(masks[mask_name], t, mask_name)
+            _check_values(t, m, kind)
+            tables[name], masks[mask_name] = t, m
         f = None
         if floor is not None:
-            f = _tensor(floor, "floor", s.dtype, s.device)
+            f = _tensor(floor, "floor", dtype, device)
             if not bool(torch.isfinite(f).all()):
                 raise ObstacleError("floor height holds NaN/inf; give a finite height in metres or None")
-        self_shape = [s.shape[:-2], b.shape[:-2]]
+        shapes = [t.shape[:-2] for t in tables.values()]
+        shapes += [m.shape[:-1] for m in masks.values() if m is not None]
         if f is not None:
-            self_shape.append(f.shape)
-        for m in (sm, bm):
-            if m is not None:
-                self_shape.append(m.shape[:-1])
+            shapes.append(f.shape)
         try:
-            torch.broadcast_shapes(*self_shape)
+            torch.broadcast_shapes(*shapes)
         except RuntimeError as exc:
             raise ObstacleError(
-                f"the scene's batch shapes do not broadcast: spheres {tuple(s.shape)}, boxes {tuple(b.shape)}"
+                "the scene's batch shapes do not broadcast: "
+                + ", ".join(f"{k} {tuple(v.shape)}" for k, v in tables.items())
                 + (f", floor {tuple(f.shape)}" if f is not None else "")
             ) from exc
-        object.__setattr__(self, "spheres", s)
-        object.__setattr__(self, "boxes", b)
-        object.__setattr__(self, "floor", f)
-        object.__setattr__(self, "sphere_mask", sm)
-        object.__setattr__(self, "box_mask", bm)
+        for k, v in (*tables.items(), *masks.items(), ("floor", f)):
+            object.__setattr__(self, k, v)
 
     @classmethod
-    def _unchecked(cls, spheres, boxes, floor=None, sphere_mask=None, box_mask=None) -> Scene:
+    def _unchecked(cls, **fields) -> Scene:
         """A scene from tensors already validated (views or indexing of a valid scene)."""
         out = object.__new__(cls)
-        for name, value in (
-            ("spheres", spheres),
-            ("boxes", boxes),
-            ("floor", floor),
-            ("sphere_mask", sphere_mask),
-            ("box_mask", box_mask),
-        ):
-            object.__setattr__(out, name, value)
+        for name, _ in _FIELDS:
+            object.__setattr__(out, name, fields.get(name))
         return out
+
+    def _map(self, fn) -> Scene:
+        """A scene of ``fn(tensor, trailing dims)`` applied to every present field (unchecked)."""
+        return Scene._unchecked(
+            **{n: (None if (t := getattr(self, n)) is None else fn(t, tail)) for n, tail in _FIELDS}
+        )
 
     # ---------------------------------------------------------------------------------------------
     @classmethod
@@ -184,14 +207,68 @@ class Scene:
         """A scene of spheres ``(K, 4)`` or ``(..., K, 4)`` [x, y, z, radius] (and an optional floor)."""
         return cls(spheres=spheres, floor=floor)
 
+    @classmethod
+    def from_primitives(
+        cls, primitives: Sequence[Primitive], floor=None, dtype: torch.dtype = torch.float64
+    ) -> Scene:
+        """One (unbatched) scene of typed primitives (:class:`~kinlearn.collision.geometry.Sphere`,
+        ``Box``, ``Cylinder``); a horizontal ``Plane`` (normal +z) is taken as the floor."""
+        rows: dict[str, list] = {k.table: [] for k in SCENE_KINDS}
+        for p in primitives:
+            if isinstance(p, Plane):
+                if not np.allclose(p.normal, (0.0, 0.0, 1.0), atol=1e-12):
+                    raise ObstacleError(
+                        f"a scene's plane is its floor: its normal must be +z, got {p.normal}"
+                    )
+                if floor is not None:
+                    raise ObstacleError("a scene has one floor: give floor= or one horizontal Plane")
+                floor = p.offset
+                continue
+            if not isinstance(p, Primitive) or type(p) not in SCENE_KINDS:
+                raise ObstacleError(
+                    f"a scene holds {', '.join(k.__name__ for k in SCENE_KINDS)} (and a floor Plane), "
+                    f"got {type(p).__name__}"
+                )
+            rows[p.table].append(p.row())
+        tables = {k.table: torch.tensor(rows[k.table], dtype=dtype).reshape(-1, k.width) for k in SCENE_KINDS}
+        return cls(**tables, floor=floor)
+
+    def primitives(self) -> list[Primitive]:
+        """The obstacles of an unbatched scene as typed objects, padding left out (the floor, if any,
+        last as a :class:`~kinlearn.collision.geometry.Plane`)."""
+        if len(self.batch_shape):
+            raise ObstacleError(
+                f"primitives() takes an unbatched scene, got batch shape {tuple(self.batch_shape)}; "
+                "index it (scene[i]) first"
+            )
+        out: list[Primitive] = []
+        for kind, rows, _ in self.tables(live=True):
+            out += [kind.from_row(r) for r in rows.detach().cpu().double().tolist()]
+        if self.floor is not None:
+            out.append(Plane((0.0, 0.0, 1.0), float(self.floor)))
+        return out
+
+    def tables(
+        self, live: bool = False
+    ) -> Iterator[tuple[type[Primitive], torch.Tensor, torch.Tensor | None]]:
+        """``(kind, rows, mask)`` per kind of primitive, in :data:`~kinlearn.collision.geometry.SCENE_KINDS`
+        order. ``live=True`` (unbatched scenes only): the rows without padding, and mask None."""
+        for name, mask_name, kind in _TABLES:
+            rows, mask = getattr(self, name), getattr(self, mask_name)
+            if live:
+                if rows.ndim != 2:
+                    raise ObstacleError("tables(live=True) takes an unbatched scene")
+                if mask is not None:
+                    rows = rows[mask]
+                mask = None
+            yield kind, rows, mask
+
     @property
     def batch_shape(self) -> torch.Size:
-        shapes = [self.spheres.shape[:-2], self.boxes.shape[:-2]]
+        shapes = [getattr(self, t).shape[:-2] for t, _, _ in _TABLES]
+        shapes += [m.shape[:-1] for _, n, _ in _TABLES if (m := getattr(self, n)) is not None]
         if self.floor is not None:
             shapes.append(self.floor.shape)
-        for m in (self.sphere_mask, self.box_mask):
-            if m is not None:
-                shapes.append(m.shape[:-1])
         return torch.broadcast_shapes(*shapes)
 
     @property
@@ -201,6 +278,23 @@ class Scene:
     @property
     def num_boxes(self) -> int:
         return int(self.boxes.shape[-2])
+
+    @property
+    def num_cylinders(self) -> int:
+        return int(self.cylinders.shape[-2])
+
+    @property
+    def num_primitives(self) -> int:
+        """Rows over every kind (padding included)."""
+        return sum(int(getattr(self, t).shape[-2]) for t, _, _ in _TABLES)
+
+    @property
+    def axis_aligned(self) -> bool:
+        """True when the scene holds no cylinder and every box has the identity rotation."""
+        if self.cylinders.shape[-2]:
+            return False
+        R = self.boxes[..., 6:15]
+        return bool((R == R.new_tensor(IDENTITY)).all())
 
     @property
     def dtype(self) -> torch.dtype:
@@ -215,50 +309,25 @@ class Scene:
         if (dtype is None or dtype == self.dtype) and (device is None or torch.device(device) == self.device):
             return self  # immutable: nothing to convert
 
-        def cast(t, is_float=True):
-            if t is None:
-                return None
+        def cast(t, tail):
+            is_float = t.is_floating_point()
             return t.to(
                 dtype=dtype if (is_float and dtype is not None) else t.dtype, device=device or t.device
             )
 
-        return Scene(
-            cast(self.spheres),
-            cast(self.boxes),
-            cast(self.floor),
-            cast(self.sphere_mask, False),
-            cast(self.box_mask, False),
-        )
+        return self._map(cast)
 
     def expand(self, *batch: int) -> Scene:
         """Every field broadcast to batch shape ``batch`` (views, no copies)."""
         batch = torch.Size(batch)
-
-        def ex(t, tail: int):
-            if t is None:
-                return None
-            return t.expand(*batch, *t.shape[t.ndim - tail :])
-
-        return Scene._unchecked(
-            ex(self.spheres, 2),
-            ex(self.boxes, 2),
-            ex(self.floor, 0),
-            ex(self.sphere_mask, 1),
-            ex(self.box_mask, 1),
-        )
+        return self._map(lambda t, tail: t.expand(*batch, *t.shape[t.ndim - tail :]))
 
     def reshape(self, *batch: int) -> Scene:
         """The scene with its batch dimensions reshaped to ``batch`` (e.g. ``(2, 3)`` → ``(6,)``)."""
         full = self.expand(*self.batch_shape)
         n = len(self.batch_shape)
-
-        def rs(t):
-            return None if t is None else t.reshape(*batch, *t.shape[n:])
-
         try:
-            return Scene._unchecked(
-                rs(full.spheres), rs(full.boxes), rs(full.floor), rs(full.sphere_mask), rs(full.box_mask)
-            )
+            return full._map(lambda t, tail: t.reshape(*batch, *t.shape[n:]))
         except RuntimeError as exc:
             raise ObstacleError(
                 f"cannot reshape a scene of batch {tuple(self.batch_shape)} to {batch}"
@@ -268,14 +337,7 @@ class Scene:
         """Index the batch dimensions (``scene[3]``, ``scene[:10]``, ``scene[mask]``)."""
         if len(self.batch_shape) == 0:
             raise ObstacleError("an unbatched scene (batch shape ()) cannot be indexed")
-        full = self.expand(*self.batch_shape)
-
-        def ix(t):
-            return None if t is None else t[index]
-
-        return Scene._unchecked(
-            ix(full.spheres), ix(full.boxes), ix(full.floor), ix(full.sphere_mask), ix(full.box_mask)
-        )
+        return self.expand(*self.batch_shape)._map(lambda t, tail: t[index])
 
     def unsqueeze(self, dim: int) -> Scene:
         """Insert a batch dimension of size 1 at ``dim`` of the batch shape (negative: from its end).
@@ -288,18 +350,12 @@ class Scene:
                 f"dim must be in [{-nb - 1}, {nb}] for a scene of batch shape {tuple(self.batch_shape)}"
             )
         pos = dim if dim >= 0 else nb + 1 + dim
-        full = self.expand(*self.batch_shape)
-
-        def un(t):
-            return None if t is None else t.unsqueeze(pos)
-
-        return Scene._unchecked(
-            un(full.spheres), un(full.boxes), un(full.floor), un(full.sphere_mask), un(full.box_mask)
-        )
+        return self.expand(*self.batch_shape)._map(lambda t, tail: t.unsqueeze(pos))
 
     @staticmethod
     def stack(scenes: Sequence[Scene]) -> Scene:
-        """Unbatched scenes → one scene of batch ``(len(scenes),)``, padded to the largest K and B with masks.
+        """Unbatched scenes → one scene of batch ``(len(scenes),)``, padded to the largest count of each
+        kind with masks.
 
         A floor is kept only if every scene has one (a scene without a floor cannot share a floor tensor).
         """
@@ -311,67 +367,55 @@ class Scene:
                 "Scene.stack takes unbatched scenes (batch shape ()); index batched ones first"
             )
         ref = scenes[0].spheres
-        K = max(s.num_spheres for s in scenes)
-        B = max(s.num_boxes for s in scenes)
-        sp = ref.new_tensor(_PAD_SPHERE).repeat(len(scenes), K, 1)
-        bx = ref.new_tensor(_PAD_BOX).repeat(len(scenes), B, 1)
-        sm = torch.zeros(len(scenes), K, dtype=torch.bool, device=ref.device)
-        bm = torch.zeros(len(scenes), B, dtype=torch.bool, device=ref.device)
-        for i, s in enumerate(scenes):
-            k, b = s.num_spheres, s.num_boxes
-            sp[i, :k] = s.spheres.to(ref)
-            bx[i, :b] = s.boxes.to(ref)
-            sm[i, :k] = True if s.sphere_mask is None else s.sphere_mask
-            bm[i, :b] = True if s.box_mask is None else s.box_mask
+        fields = {}
+        for name, mask_name, kind in _TABLES:
+            n = max(getattr(s, name).shape[-2] for s in scenes)
+            rows = ref.new_tensor(kind.pad).repeat(len(scenes), n, 1)
+            mask = torch.zeros(len(scenes), n, dtype=torch.bool, device=ref.device)
+            for i, s in enumerate(scenes):
+                t, m = getattr(s, name), getattr(s, mask_name)
+                rows[i, : t.shape[-2]] = t.to(ref)
+                mask[i, : t.shape[-2]] = True if m is None else m
+            fields[name], fields[mask_name] = rows, mask
         floors = [s.floor for s in scenes]
         floor = torch.stack([f.to(ref) for f in floors]) if all(f is not None for f in floors) else None
         if floor is None and any(f is not None for f in floors):
             raise ObstacleError(
                 "Scene.stack: some scenes have a floor and some do not; give all or none a floor"
             )
-        return Scene(sp, bx, floor, sm, bm)
+        return Scene(**fields, floor=floor)
 
     def unstack(self) -> list[Scene]:
         """A batch ``(n,)`` scene → ``n`` unbatched scenes without their padding."""
         if len(self.batch_shape) != 1:
             raise ObstacleError(f"unstack needs a scene of batch shape (n,), got {tuple(self.batch_shape)}")
-        out = []
         full = self.expand(*self.batch_shape)
+        out = []
         for i in range(self.batch_shape[0]):
-            s, b = full.spheres[i], full.boxes[i]
-            if full.sphere_mask is not None:
-                s = s[full.sphere_mask[i]]
-            if full.box_mask is not None:
-                b = b[full.box_mask[i]]
-            out.append(Scene(s, b, None if full.floor is None else full.floor[i]))
+            one = full[i]
+            tables = {kind.table: rows for kind, rows, _ in one.tables(live=True)}
+            out.append(Scene(**tables, floor=one.floor))
         return out
 
     # ---------------------------------------------------------------------------------------------
     def arrays(self) -> dict[str, np.ndarray]:
         """The scene as numpy arrays (float64 and bool), keyed as :meth:`from_arrays` expects."""
-        out = {
-            "spheres": self.spheres.detach().cpu().double().numpy(),
-            "boxes": self.boxes.detach().cpu().double().numpy(),
-        }
-        if self.floor is not None:
-            out["floor"] = self.floor.detach().cpu().double().numpy()
-        if self.sphere_mask is not None:
-            out["sphere_mask"] = self.sphere_mask.cpu().numpy()
-        if self.box_mask is not None:
-            out["box_mask"] = self.box_mask.cpu().numpy()
+        out = {}
+        for name, _ in _FIELDS:
+            t = getattr(self, name)
+            if t is not None:
+                out[name] = t.detach().cpu().double().numpy() if t.is_floating_point() else t.cpu().numpy()
         return out
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], dtype: torch.dtype = torch.float64) -> Scene:
-        def get(key, cast=True):
+        def get(key):
             if key not in arrays:
                 return None
             a = torch.as_tensor(np.asarray(arrays[key]))
-            return a.to(dtype) if cast else a
+            return a.to(dtype) if a.dtype != torch.bool else a
 
-        return cls(
-            get("spheres"), get("boxes"), get("floor"), get("sphere_mask", False), get("box_mask", False)
-        )
+        return cls(**{name: get(name) for name, _ in _FIELDS})
 
     def save(self, path: str | Path, robot: str = "") -> Path:
         """Write the scene to ``path`` (``.npz``) atomically; ``robot`` names the robot whose base frame it is in."""
@@ -385,9 +429,10 @@ class Scene:
         missing or unreadable file, a file of another kind, format or robot, or invalid obstacles."""
         meta, arrays = load_npz(path, kind="scene", robot=robot)
         version = meta.get("config", {}).get("scene_format")
-        if version != SCENE_FORMAT:
+        if version not in SCENE_FORMATS:
             raise DatasetError(
-                f"{path} holds scene format {version!r}; this kinlearn reads scene format {SCENE_FORMAT}"
+                f"{path} holds scene format {version!r}; this kinlearn reads scene formats "
+                f"{', '.join(map(str, SCENE_FORMATS))}"
             )
         try:
             return cls.from_arrays(arrays, dtype)
@@ -400,6 +445,7 @@ class Scene:
         )
         return (
             f"Scene(batch={tuple(self.batch_shape)}, spheres={self.num_spheres}, boxes={self.num_boxes}, "
+            f"cylinders={self.num_cylinders}, "
             f"floor={floor}, dtype={self.dtype})"
         )
 

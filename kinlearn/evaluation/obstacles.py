@@ -28,6 +28,7 @@ import torch
 
 from ..body.kinematics import kinematics
 from ..collision import BodySpheres, Scene, check_path
+from ..collision.geometry import box_faces, cylinder_faces
 from ..collision.problems import FAMILIES, ProblemSet
 from ..data.problem import LIMIT_TOLERANCE
 from ..errors import ConfigError, ShapeError
@@ -380,26 +381,20 @@ def plot_success_latency(
     return _save(fig, path, dpi)
 
 
-def _box_faces(box: np.ndarray) -> list[np.ndarray]:
-    c, h = box[:3], box[3:6]
-    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h + c
-    quads = [(0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5)]
-    return [corners[list(q)] for q in quads]
-
-
 def _draw_scene(ax, scene: Scene) -> list[np.ndarray]:
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     pts = []
-    boxes = scene.boxes.detach().cpu().double().numpy()
-    if len(boxes):
-        faces = [f for b in boxes for f in _box_faces(b)]
+    tables = {kind.kind: rows.detach().cpu().double().numpy() for kind, rows, _ in scene.tables(live=True)}
+    faces = [f for b in tables["box"] for f in box_faces(b)]
+    faces += [f for c in tables["cylinder"] for f in cylinder_faces(c)]
+    if faces:
         ax.add_collection3d(
             Poly3DCollection(faces, facecolor="tan", edgecolor="0.35", linewidths=0.3, alpha=0.25)
         )
-        pts += [b[:3] + s * b[3:6] for b in boxes for s in (-1.0, 1.0)]
+        pts += [corner for f in faces for corner in f]
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 16), np.linspace(0, np.pi, 9))
-    for x, y, z, r in scene.spheres.detach().cpu().double().numpy():
+    for x, y, z, r in tables["sphere"]:
         ax.plot_surface(
             x + r * np.cos(u) * np.sin(v),
             y + r * np.sin(u) * np.sin(v),

@@ -6,8 +6,9 @@ once, each its own set of mode coefficients. The planner checks them (and the st
 the scene and keeps a collision-free one, so a plan costs one network pass and a bounded number of
 path checks whatever the problem: a fixed, small time.
 
-The scene enters as a set. Every primitive (a sphere or an axis-aligned box) becomes a row of
-features: its centre, its half extents (a sphere's radius three times), whether it is a sphere, and
+The scene enters as a set. Every primitive (a sphere, a box or a cylinder) becomes a row of
+features: its centre, its half extents (a sphere's radius three times; a rotated box's or a cylinder's
+axis-aligned bounding box), whether it is a sphere, and
 its centre relative to the start's and the goal's end effector. A small network maps each row to an
 embedding and a masked max over the rows pools them (a PointNet-style set encoder), so scenes of any
 number of primitives give an input of one size; a floor plane enters as its height and a flag. The
@@ -26,6 +27,7 @@ import torch
 from torch import nn
 
 from ..body.state import StateLayout
+from ..collision.geometry import Sphere, aabb_half_extents
 from ..collision.scene import Scene
 from ..errors import CheckpointError, ConfigError
 from ..io import half_weights, load_checkpoint, save_checkpoint
@@ -88,26 +90,29 @@ def scene_primitives(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """A scene as the model's set input for ``batch`` problems.
 
-    Returns ``rows (batch, P, 7)`` [centre, half extents, is-sphere] (spheres first, then boxes),
-    ``mask (batch, P)`` (False for padding) and ``floor (batch, 2)`` [has floor, height]. The scene's
-    batch shape must be ``()`` or ``(batch,)``.
+    Returns ``rows (batch, P, 7)`` [centre, half extents, is-sphere] (spheres first, then boxes, then
+    cylinders), ``mask (batch, P)`` (False for padding) and ``floor (batch, 2)`` [has floor, height]. A
+    box or cylinder enters by the half extents of its axis-aligned bounding box
+    (:func:`~kinlearn.collision.geometry.aabb_half_extents`): an axis-aligned box's own, so the rows of
+    spheres and axis-aligned boxes are those the shipped model was trained on. The scene's batch shape
+    must be ``()`` or ``(batch,)``.
     """
     if scene.batch_shape not in ((), (batch,)):
         raise ConfigError(
             f"the scene's batch shape {tuple(scene.batch_shape)} must be () or ({batch},) for {batch} problems"
         )
-    s = scene.spheres.to(dtype).expand(batch, *scene.spheres.shape[-2:])
-    b = scene.boxes.to(dtype).expand(batch, *scene.boxes.shape[-2:])
-    sph = torch.cat((s[..., :3], s[..., 3:4].expand(*s.shape[:-1], 3), torch.ones_like(s[..., :1])), -1)
-    box = torch.cat((b[..., :3], b[..., 3:6], torch.zeros_like(b[..., :1])), -1)
-    rows = torch.cat((sph, box), dim=1)
-
-    def mask_of(m, t):
-        if m is None:
-            return torch.ones(batch, t.shape[-2], dtype=torch.bool, device=t.device)
-        return m.expand(batch, t.shape[-2])
-
-    mask = torch.cat((mask_of(scene.sphere_mask, s), mask_of(scene.box_mask, b)), dim=1)
+    parts, masks = [], []
+    for kind, table, m in scene.tables():
+        t = table.to(dtype).expand(batch, *table.shape[-2:])
+        flag = torch.ones_like(t[..., :1]) if kind is Sphere else torch.zeros_like(t[..., :1])
+        parts.append(torch.cat((t[..., :3], aabb_half_extents(kind, t), flag), -1))
+        masks.append(
+            torch.ones(batch, t.shape[-2], dtype=torch.bool, device=t.device)
+            if m is None
+            else m.expand(batch, t.shape[-2])
+        )
+    rows = torch.cat(parts, dim=1)
+    mask = torch.cat(masks, dim=1)
     if scene.floor is None:
         floor = torch.zeros(batch, 2, dtype=dtype, device=rows.device)
     else:

@@ -34,6 +34,7 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..collision.body import BodySpheres, body_spheres
+from ..collision.distance import body_obstacle_distance
 from ..collision.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
 from ..errors import ConfigError
 from ..models.obstacle_path import (
@@ -183,36 +184,13 @@ def _travel(centres: torch.Tensor, moving: torch.Tensor) -> torch.Tensor:
     return (step * moving).sum((-1, -2))
 
 
-def _far(table: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
-    """Padding rows of an obstacle table moved far away (1 km, 1 mm in size): no mask needed after."""
-    if mask is None:
-        return table
-    far = torch.zeros_like(table)
-    far[..., :3] = 1000.0
-    far[..., 3:] = 1e-3
-    return torch.where(mask[..., None], table, far)
-
-
 def _scene_clearance(centres: torch.Tensor, radii: torch.Tensor, scene, floor_mask) -> torch.Tensor:
     """``centres (N, R, M, 3)`` → ``(N, R, M)``: each sphere's signed distance to its problem's scene
-    (batch ``(N,)``, floor included). The sphere and box distances of
-    :mod:`kinlearn.collision.distance`, lean for training: padding is moved away instead of masked."""
-    c = centres[..., None, :]  # (N, R, M, 1, 3)
-    out = torch.full_like(centres[..., 0], torch.inf)
-    if scene.spheres.shape[-2]:
-        sp = _far(scene.spheres, scene.sphere_mask)[:, None, None]  # (N, 1, 1, K, 4)
-        d = (c - sp[..., :3]).norm(dim=-1) - sp[..., 3]
-        out = torch.minimum(out, d.amin(-1))
-    if scene.boxes.shape[-2]:
-        bx = _far(scene.boxes, scene.box_mask)[:, None, None]  # (N, 1, 1, B, 6)
-        q = (c - bx[..., :3]).abs() - bx[..., 3:]
-        d = q.clamp_min(0.0).square().sum(-1).clamp_min(1e-12).sqrt() + q.amax(-1).clamp_max(0.0)
-        out = torch.minimum(out, d.amin(-1))
-    out = out - radii
-    if scene.floor is not None:
-        h = scene.floor.expand(centres.shape[0])[:, None, None]
-        out = torch.where(floor_mask, torch.minimum(out, centres[..., 2] - radii - h), out)
-    return out
+    (batch ``(N,)``, floor included): the distances of :mod:`kinlearn.collision.distance`."""
+    _, per = body_obstacle_distance(
+        centres, radii, scene.unsqueeze(-1), per_sphere=True, floor_mask=floor_mask
+    )
+    return per
 
 
 def candidate_losses(

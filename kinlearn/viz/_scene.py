@@ -1,15 +1,17 @@
 """What both the animation and the browser viewer draw, computed once from plain inputs.
 
 A joint path ``(N, dof)`` becomes the arm's joint origins at every configuration (analytic FK of the
-fast backend), the end-effector path, and validated optional extras: waypoints ``(M, 3)``, spheres
-``(K, 4)`` as ``[x, y, z, r]`` and axis-aligned boxes ``(B, 6)`` as ``[cx, cy, cz, hx, hy, hz]``
-(centre and half extents), all in metres in the robot's base frame. Joint paths outside the joint
+fast backend), the end-effector path, and validated optional extras: waypoints ``(M, 3)`` and the
+obstacles, either a :class:`~kinlearn.collision.Scene` (``scene=``, every kind of primitive) or plain
+tables: spheres ``(K, 4)`` as ``[x, y, z, r]``, boxes ``(B, 6)`` as ``[cx, cy, cz, hx, hy, hz]``
+(axis-aligned: centre and half extents) or ``(B, 15)`` (with a row-major rotation), cylinders
+``(C, 14)`` (:mod:`kinlearn.collision.geometry`'s layouts), all in metres in the robot's base frame. Joint paths outside the joint
 limits are drawn as they are: showing such a plan is one reason to look at it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -17,6 +19,8 @@ import torch
 
 from ..body.kinematics import kinematics
 from ..body.robot import Robot
+from ..collision.geometry import IDENTITY, Box, Cylinder, aabb_half_extents
+from ..collision.scene import Scene
 from ..errors import ConfigError, NonFiniteError, ObstacleError, ShapeError
 
 
@@ -29,7 +33,8 @@ class PlanScene:
         links: ``(N, dof + 2, 3)`` base, every joint origin and the end effector, per configuration.
         ee: ``(N, 3)`` the end-effector path (``links[:, -1]``).
         waypoints: ``(M, 3)`` (``M = 0`` when none were given).
-        spheres: ``(K, 4)``; boxes: ``(B, 6)``.
+        spheres: ``(K, 4)``; boxes: ``(B, 15)``; cylinders: ``(C, 14)`` (the layouts of
+            :mod:`kinlearn.collision.geometry`).
         times: ``(N,)`` seconds, or ``None`` when the path has no time stamps.
     """
 
@@ -40,6 +45,7 @@ class PlanScene:
     spheres: np.ndarray
     boxes: np.ndarray
     times: np.ndarray | None
+    cylinders: np.ndarray = field(default_factory=lambda: np.zeros((0, 14)))
 
     @property
     def frames(self) -> int:
@@ -51,9 +57,10 @@ class PlanScene:
         if len(self.spheres):
             c, r = self.spheres[:, :3], self.spheres[:, 3:]
             pts += [c - r, c + r]
-        if len(self.boxes):
-            c, h = self.boxes[:, :3], self.boxes[:, 3:]
-            pts += [c - h, c + h]
+        for kind, rows in ((Box, self.boxes), (Cylinder, self.cylinders)):
+            if len(rows):
+                c, h = rows[:, :3], aabb_half_extents(kind, torch.from_numpy(rows)).numpy()
+                pts += [c - h, c + h]
         allp = np.concatenate(pts)
         return allp.min(axis=0), allp.max(axis=0)
 
@@ -89,6 +96,8 @@ def plan_scene(
     spheres: Any = None,
     boxes: Any = None,
     times: Any = None,
+    cylinders: Any = None,
+    scene: Scene | None = None,
 ) -> PlanScene:
     """Validate the inputs and compute the arm's joint origins along the path (see the module docstring)."""
     if isinstance(joints, np.ndarray):
@@ -108,11 +117,29 @@ def plan_scene(
     links = kinematics(robot, "fast").link_positions(q).numpy()
     wp = _array(waypoints, 3, "waypoints", "(x, y, z in metres)")
     sph = _array(spheres, 4, "spheres", "[x, y, z, radius] in metres", obstacle=True)
-    box = _array(boxes, 6, "boxes", "[centre x, y, z, half extents x, y, z] in metres", obstacle=True)
-    if (sph[:, 3] <= 0).any():
-        raise ObstacleError(f"sphere radii must be > 0 (metres), got {sph[:, 3].tolist()}")
-    if (box[:, 3:] <= 0).any():
-        raise ObstacleError(f"box half extents must be > 0 (metres), got {box[:, 3:].tolist()}")
+    if scene is not None:
+        if not isinstance(scene, Scene) or len(scene.batch_shape):
+            raise ObstacleError(
+                "scene must be one kinlearn Scene (batch shape ()); index a batched one first"
+            )
+        if any(t is not None for t in (spheres, boxes, cylinders)):
+            raise ObstacleError("give the obstacles as scene= or as spheres=/boxes=/cylinders=, not both")
+        spheres, boxes, cylinders = (rows for _, rows, _ in scene.tables(live=True))
+    if boxes is not None and np.shape(boxes)[-1:] == (6,):
+        b6 = _array(boxes, 6, "boxes", "[centre x, y, z, half extents x, y, z] in metres", obstacle=True)
+        boxes = np.concatenate((b6, np.tile(IDENTITY, (len(b6), 1))), axis=1)
+    box = _array(
+        boxes,
+        15,
+        "boxes",
+        "[centre, half extents, rotation (9)] in metres (or (n, 6) [centre, half extents], axis-aligned)",
+        obstacle=True,
+    )
+    cyl = _array(cylinders, 14, "cylinders", "[centre, radius, half length, rotation (9)]", obstacle=True)
+    try:  # the scene's own checks: sizes > 0, rotations orthonormal
+        Scene(spheres=sph, boxes=box, cylinders=cyl)
+    except ObstacleError as exc:
+        raise ObstacleError(f"obstacles to draw: {exc}") from exc
     t = None
     if times is not None:
         t = _array(np.asarray(times, dtype=np.float64).reshape(-1, 1), 1, "times", "(seconds)")[:, 0]
@@ -120,4 +147,4 @@ def plan_scene(
             raise ShapeError(f"times must have one entry per configuration ({q.shape[0]}), got {t.shape[0]}")
         if (np.diff(t) < 0).any():
             raise ConfigError("times must be non-decreasing")
-    return PlanScene(robot.name, links, links[:, -1].copy(), wp, sph, box, t)
+    return PlanScene(robot.name, links, links[:, -1].copy(), wp, sph, box, t, cyl)

@@ -4,8 +4,9 @@ One frame per configuration of the path: pass a plan's ``joints`` for one frame 
 trajectory resampled at the frame rate (``time_parameterize(robot, plan.joints, dt=1 / fps)``, then
 ``q`` and ``times=t``) for motion at its real speed. Each frame shows the arm as a polyline through its
 joint origins, the end-effector trace so far, the whole end-effector path (dashed), the start and the
-goal, and optionally the planner's waypoints and obstacles (spheres ``(K, 4)`` ``[x, y, z, r]``,
-axis-aligned boxes ``(B, 6)`` ``[centre, half extents]``). Every frame carries its index (and time),
+goal, and optionally the planner's waypoints and obstacles (a :class:`~kinlearn.collision.Scene` as
+``scene=``, or spheres ``(K, 4)`` ``[x, y, z, r]``, boxes ``(B, 6)`` ``[centre, half extents]`` or
+``(B, 15)`` with a rotation, cylinders ``(C, 14)``). Every frame carries its index (and time),
 so no two frames are identical and the GIF keeps exactly one frame per configuration.
 
 matplotlib (``pip install kinlearn[plots]``) is imported when an animation is made, through its
@@ -21,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..body.robot import Robot
+from ..collision.geometry import box_faces, cylinder_faces
 from ..errors import ConfigError, MissingDependencyError
 from ..io import atomic_write
 from ._scene import PlanScene, plan_scene
@@ -45,13 +47,6 @@ def _matplotlib():
             "`pip install matplotlib` (or `pip install kinlearn[plots]`)"
         ) from exc
     return Figure, PillowWriter, Poly3DCollection
-
-
-def _box_faces(box: np.ndarray) -> list[np.ndarray]:
-    c, h = box[:3], box[3:]
-    corners = c + h * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
-    quads = ((0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5))
-    return [corners[list(f)] for f in quads]
 
 
 def _draw_static(ax, scene: PlanScene, Poly3DCollection) -> None:
@@ -79,9 +74,11 @@ def _draw_static(ax, scene: PlanScene, Poly3DCollection) -> None:
             alpha=0.25,
             linewidth=0,
         )
-    for box in scene.boxes:
+    faces = [f for box in scene.boxes for f in box_faces(box)]
+    faces += [f for cyl in scene.cylinders for f in cylinder_faces(cyl)]
+    if faces:
         ax.add_collection3d(
-            Poly3DCollection(_box_faces(box), facecolor=_OBSTACLE, alpha=0.2, edgecolor=_OBSTACLE, lw=0.5)
+            Poly3DCollection(faces, facecolor=_OBSTACLE, alpha=0.2, edgecolor=_OBSTACLE, lw=0.5)
         )
 
 
@@ -110,6 +107,8 @@ def animate_plan(
     spheres: Any = None,
     boxes: Any = None,
     times: Any = None,
+    cylinders: Any = None,
+    scene: Any = None,
     fps: float = 20.0,
     figsize: tuple[float, float] = (5.0, 5.0),
     dpi: int = 80,
@@ -124,7 +123,9 @@ def animate_plan(
         joints: ``(N, dof)`` joint path (tensor or array, rad); one frame per row.
         path: the GIF file to write.
         waypoints: ``(M, 3)`` points to mark (e.g. a plan's ``waypoints``), metres.
-        spheres: ``(K, 4)`` obstacle spheres ``[x, y, z, r]``; boxes: ``(B, 6)`` ``[centre, half extents]``.
+        spheres: ``(K, 4)`` obstacle spheres ``[x, y, z, r]``; boxes: ``(B, 6)`` ``[centre, half extents]``
+            or ``(B, 15)`` (with a rotation); cylinders: ``(C, 14)``; or all of them as ``scene``, a
+            :class:`~kinlearn.collision.Scene`.
         times: ``(N,)`` time stamps (s) shown on each frame, e.g. a timed trajectory's ``t``.
         fps: frames per second of the GIF (GIF delays are whole centiseconds: 20 fps or 25 fps are exact).
         figsize, dpi: the frame size in inches and its resolution (5 in × 80 dpi = 400 px).
@@ -138,7 +139,16 @@ def animate_plan(
         raise ConfigError(f"fps must be in (0, 100], got {fps!r}")
     if not (isinstance(dpi, int) and dpi > 0):
         raise ConfigError(f"dpi must be a positive integer, got {dpi!r}")
-    scene = plan_scene(robot, joints, waypoints=waypoints, spheres=spheres, boxes=boxes, times=times)
+    scene = plan_scene(
+        robot,
+        joints,
+        waypoints=waypoints,
+        spheres=spheres,
+        boxes=boxes,
+        times=times,
+        cylinders=cylinders,
+        scene=scene,
+    )
     Figure, PillowWriter, Poly3DCollection = _matplotlib()
 
     fig = Figure(figsize=figsize)

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from ..body.robot import Robot
+from ..collision.geometry import quaternion_from_rotation
 from ..errors import ConfigError, MissingDependencyError
 from ._scene import PlanScene, plan_scene
 
@@ -140,9 +141,26 @@ class PlanViewer:
             )
         for k, box in enumerate(s.boxes):
             name = f"/obstacles/box_{k}"
+            wxyz = _wxyz(box[6:15])
             self._add(
                 name,
-                sc.add_box(name, color=_OBSTACLE, dimensions=2 * box[3:], opacity=0.45, position=box[:3]),
+                sc.add_box(
+                    name, color=_OBSTACLE, dimensions=2 * box[3:6], opacity=0.45, position=box[:3], wxyz=wxyz
+                ),
+            )
+        for k, cyl in enumerate(s.cylinders):
+            name = f"/obstacles/cylinder_{k}"
+            self._add(
+                name,
+                sc.add_cylinder(
+                    name,
+                    radius=float(cyl[3]),
+                    height=float(2 * cyl[4]),
+                    color=_OBSTACLE,
+                    opacity=0.45,
+                    position=cyl[:3],
+                    wxyz=_wxyz(cyl[5:14]),
+                ),
             )
         centre = (lo + hi) / 2
         radius = float(np.linalg.norm(hi - lo)) / 2
@@ -243,6 +261,12 @@ class PlanViewer:
         return f"PlanViewer({self.robot.name!r}, frames={self.scene.frames}, {state})"
 
 
+def _wxyz(rotation: np.ndarray) -> tuple[float, float, float, float]:
+    """A row-major rotation (9,) as viser's quaternion (w, x, y, z)."""
+    x, y, z, w = quaternion_from_rotation(rotation)
+    return (float(w), float(x), float(y), float(z))
+
+
 def show_plan(
     robot: Robot,
     joints: Any,
@@ -251,6 +275,8 @@ def show_plan(
     spheres: Any = None,
     boxes: Any = None,
     times: Any = None,
+    cylinders: Any = None,
+    scene: Any = None,
     host: str = "127.0.0.1",
     port: int = 8080,
     fps: float = 10.0,
@@ -262,7 +288,9 @@ def show_plan(
         robot: the robot (``kinlearn.load_robot(name)``).
         joints: ``(N, dof)`` joint path (rad); the slider steps through its rows.
         waypoints: ``(M, 3)`` points to mark (e.g. a plan's ``waypoints``), metres.
-        spheres: ``(K, 4)`` obstacle spheres ``[x, y, z, r]``; boxes: ``(B, 6)`` ``[centre, half extents]``.
+        spheres: ``(K, 4)`` obstacle spheres ``[x, y, z, r]``; boxes: ``(B, 6)`` ``[centre, half extents]``
+            or ``(B, 15)`` (with a rotation); cylinders: ``(C, 14)``; or all of them as ``scene``, a
+            :class:`~kinlearn.collision.Scene`.
         times: ``(N,)`` time stamps (s) shown beside the slider, e.g. a timed trajectory's ``t``.
         host, port: where to listen (localhost by default; ``"0.0.0.0"`` to serve other machines).
             If the port is taken, viser takes the next free one: read ``viewer.port``.
@@ -276,7 +304,16 @@ def show_plan(
         raise ConfigError(f"port must be an integer in 1…65535, got {port!r}")
     if not (isinstance(fps, int | float) and 0.5 <= fps <= 120):
         raise ConfigError(f"fps must be in [0.5, 120], got {fps!r}")
-    scene = plan_scene(robot, joints, waypoints=waypoints, spheres=spheres, boxes=boxes, times=times)
+    scene = plan_scene(
+        robot,
+        joints,
+        waypoints=waypoints,
+        spheres=spheres,
+        boxes=boxes,
+        times=times,
+        cylinders=cylinders,
+        scene=scene,
+    )
     viewer = PlanViewer(robot, scene, host, port, fps)
     if block:
         print(f"kinlearn viewer: open {viewer.url} in a browser (Ctrl-C to stop)")
