@@ -6,12 +6,22 @@ importing the robot.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 
 from .errors import ConfigError, DTypeError, NonFiniteError, ShapeError
 
-__all__ = ["check_finite", "check_last_dim", "check_real_dtype", "check_region", "real_array"]
+__all__ = [
+    "as_int",
+    "as_real",
+    "check_finite",
+    "check_last_dim",
+    "check_real_dtype",
+    "check_region",
+    "real_array",
+]
 
 
 def check_last_dim(x: torch.Tensor, n: int | tuple[int, ...], what: str) -> None:
@@ -65,3 +75,70 @@ def check_region(region, what: str = "region") -> tuple[float, ...]:
             f"got {region!r}"
         )
     return tuple(float(v) for v in r)
+
+
+def _scalar(value, what: str, kinds: str, expected: str):
+    """``value`` (a Python, NumPy or 0-d torch number) as a Python number when its kind (NumPy's
+    ``dtype.kind``) is one of ``kinds``; :class:`ConfigError` otherwise (bools and complex numbers included:
+    True is no count and 1+0j no length)."""
+    if isinstance(value, torch.Tensor):
+        if value.ndim != 0:
+            raise ConfigError(f"{what} must be {expected}, got a tensor of shape {tuple(value.shape)}")
+        if value.dtype == torch.bool or value.is_complex():
+            raise ConfigError(f"{what} must be {expected}, got a {value.dtype} tensor")
+        kind = "f" if value.is_floating_point() else "i"
+        value = value.item()
+    elif isinstance(value, (bool, np.bool_)):
+        raise ConfigError(f"{what} must be {expected}, got {value!r}")
+    elif isinstance(value, int):
+        kind = "i"
+    elif isinstance(value, float):
+        kind = "f"
+    elif isinstance(value, (np.generic, np.ndarray)) and np.ndim(value) == 0:
+        kind = np.asarray(value).dtype.kind
+        value = np.asarray(value).item()
+    else:
+        raise ConfigError(f"{what} must be {expected}, got {type(value).__name__} {value!r}")
+    if kind not in kinds:
+        raise ConfigError(f"{what} must be {expected}, got {value!r}")
+    return value
+
+
+def as_int(value, what: str, *, minimum: int | None = None, maximum: int | None = None) -> int:
+    """``value`` as a Python int: an integer (Python, NumPy or a 0-d integer tensor; not a bool) within
+    ``[minimum, maximum]``; :class:`ConfigError` naming ``what`` and the bound otherwise."""
+    bounds = (
+        f" in [{minimum}, {maximum}]"
+        if minimum is not None and maximum is not None
+        else (f" ≥ {minimum}" if minimum is not None else (f" ≤ {maximum}" if maximum is not None else ""))
+    )
+    v = int(_scalar(value, what, "iu", f"an integer{bounds}"))
+    if (minimum is not None and v < minimum) or (maximum is not None and v > maximum):
+        raise ConfigError(f"{what} must be an integer{bounds}, got {v}")
+    return v
+
+
+def as_real(
+    value,
+    what: str,
+    *,
+    minimum: float | None = None,
+    maximum: float | None = None,
+    open_minimum: bool = False,
+    finite: bool = True,
+) -> float:
+    """``value`` as a Python float: a real number (Python, NumPy or a 0-d real tensor; not a bool or a
+    complex number), finite unless ``finite=False``, ≥ ``minimum`` (> with ``open_minimum``) and ≤
+    ``maximum``; :class:`ConfigError` naming ``what`` and the bound otherwise."""
+    low = "" if minimum is None else f"{'>' if open_minimum else '≥'} {minimum:g}"
+    high = "" if maximum is None else f"≤ {maximum:g}"
+    bounds = " and ".join(b for b in (low, high) if b)
+    expected = f"a {'finite ' if finite else ''}real number" + (f" {bounds}" if bounds else "")
+    v = float(_scalar(value, what, "fiu", expected))
+    if math.isnan(v) or (finite and math.isinf(v)):
+        raise ConfigError(f"{what} must be {expected}, got {v}")
+    if minimum is not None and (v < minimum or (open_minimum and v == minimum)):
+        raise ConfigError(f"{what} must be {expected}, got {v:g}")
+    if maximum is not None and v > maximum:
+        raise ConfigError(f"{what} must be {expected}, got {v:g}")
+    return v

@@ -54,6 +54,7 @@ import numpy as np
 import torch
 
 from ..body.robot import Robot
+from ..checks import as_int, as_real
 from ..errors import ConfigError, DatasetError, JointLimitError, NonFiniteError, ShapeError, TimingError
 from ..io import atomic_write
 
@@ -69,6 +70,10 @@ _GRID_PER_SEGMENT = 16  # toppra grid points per waypoint segment (at least)
 _GRID_MIN = 200
 _CHECK_PER_INTERVAL = 4  # dense-check samples per toppra grid interval
 _MAX_RESOLVES = 6
+#: The most samples a timed trajectory may have (t, q, qd, qdd: ≈ 24 · dof bytes each, 170 MB for 7
+#: joints): ``samples`` above it, or a ``dt`` that would give more over the trajectory's duration
+#: (tiny limits make it long), is refused before anything is allocated.
+MAX_SAMPLES = 1_000_000
 
 Interpolant = Literal["auto", "spline", "pchip"]
 
@@ -114,6 +119,21 @@ class TimedTrajectory:
                 )
         if self.velocity_limits.shape != (dof,) or self.acceleration_limits.shape != (dof,):
             raise ShapeError(f"TimedTrajectory limits must have shape ({dof},)")
+        for name in ("t", "q", "qd", "qdd", "velocity_limits", "acceleration_limits", "waypoint_times"):
+            if not np.isfinite(getattr(self, name)).all():
+                raise NonFiniteError(f"TimedTrajectory.{name} holds NaN/inf; every value must be finite")
+        if not math.isfinite(self.duration) or self.duration < 0:
+            raise ConfigError(f"TimedTrajectory.duration must be a finite time ≥ 0 s, got {self.duration}")
+        t, wt = self.t, self.waypoint_times
+        if self.t.ndim != 1 or k == 0 or t[0] != 0.0 or (np.diff(t) <= 0).any() or t[-1] != self.duration:
+            raise ConfigError(
+                "TimedTrajectory.t must be sample times increasing strictly from 0 to its duration "
+                f"({self.duration:g} s)"
+            )
+        if wt.ndim != 1 or (np.diff(wt) < 0).any() or (wt.size and (wt[0] < 0 or wt[-1] > self.duration)):
+            raise ConfigError(
+                "TimedTrajectory.waypoint_times must not decrease and must lie within [0, duration]"
+            )
 
     @property
     def dof(self) -> int:
@@ -214,8 +234,7 @@ def _limit_vector(value: Any, dof: int, what: str) -> np.ndarray:
 def _resolve_limits(
     robot: Robot, velocity_limits: Any, acceleration_limits: Any, velocity_scale: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    if not (isinstance(velocity_scale, int | float) and 0.0 < velocity_scale <= 1.0):
-        raise ConfigError(f"velocity_scale must be in (0, 1], got {velocity_scale!r}")
+    velocity_scale = as_real(velocity_scale, "velocity_scale", minimum=0.0, open_minimum=True, maximum=1.0)
     if velocity_limits is None:
         vel = np.asarray(robot.velocity_limits, dtype=np.float64)
         missing = [n for n, v in zip(robot.joint_names, vel, strict=True) if not math.isfinite(v) or v <= 0]
@@ -402,10 +421,10 @@ def time_parameterize(
         raise ConfigError(f"interpolant must be 'auto', 'spline' or 'pchip', got {interpolant!r}")
     if dt is not None and samples is not None:
         raise ConfigError("give dt or samples, not both")
-    if dt is not None and not (isinstance(dt, int | float) and math.isfinite(dt) and dt > 0):
-        raise ConfigError(f"dt must be a positive number of seconds, got {dt!r}")
-    if samples is not None and not (isinstance(samples, int) and samples >= 2):
-        raise ConfigError(f"samples must be an integer ≥ 2, got {samples!r}")
+    if dt is not None:
+        dt = as_real(dt, "dt (s)", minimum=0.0, open_minimum=True)
+    if samples is not None:
+        samples = as_int(samples, "samples", minimum=2, maximum=MAX_SAMPLES)
     q_in = _joint_path(robot, joints)
     vel, acc = _resolve_limits(robot, velocity_limits, acceleration_limits, velocity_scale)
 
@@ -443,6 +462,13 @@ def time_parameterize(
         )
 
     duration = float(traj.duration)
+    step = DEFAULT_DT if dt is None else dt
+    if samples is None and duration / step + 2 > MAX_SAMPLES:
+        raise ConfigError(
+            f"sampling the {duration:.4g} s trajectory every {step:g} s would take {duration / step:.3g} samples, "
+            f"more than the {MAX_SAMPLES:,} allowed (MAX_SAMPLES: the arrays would not fit in memory); "
+            "pass a larger dt or samples=, or larger velocity/acceleration limits"
+        )
     ts = _sample_times(duration, dt, samples)
     q, qd, qdd = _evaluate(traj, ts)
     q[-1], qd[0], qd[-1] = qs[-1], 0.0, 0.0  # exact end configuration and rest (rounding ≈ 1e-12 otherwise)
