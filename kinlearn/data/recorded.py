@@ -167,14 +167,14 @@ class Observations:
         next) is an episode of its states, the last s' included, so :meth:`transitions` gives the same
         transitions back. Babbling is ordered (step, walker): its walkers' chains are found from its
         config's ``walkers``. ``joint_names``: the names to give the joints (e.g. the robot's)."""
-        s, s_next = data.s.detach().cpu(), data.s_next.detach().cpu()
         n = len(data)
+        if n == 0:
+            raise RecordedDataError("no transitions to take observations from")
+        s, s_next = data.s.detach().cpu(), data.s_next.detach().cpu()
         walkers, steps = int(data.config.get("walkers", 0) or 0), int(data.config.get("steps", 0) or 0)
         if walkers > 1 and walkers * steps == n:  # (step, walker) → (walker, step)
             order = torch.arange(n).reshape(steps, walkers).T.reshape(-1)
             s, s_next = s[order], s_next[order]
-        if n == 0:
-            raise RecordedDataError("no transitions to take observations from")
         breaks = torch.ones(n, dtype=torch.bool)  # a chain ends after row i
         breaks[:-1] = (s_next[:-1] != s[1:]).any(dim=1)
         ends = torch.nonzero(breaks).squeeze(1)
