@@ -84,5 +84,10 @@ class DomainError(KinlearnError, ValueError):
     """A start or goal outside the domain the planner was trained on (raised with ``strict=True``)."""
 
 
+class OutputError(KinlearnError, OSError):
+    """An output file that cannot be written: a folder in its place, a file where its folder should be, no
+    permission, a read-only or full disk. The message names the path and what to do."""
+
+
 class DomainWarning(UserWarning):
     """A start or goal outside the domain the planner was trained on: its plan may be poor."""

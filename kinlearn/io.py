@@ -14,6 +14,7 @@ left by a killed process is deleted by the next write of the same file (:func:`r
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -25,7 +26,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from .errors import CheckpointError, DatasetError
+from .errors import CheckpointError, DatasetError, OutputError
 
 __all__ = [
     "CHECKPOINT_FORMAT",
@@ -33,6 +34,7 @@ __all__ = [
     "FORMAT_VERSION",
     "atomic_copy",
     "atomic_write",
+    "check_output",
     "content_sha256",
     "file_sha256",
     "load_checkpoint",
@@ -96,21 +98,84 @@ def remove_stale_tmp(folder: str | Path, name: str | None = None) -> list[Path]:
     return removed
 
 
+def check_output(path: str | Path) -> Path:
+    """``path`` as a :class:`Path` a file can be written at, or :class:`~kinlearn.errors.OutputError`: not a
+    folder, and its nearest existing folder above it a folder (not a file) this process may write in.
+    Cheap: call it before long work whose result goes there. Missing folders are fine (they are made)."""
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"cannot write {path}: it is a folder; give a file name")
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise OutputError(f"cannot write {path}: {folder} is a file, not a folder; choose another path")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputError(f"cannot write {path}: no permission to write in {folder}; choose another folder")
+    return path
+
+
+_DISK_FULL = (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC))
+
+
+def _output_error(path: Path, exc: BaseException) -> OutputError:
+    """``exc`` (raised while writing ``path``) as an :class:`OutputError` that says what to do."""
+    code = getattr(exc, "errno", None)
+    if code in _DISK_FULL or isinstance(exc, RuntimeError):  # torch's writer says "unexpected pos …"
+        try:
+            free = f"{shutil.disk_usage(path.parent).free / 2**20:.1f} MiB free"
+        except OSError:
+            free = "free space unknown"
+        return OutputError(
+            f"cannot write {path}: the disk is full ({free}; {type(exc).__name__}: {exc}). Free some space "
+            "and run the command again (the old file, if any, is intact)"
+        )
+    what = {
+        errno.EROFS: f"{path.parent} is on a read-only file system; choose another folder",
+        errno.EACCES: f"no permission to write in {path.parent}; choose another folder",
+        errno.EPERM: f"no permission to write in {path.parent}; choose another folder",
+        errno.EISDIR: "a folder is in its place; give a file name",
+        errno.ENOTDIR: "a file is in the way of its folder; choose another path",
+    }.get(code, getattr(exc, "strerror", None) or str(exc))
+    return OutputError(f"cannot write {path}: {what}")
+
+
+def _is_write_failure(exc: BaseException, targets: tuple[Path, ...]) -> bool:
+    """Whether ``exc`` is the filesystem refusing the write (not, say, a missing file ``write`` reads)."""
+    if isinstance(exc, OSError) and not isinstance(exc, OutputError):
+        if exc.errno in (*_DISK_FULL, errno.EROFS):
+            return True
+        return (
+            exc.filename is None or Path(exc.filename) in targets or Path(exc.filename) == targets[0].parent
+        )
+    # torch.save's C++ writer reports a failed write (a full disk) as a RuntimeError of its own
+    return isinstance(exc, RuntimeError) and (
+        "inline_container" in str(exc) or "PytorchStreamWriter" in str(exc)
+    )
+
+
 def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it onto ``path``.
 
     A crash midway leaves the old file (if any) intact, never a half-written one. The temporary file
-    is deleted when ``write`` raises; one left by a killed process is deleted before this write.
+    is deleted when ``write`` raises; one left by a killed process is deleted before this write. The
+    one writer of every output file: a folder in the way, a file where a folder should be, no
+    permission, a read-only or full disk raise :class:`~kinlearn.errors.OutputError` naming the path.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = check_output(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _output_error(path, exc) from exc
     remove_stale_tmp(path.parent, path.name)
     tmp = _tmp_path(path)
     try:
         write(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         tmp.unlink(missing_ok=True)
+        if _is_write_failure(exc, (tmp, path)):
+            raise _output_error(path, exc) from exc
         raise
     return path
 

@@ -3,6 +3,9 @@ batches, and answers that do not depend on what else is in the batch."""
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -121,3 +124,121 @@ def test_from_json_refuses_times_that_do_not_increase_and_nan_positions(robot, t
     with pytest.raises(DatasetError, match="malformed"):
         TimedTrajectory.from_json(_timed_json(robot, tmp_path, edit))
     assert TimedTrajectory.from_json(_timed_json(robot, tmp_path, lambda o: None)).duration > 0
+
+
+def test_judge_bounds_its_check_and_checks_what_it_is_given(robot):
+    from kinlearn import Problem, judge
+    from kinlearn.errors import ShapeError
+    from kinlearn.planning.plan import MIN_CHECK_TRAVEL, Tolerance
+
+    problem = Problem.make(robot, START[None], GOAL[None], obstacles=[[3.0, 3.0, 3.0, 0.1]])
+    f = torch.linspace(0, 1, 5, dtype=torch.float64)[:, None]
+    paths = (START + f * (GOAL - START))[None]
+    assert bool(judge(problem, paths).success)
+    with pytest.raises(ConfigError, match="max_travel"):  # it subdivided without end
+        judge(problem, paths, max_travel=MIN_CHECK_TRAVEL / 1000)
+    for bad in (float("nan"), -0.01, True):
+        with pytest.raises(ConfigError, match="max_travel"):
+            judge(problem, paths, max_travel=bad)
+    with pytest.raises(ShapeError, match="found"):
+        judge(problem, paths, found=torch.ones(3, dtype=torch.bool))
+    with pytest.raises(ShapeError, match="found"):
+        judge(problem, paths, found=torch.ones(1))
+    for bad in (-0.01, float("nan")):
+        with pytest.raises(ConfigError, match=r"Tolerance\.position"):
+            Tolerance(position=bad)
+    with pytest.raises(ConfigError, match="tolerance"):
+        judge(problem, paths, tolerance=0.01)
+    elsewhere = paths.clone()
+    elsewhere[:, 0] += 0.2  # a path that starts elsewhere than the problem's start
+    assert not bool(judge(problem, elsewhere).success)
+    with pytest.raises(ConfigError, match="Problem"):
+        judge((START, GOAL), paths)
+
+
+def test_viewer_refuses_a_host_it_cannot_listen_on(robot):
+    from kinlearn.viz import show_plan
+
+    plan = kinlearn.plan(START, GOAL)
+    for host in ("256.0.0.1", "no such host", "", None, "8.8.8.8"):  # not addresses of this machine
+        with pytest.raises(ConfigError, match="host"):
+            plan.show(host=host, block=False)
+    with pytest.raises(ConfigError, match="port"):
+        show_plan(robot, plan.joints, port=70000, block=False)
+
+
+# -------------------------------------------------------------------------------------- output files
+
+
+def test_every_output_file_gives_a_typed_error_for_a_path_it_cannot_be(robot, tmp_path):
+    from kinlearn.collision import Scene
+    from kinlearn.errors import OutputError
+
+    plan = kinlearn.plan(START, GOAL)
+    traj = plan.timed(dt=0.1)
+    scene = Scene(torch.tensor([[0.5, 0.0, 0.5, 0.1]], dtype=torch.float64))
+    (tmp_path / "a_file").write_text("x")
+    (tmp_path / "a_folder").mkdir()
+    writers = {
+        "scene": lambda p: scene.save(p),
+        "csv": traj.to_csv,
+        "json": traj.to_json,
+        "gif": lambda p: plan.animate(p, fps=50),
+    }
+    for name, write in writers.items():
+        suffix = {"scene": ".npz"}.get(name, f".{name}")
+        with pytest.raises(OutputError, match="it is a folder"):
+            write(tmp_path / "a_folder")
+        with pytest.raises(OutputError, match="is a file, not a folder"):
+            write(tmp_path / "a_file" / f"out{suffix}")
+        # A missing parent is made.
+        assert write(tmp_path / "new" / name / f"out{suffix}").is_file()
+    assert not list(tmp_path.rglob(".*.tmp"))
+
+
+def test_a_full_disk_is_a_typed_error_that_says_so(tmp_path):
+    """/dev/full fails every write with ENOSPC, as a full disk does; torch's own writer then reports
+    "unexpected pos", which does not say the disk is full."""
+    from kinlearn.errors import OutputError
+    from kinlearn.io import atomic_write
+
+    def python_write(tmp):
+        with open("/dev/full", "wb") as f:
+            f.write(b"x" * 100_000)
+
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full on this system")
+    for write in (python_write, lambda tmp: torch.save({"w": torch.zeros(100_000)}, "/dev/full")):
+        with pytest.raises(OutputError, match="the disk is full"):
+            atomic_write(tmp_path / "model.pt", write)
+        assert not (tmp_path / "model.pt").exists() and not list(tmp_path.glob(".*.tmp"))
+    # A missing file that the write reads is not the output's fault: it stays what it is.
+    with pytest.raises(FileNotFoundError):
+        atomic_write(tmp_path / "copy.txt", lambda tmp: tmp.write_bytes((tmp_path / "nope").read_bytes()))
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0, reason="root may write anywhere")
+def test_no_permission_is_a_typed_error(tmp_path):
+    from kinlearn.errors import OutputError
+
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        with pytest.raises(OutputError, match="no permission"):
+            kinlearn.plan(START, GOAL).timed(dt=0.1).to_csv(locked / "plan.csv")
+    finally:
+        locked.chmod(0o700)
+
+
+def test_animate_checks_its_suffix_and_its_robot(tmp_path):
+    plan = kinlearn.plan(START, GOAL)
+    with pytest.raises(ConfigError, match=r"\.gif"):
+        plan.animate(tmp_path / "x.png")
+    assert not (tmp_path / "x.png").exists()
+    q = kinlearn.load_robot("panda").sample(2, torch.Generator().manual_seed(0), dtype=torch.float64)
+    panda = kinlearn.plan(q[0], q[1], robot="panda")
+    with pytest.raises(ConfigError, match="for 'panda', not 'iiwa14'"):
+        panda.animate(tmp_path / "p.gif", kinlearn.load_robot("iiwa14"))
+    with pytest.raises(ConfigError, match="for 'panda', not 'iiwa14'"):
+        panda.timed("iiwa14")

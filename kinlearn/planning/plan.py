@@ -11,7 +11,7 @@ import torch
 
 from ..body.kinematics import kinematics
 from ..body.robot import Robot
-from ..checks import check_finite, check_last_dim
+from ..checks import as_real, check_finite, check_last_dim
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
 from ..data.problem import LIMIT_TOLERANCE, Problem
@@ -21,6 +21,11 @@ __all__ = ["CHECK_TRAVEL", "DEFAULT_TOLERANCE", "Plan", "PlannerLike", "Toleranc
 
 #: Sphere travel (m) allowed between two configurations the dense collision check looks at.
 CHECK_TRAVEL = 0.01
+#: The finest check :func:`judge` makes (m of sphere travel): a finer one sees nothing the 1 cm check
+#: misses that matters, and costs a check per 0.1 mm of the path (a bound on the work asked for).
+MIN_CHECK_TRAVEL = 1e-4
+#: How far (rad) a judged path's first configuration may be from its problem's start.
+START_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -30,6 +35,13 @@ class Tolerance:
 
     position: float = 0.01
     joints: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in ("position", "joints"):
+            unit = "m" if name == "position" else "rad"
+            object.__setattr__(
+                self, name, as_real(getattr(self, name), f"Tolerance.{name} ({unit})", minimum=0.0)
+            )
 
 
 #: The tolerance plans are judged with unless told otherwise (1 cm, 0.05 rad).
@@ -188,6 +200,9 @@ class Plan:
     def _robot(self, robot):
         from ..body.robot import Robot, load_robot
 
+        given = robot.name if isinstance(robot, Robot) else robot
+        if given is not None and self.robot is not None and given != self.robot:
+            raise ConfigError(f"this plan is for {self.robot!r}, not {given!r}: its joints are another arm's")
         if isinstance(robot, Robot):
             return robot
         name = robot or self.robot
@@ -294,8 +309,18 @@ def judge(
     every path is checked densely (:func:`~kinlearn.collision.check_path`, ``max_travel`` m of sphere
     travel between checked configurations). ``waypoints`` default to the interior configurations' FK.
     ``found (...)``: where the planner found a path at all (a search that ran out of time gives a
-    stand-in path with ``found`` False): ``success`` requires it. ``body``: the collision spheres to check
-    with (default: :func:`~kinlearn.collision.body_spheres` of the robot, built for this call)."""
+    stand-in path with ``found`` False): ``success`` requires it, and that the path starts at the
+    problem's start (within :data:`START_TOLERANCE`). ``body``: the collision spheres to check with
+    (default: :func:`~kinlearn.collision.body_spheres` of the robot, built for this call).
+
+    Raises :class:`ShapeError` for paths or a ``found`` mask of the wrong shape, :class:`ConfigError`
+    for a ``max_travel`` that is not a number ≥ :data:`MIN_CHECK_TRAVEL` or a tolerance that is no
+    :class:`Tolerance`."""
+    if not isinstance(problem, Problem):
+        raise ConfigError(f"judge takes a kinlearn.Problem (Problem.make), got {type(problem).__name__}")
+    if not isinstance(tolerance, Tolerance):
+        raise ConfigError(f"tolerance must be a kinlearn Tolerance, got {type(tolerance).__name__}")
+    max_travel = as_real(max_travel, "max_travel (m of sphere travel)", minimum=MIN_CHECK_TRAVEL)
     robot = problem.robot
     check_last_dim(joints, robot.dof, "joint paths")
     if joints.ndim < 2 or joints.shape[:-2] != problem.batch_shape or joints.shape[-2] < 2:
@@ -308,7 +333,22 @@ def judge(
     ef = kinematics(robot, "fast").position(joints, validate=False)
     within = robot.within_limits(joints, LIMIT_TOLERANCE).all(-1)
     if found is not None:
+        if (
+            not isinstance(found, torch.Tensor)
+            or found.dtype != torch.bool
+            or found.shape != problem.batch_shape
+        ):
+            what = (
+                f"a {found.dtype} tensor of shape {tuple(found.shape)}"
+                if isinstance(found, torch.Tensor)
+                else (type(found).__name__)
+            )
+            raise ShapeError(
+                f"found must be a bool tensor of the problems' batch shape {tuple(problem.batch_shape)}, got {what}"
+            )
         within = within & found.to(within.device)
+    start = problem.start_joints.to(device=joints.device, dtype=torch.float64)
+    within = within & ((joints[..., 0, :] - start).abs().amax(-1) <= START_TOLERANCE)
     free = None
     if problem.obstacles is not None:
         body = body_spheres(robot) if body is None else body

@@ -22,12 +22,16 @@ from typing import Any
 import numpy as np
 
 from ..body.robot import Robot
+from ..checks import as_int, as_real
 from ..collision.geometry import box_faces, cylinder_faces
 from ..errors import ConfigError, MissingDependencyError
-from ..io import atomic_write
+from ..io import atomic_write, check_output
 from ._scene import PlanScene, plan_scene
 
 __all__ = ["animate_plan"]
+
+#: The most frames an animation draws (each takes tens of milliseconds): a bound on its time and size.
+MAX_FRAMES = 5000
 
 _ARM = "#3b3b3b"
 _TRACE = "#1f77b4"
@@ -135,10 +139,11 @@ def animate_plan(
     Raises:
         ShapeError, NonFiniteError, ConfigError: malformed inputs. MissingDependencyError: no matplotlib.
     """
-    if not (isinstance(fps, int | float) and 0 < fps <= 100):
-        raise ConfigError(f"fps must be in (0, 100], got {fps!r}")
-    if not (isinstance(dpi, int) and dpi > 0):
-        raise ConfigError(f"dpi must be a positive integer, got {dpi!r}")
+    fps = as_real(fps, "fps", minimum=0.0, open_minimum=True, maximum=100.0)
+    dpi = as_int(dpi, "dpi", minimum=1, maximum=1000)
+    path = check_output(path)  # before the seconds of drawing, not after
+    if path.suffix.lower() != ".gif":
+        raise ConfigError(f"an animation is written as a GIF: give a path ending in .gif, got {str(path)!r}")
     scene = plan_scene(
         robot,
         joints,
@@ -149,6 +154,11 @@ def animate_plan(
         cylinders=cylinders,
         scene=scene,
     )
+    if scene.frames > MAX_FRAMES:
+        raise ConfigError(
+            f"{scene.frames} configurations would make {scene.frames} frames, more than the {MAX_FRAMES} an "
+            "animation draws (MAX_FRAMES, tens of milliseconds each); pass every k-th configuration"
+        )
     Figure, PillowWriter, Poly3DCollection = _matplotlib()
 
     fig = Figure(figsize=figsize)

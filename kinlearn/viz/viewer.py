@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from ..body.robot import Robot
+from ..checks import as_int
 from ..collision.geometry import quaternion_from_rotation
 from ..errors import ConfigError, MissingDependencyError
 from ._scene import PlanScene, plan_scene
@@ -267,6 +268,32 @@ def _wxyz(rotation: np.ndarray) -> tuple[float, float, float, float]:
     return (float(w), float(x), float(y), float(z))
 
 
+def _check_host(host) -> None:
+    """Refuse, before anything starts, a host the viewer cannot listen on (which viser would retry
+    without end): an IP address of this machine or ``"localhost"``, bindable now."""
+    import ipaddress
+    import socket
+
+    if not isinstance(host, str) or not host:
+        raise ConfigError(f"host must be an IP address of this machine or 'localhost', got {host!r}")
+    if host != "localhost":
+        try:
+            ipaddress.ip_address(host)
+        except ValueError as exc:
+            raise ConfigError(
+                f"host must be an IP address of this machine ('127.0.0.1', '0.0.0.0', '::1') or 'localhost', "
+                f"got {host!r}"
+            ) from exc
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    try:
+        with socket.socket(family, socket.SOCK_STREAM) as s:
+            s.bind((host, 0))
+    except OSError as exc:
+        raise ConfigError(
+            f"the viewer cannot listen on host {host!r} ({exc.strerror or exc}); give an address of this machine"
+        ) from exc
+
+
 def show_plan(
     robot: Robot,
     joints: Any,
@@ -300,8 +327,8 @@ def show_plan(
     Raises:
         ShapeError, NonFiniteError, ConfigError: malformed inputs. MissingDependencyError: no viser.
     """
-    if not (isinstance(port, int) and 0 < port < 65536):
-        raise ConfigError(f"port must be an integer in 1…65535, got {port!r}")
+    port = as_int(port, "port", minimum=1, maximum=65535)
+    _check_host(host)
     if not (isinstance(fps, int | float) and 0.5 <= fps <= 120):
         raise ConfigError(f"fps must be in [0.5, 120], got {fps!r}")
     scene = plan_scene(
