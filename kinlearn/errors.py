@@ -80,6 +80,11 @@ class ObstacleError(KinlearnError, ValueError):
     """Obstacles that cannot describe a scene: wrong shape, NaN/inf, a radius or half extent that is not > 0."""
 
 
+class SceneFormatError(ObstacleError):
+    """A scene or planning-request file (MoveIt YAML) that kinlearn cannot read: a missing or malformed
+    field, or geometry it does not take (meshes, planes, cones), named by its object."""
+
+
 class DomainError(KinlearnError, ValueError):
     """A start or goal outside the domain the planner was trained on (raised with ``strict=True``)."""
 

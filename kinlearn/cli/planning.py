@@ -252,10 +252,10 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--start",
         type=_floats,
-        required=True,
-        help="start joints (rad) or a full state [θ, ef], comma-separated",
+        default=None,
+        help="start joints (rad) or a full state [θ, ef], comma-separated (or --request)",
     )
-    goal = p.add_mutually_exclusive_group(required=True)
+    goal = p.add_mutually_exclusive_group()
     goal.add_argument("--goal", type=_floats, help="goal joints (rad) or a full state, comma-separated")
     goal.add_argument(
         "--goal-position",
@@ -271,6 +271,28 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
         help="plan around the obstacles of a scene file (.npz, kinlearn.collision.Scene.save)",
     )
     p.add_argument(
+        "--scene",
+        type=Path,
+        default=None,
+        metavar="YAML",
+        help="plan around the obstacles of a MoveIt planning scene (.yaml: world.collision_objects)",
+    )
+    p.add_argument(
+        "--base-pose",
+        type=_floats,
+        default=None,
+        metavar="X,Y,Z,QX,QY,QZ,QW",
+        help="with --scene: the robot base's pose in the scene's frame (default: the scene's frame)",
+    )
+    p.add_argument(
+        "--request",
+        type=Path,
+        default=None,
+        metavar="YAML",
+        help="take start and goal joints from a MoveIt motion plan request (.yaml: start_state, "
+        "goal_constraints' joint_constraints), matched to the robot's joints by name",
+    )
+    p.add_argument(
         "--refine-steps",
         type=NONNEGATIVE_INT,
         default=0,
@@ -282,12 +304,32 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
 def plan_from_args(args: argparse.Namespace, strict: bool = False):
     """``(planner, plan, scene or None)`` for the options of :func:`add_plan_inputs`."""
     planner = Planner.load(args.model, robot=args.robot) if args.model else Planner.default(args.robot)
-    start = torch.tensor(args.start, dtype=torch.float64)
+    if args.request is not None:
+        if args.start is not None or args.goal is not None or args.goal_position is not None:
+            raise ConfigError(
+                "--request gives the start and the goal: leave out --start, --goal, --goal-position"
+            )
+        from ..collision.moveit import request_joints
+
+        start, goal = request_joints(args.request, planner.robot)
+        args.goal = goal.tolist()
+    elif args.start is None or (args.goal is None and args.goal_position is None):
+        raise ConfigError("give --start and one of --goal, --goal-position (or a MoveIt --request)")
+    else:
+        start = torch.tensor(args.start, dtype=torch.float64)
+    if args.obstacles is not None and args.scene is not None:
+        raise ConfigError("give the obstacles as --obstacles (.npz) or --scene (MoveIt .yaml), not both")
+    if args.base_pose is not None and args.scene is None:
+        raise ConfigError("--base-pose places the robot in a --scene; give --scene too")
     obstacles = None
     if args.obstacles is not None:
         from ..collision.scene import Scene
 
         obstacles = Scene.load(args.obstacles)
+    elif args.scene is not None:
+        from ..collision.scene import Scene
+
+        obstacles = Scene.from_moveit(args.scene, base_pose=args.base_pose)
     options = {"obstacles": obstacles, "refine_steps": args.refine_steps, "strict": strict}
     if args.goal_position is not None:
         goal = torch.tensor(args.goal_position, dtype=torch.float64)

@@ -1,5 +1,6 @@
-"""Collision geometry for obstacle-aware planning: the arm's body as spheres, obstacle scenes,
-batched differentiable signed distances, dense path checks and a benchmark problem generator.
+"""Collision geometry for obstacle-aware planning: the arm's body as spheres, obstacle scenes of typed
+primitives (spheres, oriented boxes, cylinders, a floor; MoveIt scenes in and out), batched
+differentiable signed distances, dense path checks and a benchmark problem generator.
 
 Imports only from the robot, kinematics, errors and io layers.
 """
@@ -10,18 +11,27 @@ from .distance import (
     body_obstacle_distance,
     self_collision_distance,
     sphere_box_distance,
+    sphere_cylinder_distance,
+    sphere_distance,
     sphere_plane_distance,
     sphere_sphere_distance,
 )
 from .fast import NumpyBody, NumpyScene, check_paths, first_free
+from .geometry import KINDS, Box, Cylinder, Plane, Primitive, Sphere
 from .scene import Scene
 
 __all__ = [
+    "KINDS",
     "BodySpheres",
+    "Box",
+    "Cylinder",
     "NumpyBody",
     "NumpyScene",
     "PathCheck",
+    "Plane",
+    "Primitive",
     "Scene",
+    "Sphere",
     "body_obstacle_distance",
     "body_spheres",
     "check_path",
@@ -33,6 +43,8 @@ __all__ = [
     "segment_steps",
     "self_collision_distance",
     "sphere_box_distance",
+    "sphere_cylinder_distance",
+    "sphere_distance",
     "sphere_plane_distance",
     "sphere_sets",
     "sphere_sphere_distance",

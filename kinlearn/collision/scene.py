@@ -32,6 +32,7 @@ import torch
 from ..errors import DatasetError, ObstacleError, ShapeError
 from ..io import load_npz, save_npz
 from .geometry import IDENTITY, SCENE_KINDS, Plane, Primitive, check_rotations
+from .moveit import primitives_from_moveit, primitives_to_moveit
 
 __all__ = ["SCENE_FORMAT", "Scene", "as_scene"]
 
@@ -232,6 +233,18 @@ class Scene:
             rows[p.table].append(p.row())
         tables = {k.table: torch.tensor(rows[k.table], dtype=dtype).reshape(-1, k.width) for k in SCENE_KINDS}
         return cls(**tables, floor=floor)
+
+    @classmethod
+    def from_moveit(cls, source, base_pose=None, dtype: torch.dtype = torch.float64) -> Scene:
+        """The obstacles of a MoveIt ``PlanningScene`` (YAML file path or dict) in the robot's base frame,
+        given the base's pose in the scene's frame (4 × 4 or ``[x, y, z, qx, qy, qz, qw]``; default
+        identity). See :func:`kinlearn.collision.moveit.primitives_from_moveit`."""
+        return cls.from_primitives(primitives_from_moveit(source, base_pose), dtype=dtype)
+
+    def to_moveit(self, frame_id: str = "base_link", name: str = "kinlearn") -> dict:
+        """This (unbatched) scene as a MoveIt ``PlanningScene`` dict, for ``yaml.safe_dump``. See
+        :func:`kinlearn.collision.moveit.primitives_to_moveit`."""
+        return primitives_to_moveit(self.primitives(), frame_id, name)
 
     def primitives(self) -> list[Primitive]:
         """The obstacles of an unbatched scene as typed objects, padding left out (the floor, if any,
