@@ -242,3 +242,35 @@ def test_animate_checks_its_suffix_and_its_robot(tmp_path):
         panda.animate(tmp_path / "p.gif", kinlearn.load_robot("iiwa14"))
     with pytest.raises(ConfigError, match="for 'panda', not 'iiwa14'"):
         panda.timed("iiwa14")
+
+
+# -------------------------------------------------------------------------- degenerate and odd batches
+
+
+def test_a_zero_length_move_plans_as_no_motion(robot):
+    ball = [[3.0, 3.0, 3.0, 0.1]]  # far away: the obstacle mode, nothing in the way
+    q2 = torch.stack((START, GOAL))
+    for obstacles, steps in ((None, None), (ball, None), (ball, 5)):
+        plan = kinlearn.plan(START, START, obstacles=obstacles, refine_steps=steps)
+        assert torch.equal(plan.joints, START.expand_as(plan.joints))
+        assert float((plan.ef - plan.ef[0]).abs().max()) == 0.0 and bool(plan.success)
+        assert plan.timed().duration == 0.0
+        # In a batch with a real move, the still one stays still and the other moves.
+        both = kinlearn.plan(q2, torch.stack((START, START + 0.3)), obstacles=obstacles, refine_steps=steps)
+        assert torch.equal(both.joints[0], plan.joints)
+        assert float((both.joints[1] - both.joints[1, 0]).abs().max()) > 0.1
+
+
+def test_joint_goal_and_obstacle_plans_do_not_depend_on_their_batch_mates(robot):
+    """The same problem alone, at the NumPy batch size and at the torch one (> 16 plans)."""
+    g = torch.Generator().manual_seed(5)
+    starts, goals = robot.sample(17, g, dtype=torch.float64), robot.sample(17, g, dtype=torch.float64)
+    ball = [[0.5, 0.1, 0.6, 0.15]]
+    for obstacles in (None, ball):
+        big = kinlearn.plan(starts, goals, obstacles=obstacles)
+        small = kinlearn.plan(starts[:8], goals[:8], obstacles=obstacles)
+        for i in range(0, 8, 3):
+            alone = kinlearn.plan(starts[i], goals[i], obstacles=obstacles)
+            for batch in (big, small):
+                assert torch.allclose(alone.joints, batch.joints[i], atol=1e-6, rtol=0)
+                assert bool(alone.success) == bool(batch.success[i])

@@ -67,6 +67,8 @@ DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
 SMALL_BATCH = 16
 #: The babbling step bound (rad per joint and step, REFERENCE #4): the largest action the IM takes.
 MAX_STEP = 0.083
+#: A joint goal this close to the start (rad, every joint) is no move: its plan stays at the start.
+ZERO_MOVE = 1e-9
 #: The most refinement steps a plan may take (each costs milliseconds: a bound on a plan's time).
 MAX_REFINE_STEPS = 10_000
 #: The obstacle-aware TM's file in a planner folder.
@@ -384,6 +386,12 @@ class Planner:
             joints, waypoints, ef = self._joint_path(theta0, ef0, thetaT, efT)
         else:
             joints, waypoints, ef = self._waypoint_rollout(theta0, ef0, thetaT, efT)
+        if not position:  # a move of zero plans as no motion, whatever the TM proposes
+            still = (np.abs(thetaT - theta0) <= ZERO_MOVE).all(-1)
+            if still.any():
+                joints[still] = theta0[still, None]
+                ef[still] = ef0[still, None]
+                waypoints[still] = ef0[still, None]
         within = ((joints >= self._lo_tol) & (joints <= self._hi_tol)).all((-1, -2))
         single = batch == ()
 
