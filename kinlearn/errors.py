@@ -89,6 +89,11 @@ class DomainError(KinlearnError, ValueError):
     """A start or goal outside the domain the planner was trained on (raised with ``strict=True``)."""
 
 
+class BatchIndexError(ShapeError, IndexError, TypeError):
+    """An index outside a batch (out of range, or reaching past its batch dimensions), or ``len()`` of an
+    unbatched one. An IndexError too, so that iterating over a batch stops where it should."""
+
+
 class OutputError(KinlearnError, OSError):
     """An output file that cannot be written: a folder in its place, a file where its folder should be, no
     permission, a read-only or full disk. The message names the path and what to do."""

@@ -101,7 +101,7 @@ def test_bad_joints_and_unknown_robot(robot):
     with pytest.raises(NonFiniteError):
         body(torch.full((7,), math.nan))
     with pytest.raises(RobotDescriptionError, match="no collision sphere model"):
-        body_spheres(load_robot("panda"))
+        body_spheres(load_robot("xarm7"))
 
 
 def test_base_cover_contains_the_cylinder(robot):

@@ -76,6 +76,7 @@ def register_robot(
     region=None,
     description: str = "",
     overwrite: bool = False,
+    spheres: str | Path | None = None,
 ) -> Robot:
     """Make a robot from a URDF file known by ``name`` to every kinlearn function in this process.
 
@@ -84,7 +85,10 @@ def register_robot(
     (the paper-task starts spread around it; default: the middle of the joint range). ``region``: the
     paper-task goal box (default: the iiwa14's, scaled by the arm's reach). The URDF is parsed now,
     so a bad file, frame, home or region fails here. Registration lives in this process only: worker
-    processes (``kinlearn reproduce --workers``) must register it too. Returns the loaded robot.
+    processes (``kinlearn reproduce --workers``) must register it too. ``spheres``: a spherized URDF
+    (one ``<collision><geometry><sphere>`` per sphere, the same joint names) giving the robot a collision
+    body (:func:`kinlearn.collision.body_spheres`; spheres on fixed links are folded onto their moving
+    parent). Returns the loaded robot.
     """
     if not isinstance(name, str) or not name or name.strip() != name or name.lower().endswith(".urdf"):
         raise ConfigError(f"a robot name must be a non-empty word, not a path; got {name!r}")
@@ -96,6 +100,11 @@ def register_robot(
     if not path.is_file():
         raise UnknownRobotError(f"no URDF file at {path}")
     robot = Robot(name, path.read_bytes(), ee_frame, path)
+    if spheres is not None:
+        sphere_path = Path(spheres).resolve()
+        if not sphere_path.is_file():
+            raise UnknownRobotError(f"no sphere URDF file at {sphere_path}")
+        robot.sphere_urdf = sphere_path
     if home is not None:
         h = np.asarray(home, dtype=float)
         if h.shape != (robot.dof,) or not np.isfinite(h).all():
@@ -212,6 +221,8 @@ class Robot:
         self.upper = np.array([j.upper for j in self.joints])
         self.velocity_limits = np.array([j.velocity for j in self.joints])
         self.state_dim = self.dof + 3
+        #: A spherized URDF giving the robot's collision body (``register_robot(..., spheres=PATH)``).
+        self.sphere_urdf: Path | None = None
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, dof={self.dof}, ee_frame={self.ee_frame!r})"

@@ -311,6 +311,103 @@ class BodySpheres(nn.Module):
         return self.radii.to(dtype=x.dtype, device=x.device)
 
 
+def urdf_spheres(robot: Robot, urdf: str | Path | bytes, drop_links: tuple[str, ...] = ()) -> np.ndarray:
+    """The collision spheres of a spherized URDF (one ``<collision><geometry><sphere>`` per sphere) as rows
+    ``[link, x, y, z, r]`` in ``robot``'s link frames, sorted by link (base, 0, first).
+
+    Each sphere's link is walked up the URDF's fixed joints to the nearest link that a joint of
+    ``robot`` moves (matched by joint name; the sphere is folded onto it, its centre carried through
+    the fixed joints' origins), or to the parent of the robot's first joint (the base, 0, expressed in
+    the robot's root frame). Spheres on links in ``drop_links``, or folded through one, are left out
+    (parts the robot's own description does not have: a gripper, a sensor), and so are spheres above the
+    base (a stand). A sphere behind a moving joint that ``robot`` lacks is a
+    :class:`~kinlearn.errors.RobotDescriptionError` naming it.
+    """
+    import xml.etree.ElementTree as ET
+
+    from ..body.robot import _origin
+
+    data = urdf if isinstance(urdf, bytes) else Path(urdf).read_bytes()
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as exc:
+        raise RobotDescriptionError(f"the sphere URDF is not valid XML: {exc}") from exc
+    by_child = {}
+    for el in root.iter("joint"):
+        child, parent = el.find("child"), el.find("parent")
+        if child is None or parent is None:
+            continue
+        by_child[child.get("link")] = (
+            el.get("name"),
+            el.get("type"),
+            parent.get("link"),
+            _origin(el.find("origin"), f"joint {el.get('name')}"),
+        )
+    index = {j.name: k + 1 for k, j in enumerate(robot.joints)}
+    first = next((c for c, (n, *_rest) in by_child.items() if n == robot.joints[0].name), None)
+    if first is None:
+        raise RobotDescriptionError(
+            f"the sphere URDF has no joint {robot.joints[0].name!r}, {robot.name}'s first joint"
+        )
+    base_link, origin1 = by_child[first][2], by_child[first][3]
+    to_root = robot.joints[0].T_prev @ np.linalg.inv(origin1)  # the base link's frame in the robot's root
+    rows = []
+    for link in root.iter("link"):
+        name = link.get("name")
+        for col in link.findall("collision"):
+            sphere = col.find("geometry/sphere")
+            if sphere is None:
+                continue
+            r = float(sphere.get("radius"))
+            T = _origin(col.find("origin"), f"a collision sphere of {name}")
+            cur, k = name, None
+            while True:
+                if cur in drop_links:
+                    break
+                if cur == base_link:
+                    T, k = to_root @ T, 0
+                    break
+                if cur not in by_child:
+                    break  # above the base: not part of the robot
+                jname, jtype, parent, origin = by_child[cur]
+                if jname in index:
+                    k = index[jname]
+                    break
+                if jtype != "fixed":
+                    raise RobotDescriptionError(
+                        f"a collision sphere of link {name!r} sits behind joint {jname!r} ({jtype}), which "
+                        f"{robot.name} does not have; drop the link or fix the joint"
+                    )
+                T, cur = origin @ T, parent
+            if k is not None:
+                rows.append([k, *T[:3, 3], r])
+    if not rows:
+        raise RobotDescriptionError(f"the sphere URDF holds no collision sphere on {robot.name}'s links")
+    out = np.asarray(rows, dtype=np.float64)
+    return out[np.argsort(out[:, 0], kind="stable")]
+
+
+def always_overlapping(
+    robot: Robot,
+    spheres: np.ndarray,
+    pairs: np.ndarray,
+    samples: int = 2000,
+    share: float = 0.95,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Of the sphere ``pairs``, those that overlap in at least ``share`` of ``samples`` uniformly drawn
+    configurations (seeded): pairs a self-collision check must leave out, as an SRDF's disabled pairs.
+    Returns ``(kept pairs, each pair's overlap share (P,))``."""
+    body = BodySpheres(robot, spheres, np.zeros((0, 2), dtype=np.int64))
+    q = robot.sample(samples, torch.Generator().manual_seed(seed), dtype=torch.float64)
+    with torch.no_grad():
+        c = body(q)
+        p = torch.as_tensor(pairs)
+        gap = (c[:, p[:, 0]] - c[:, p[:, 1]]).norm(dim=-1) - body.radii[p[:, 0]] - body.radii[p[:, 1]]
+        frac = (gap < 0).double().mean(0).numpy()
+    return pairs[frac < share], frac
+
+
 def _default_pairs(link: np.ndarray, adjacent_gap: int = 2) -> np.ndarray:
     """All sphere pairs on links at least ``adjacent_gap`` apart (the candidates for self-collision)."""
     i, j = np.triu_indices(len(link), k=1)
@@ -318,25 +415,73 @@ def _default_pairs(link: np.ndarray, adjacent_gap: int = 2) -> np.ndarray:
     return np.stack([i[keep], j[keep]], axis=1)
 
 
+#: Per (robot, sphere URDF, dropped links): the spheres and self-collision pairs read from it.
+_URDF_BODIES: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _from_urdf(
+    robot: Robot, path: Path, drop_links: tuple[str, ...], rule: dict
+) -> tuple[np.ndarray, np.ndarray]:
+    key = (robot.name, robot.urdf, str(path), drop_links, tuple(sorted(rule.items())))
+    hit = _URDF_BODIES.get(key)
+    if hit is None:
+        spheres = urdf_spheres(robot, path, drop_links)
+        pairs = _default_pairs(spheres[:, 0].astype(np.int64))
+        kept, _ = always_overlapping(
+            robot,
+            spheres,
+            pairs,
+            samples=int(rule.get("samples", 2000)),
+            share=float(rule.get("share", 0.95)),
+            seed=int(rule.get("seed", 0)),
+        )
+        hit = _URDF_BODIES[key] = (spheres, kept)
+    return hit
+
+
 def body_spheres(robot: Robot, dense: bool = False, base: bool = True) -> BodySpheres:
-    """The collision spheres of ``robot``: Drake's 12-sphere set (``dense=False``) or 46-sphere set.
+    """The collision spheres of ``robot``: its default set (the iiwa14: Drake's 12 spheres and 6 covering
+    the base; panda and ur5: the spherized URDFs of ``robots/``; a robot registered with
+    ``spheres=PATH``: that URDF), or with ``dense=True`` the iiwa14's 46-sphere set.
 
     ``base=False`` leaves out the base's spheres (they never move: useful where only the arm matters).
     Raises :class:`~kinlearn.errors.RobotDescriptionError` for a robot without a sphere model.
     """
-    model = sphere_sets(robot)
-    key = "dense" if dense else "sparse"
-    entry = model["sets"][key]
-    spheres = np.asarray(entry["spheres"], dtype=np.float64)
-    if entry.get("base") == "base_cylinder_cover":
-        cover = np.asarray(model["base_cylinder_cover"]["spheres"], dtype=np.float64)
-        spheres = np.concatenate([cover, spheres])
+    own = getattr(robot, "sphere_urdf", None)
+    if own is not None and not dense:
+        spheres, pairs = _from_urdf(robot, Path(own), (), {})
+        name = "spherized"
+    else:
+        model = sphere_sets(robot)
+        key = "dense" if dense else model.get("default_set", "sparse")
+        if key not in model["sets"]:
+            raise RobotDescriptionError(
+                f"robot {robot.name!r} has no {key!r} sphere set (it has {', '.join(model['sets'])})"
+            )
+        entry = model["sets"][key]
+        name = key
+        if "urdf" in entry:
+            spheres, pairs = _from_urdf(
+                robot,
+                _model_path(robot).parent / entry["urdf"],
+                tuple(entry.get("drop_links", ())),
+                model.get("self_collision", {}),
+            )
+        else:
+            spheres = np.asarray(entry["spheres"], dtype=np.float64)
+            if entry.get("base") == "base_cylinder_cover":
+                cover = np.asarray(model["base_cylinder_cover"]["spheres"], dtype=np.float64)
+                spheres = np.concatenate([cover, spheres])
+            spheres = spheres[np.argsort(spheres[:, 0], kind="stable")]  # base first, then link by link
+            link = spheres[:, 0].astype(np.int64)
+            excluded = {tuple(p) for p in model.get("self_collision", {}).get("excluded_link_pairs", [])}
+            pairs = _default_pairs(link)
+            keep = np.array([(int(link[a]), int(link[b])) not in excluded for a, b in pairs], dtype=bool)
+            pairs = pairs[keep] if len(pairs) else pairs
     if not base:
-        spheres = spheres[spheres[:, 0] > 0]
-    order = np.argsort(spheres[:, 0], kind="stable")  # base first, then link by link
-    spheres = spheres[order]
-    link = spheres[:, 0].astype(np.int64)
-    excluded = {tuple(p) for p in model.get("self_collision", {}).get("excluded_link_pairs", [])}
-    pairs = _default_pairs(link)
-    keep = np.array([(int(link[a]), int(link[b])) not in excluded for a, b in pairs], dtype=bool)
-    return BodySpheres(robot, spheres, pairs[keep] if len(pairs) else pairs, name=key)
+        moving = spheres[:, 0] > 0
+        renumber = np.cumsum(moving) - 1
+        keep = moving[pairs[:, 0]] & moving[pairs[:, 1]] if len(pairs) else np.zeros(0, dtype=bool)
+        pairs = renumber[pairs[keep]] if len(pairs) else pairs
+        spheres = spheres[moving]
+    return BodySpheres(robot, spheres, pairs, name=name)

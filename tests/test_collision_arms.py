@@ -1,0 +1,167 @@
+"""Collision bodies of the panda and the ur5 from their spherized URDFs: every sphere where pinocchio
+(its own URDF and geometry parsers, an independent reading of the same files) puts it, the parts
+kinlearn's ur5 lacks left out, self-collision pairs, distances against coal, and a user's arm
+registered with ``spheres=``."""
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import torch
+
+import kinlearn
+from kinlearn import load_robot
+from kinlearn.collision import Scene, body_obstacle_distance, body_spheres, self_collision_distance
+from kinlearn.collision.body import urdf_spheres
+from kinlearn.collision.geometry import Box, Cylinder, Sphere, rotation_from_quaternion
+from kinlearn.errors import RobotDescriptionError
+
+ROBOTS = Path(__file__).resolve().parents[1] / "robots"
+#: The links of kinlearn's ur5 that carry spheres (the sensor and gripper under ee_link are not its).
+UR5_ARM = {
+    "base_link",
+    "shoulder_link",
+    "upper_arm_link",
+    "forearm_link",
+    "wrist_1_link",
+    "wrist_2_link",
+    "wrist_3_link",
+}
+
+
+def _pinocchio_spheres(name: str, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World centres (in the spherized model's root) and radii of its spheres, by pinocchio, with
+    the base_link frame's pose; the ur5 restricted to its arm's links."""
+    path = str(ROBOTS / name / f"{name}_spherized.urdf")
+    model = pin.buildModelFromUrdf(path)
+    geom = pin.buildGeomFromUrdf(model, path, pin.GeometryType.COLLISION)
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    pin.updateFramePlacements(model, data)
+    base = data.oMf[model.getFrameId("base_link" if name == "ur5" else "panda_link0")]
+    centres, radii = [], []
+    for obj in geom.geometryObjects:
+        if name == "ur5" and model.frames[obj.parentFrame].name not in UR5_ARM:
+            continue
+        world = data.oMi[obj.parentJoint] * obj.placement
+        centres.append((base.inverse() * world).translation)
+        radii.append(obj.geometry.radius)
+    return np.array(centres), np.array(radii)
+
+
+def _root_from_base(robot) -> pin.SE3:
+    """kinlearn's root frame → the arm's base_link frame, from pinocchio on kinlearn's own URDF."""
+    model = pin.buildModelFromUrdf(str(robot.urdf_path))
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    base = "base_link" if robot.name == "ur5" else "panda_link0"
+    return data.oMf[model.getFrameId(base)]
+
+
+@pytest.mark.parametrize("name, count", [("panda", 59), ("ur5", 23)])
+def test_spheres_sit_where_pinocchio_puts_them(name, count):
+    robot = load_robot(name)
+    body = body_spheres(robot).double()
+    assert body.num_spheres == count and body.name == "spherized"
+    q = robot.sample(5, torch.Generator().manual_seed(0), dtype=torch.float64)
+    T = _root_from_base(robot)
+    for qi in q:
+        ours = body(qi).numpy()
+        ours = (T.rotation.T @ (ours - T.translation).T).T  # into the base_link frame
+        ref, radii = _pinocchio_spheres(name, qi.numpy())
+        assert ref.shape == ours.shape
+        # Same spheres, in any order: each of ours has a pinocchio sphere of its radius at its centre.
+        d = np.linalg.norm(ours[:, None] - ref[None], axis=-1) + 10 * np.abs(
+            body.radii.numpy()[:, None] - radii
+        )
+        # The ur5 file writes π/2 as 1.570796325: its frames agree with kinlearn's to 5e-9 m.
+        assert d.min(axis=1).max() < (1e-8 if name == "ur5" else 1e-9)
+        assert len(set(d.argmin(axis=1))) == count
+
+
+def test_ur5_keeps_its_arm_and_drops_the_gripper_and_stand():
+    robot = load_robot("ur5")
+    spheres = urdf_spheres(robot, ROBOTS / "ur5" / "ur5_spherized.urdf", ("ee_link",))
+    assert np.bincount(spheres[:, 0].astype(int)).tolist() == [1, 1, 5, 9, 3, 3, 1]
+    everything = urdf_spheres(robot, ROBOTS / "ur5" / "ur5_spherized.urdf")  # gripper folded onto wrist 3
+    assert len(everything) == 40 and int((everything[:, 0] == 6).sum()) == 1 + 17  # sensor 1, gripper 16
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_self_collision_pairs(name):
+    robot = load_robot(name)
+    body = body_spheres(robot).double()
+    link = body.link[body.pairs]
+    assert bool(((link[:, 0] - link[:, 1]).abs() >= 2).all())  # adjacent links never checked
+    q = robot.sample(3000, torch.Generator().manual_seed(7), dtype=torch.float64)
+    _, per = self_collision_distance(body(q), body.radii, body.pairs, per_pair=True)
+    share = (per < 0).double().mean(0)
+    assert float(share.max()) < 0.95  # no pair that (nearly) always overlaps is kept
+    assert 0.0 < float((per.amin(-1) < 0).double().mean()) < 0.6
+
+
+def test_panda_distance_matches_coal_on_a_mixed_scene():
+    import coal
+
+    robot = load_robot("panda")
+    body = body_spheres(robot).double()
+    R = rotation_from_quaternion([0.1, 0.3, -0.2, 0.9])
+    prims = [
+        Sphere((0.4, 0.1, 0.5), 0.08),
+        Box((0.5, -0.2, 0.3), (0.1, 0.2, 0.05), R),
+        Cylinder((0.3, 0.3, 0.4), 0.05, 0.2, R),
+    ]
+    scene = Scene.from_primitives(prims)
+    q = robot.sample(8, torch.Generator().manual_seed(3), dtype=torch.float64)
+    c = body(q)
+    _, per = body_obstacle_distance(c, body.radii, scene, per_sphere=True)
+
+    def tf(Rm, p):
+        t = coal.Transform3s()
+        t.setRotation(np.asarray(Rm, dtype=float))
+        t.setTranslation(np.asarray(p, dtype=float))
+        return t
+
+    shapes = [
+        (coal.Sphere(0.08), np.eye(3), prims[0].centre),
+        (coal.Box(0.2, 0.4, 0.1), R, prims[1].centre),
+        (coal.Cylinder(0.05, 0.4), R, prims[2].centre),
+    ]
+    req = coal.DistanceRequest()
+    req.gjk_tolerance = req.epa_tolerance = 1e-12
+    req.gjk_max_iterations = req.epa_max_iterations = 1000
+    for n in range(8):
+        for m in range(body.num_spheres):
+            me = coal.Capsule(float(body.radii[m]), 0.0)  # GJK/EPA: exact for a ball against any of them
+            ref = min(
+                max(
+                    coal.distance(g, tf(np.eye(3), c[n, m]), s, tf(Rm, p), req, coal.DistanceResult())
+                    for g in (coal.Sphere(float(body.radii[m])), me)
+                )
+                for s, Rm, p in shapes
+            )
+            assert abs(float(per[n, m]) - ref) < 1e-6
+
+
+def test_register_robot_with_spheres(tmp_path):
+    panda = load_robot("panda")
+    name = "sphered_panda"
+    try:
+        mine = kinlearn.register_robot(
+            name,
+            panda.urdf_path,
+            ee_frame="panda_hand_tcp",
+            spheres=ROBOTS / "panda" / "panda_spherized.urdf",
+        )
+        body, ref = body_spheres(mine), body_spheres(panda)
+        assert torch.equal(body.local, ref.local) and torch.equal(body.pairs, ref.pairs)
+    finally:
+        kinlearn.unregister_robot(name) if hasattr(kinlearn, "unregister_robot") else None
+    bad = tmp_path / "bad.urdf"
+    text = (ROBOTS / "panda" / "panda_spherized.urdf").read_text()
+    bad.write_text(
+        text.replace('name="panda_finger_joint1" type="fixed"', 'name="panda_finger_joint1" type="prismatic"')
+    )
+    with pytest.raises(RobotDescriptionError, match="panda_finger_joint1"):
+        urdf_spheres(panda, bad)
