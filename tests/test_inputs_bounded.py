@@ -274,3 +274,53 @@ def test_joint_goal_and_obstacle_plans_do_not_depend_on_their_batch_mates(robot)
             for batch in (big, small):
                 assert torch.allclose(alone.joints, batch.joints[i], atol=1e-6, rtol=0)
                 assert bool(alone.success) == bool(batch.success[i])
+
+
+@pytest.mark.parametrize("mode", ["joints", "position", "obstacles", "refined"])
+def test_an_empty_batch_gives_an_empty_plan(mode):
+    e = torch.zeros(0, 7, dtype=torch.float64)
+    kw = {
+        "joints": dict(goal=e),
+        "position": dict(goal_position=torch.zeros(0, 3)),
+        "obstacles": dict(goal=e, obstacles=[[3.0, 3.0, 3.0, 0.1]]),
+        "refined": dict(goal=e, obstacles=[[3.0, 3.0, 3.0, 0.1]], refine_steps=2),
+    }[mode]
+    plan = kinlearn.plan(e, **kw)
+    assert plan.joints.shape[0] == 0 and plan.joints.shape[-1] == 7 and plan.success.shape == (0,)
+    assert plan.ef.shape[:2] == plan.joints.shape[:2]
+
+
+def test_problem_indexing_and_len_are_typed(robot):
+    from kinlearn import Problem
+    from kinlearn.errors import BatchIndexError
+
+    one = Problem.make(robot, START, GOAL)
+    with pytest.raises(BatchIndexError, match="no len"):
+        len(one)
+    with pytest.raises(BatchIndexError, match="cannot be indexed"):
+        one[3]  # indexed a state's entries before
+    many = Problem.make(robot, START.expand(2, 3, 7), GOAL.expand(2, 3, 7), obstacles=[[3.0, 3.0, 3.0, 0.1]])
+    assert len(many) == 2 and len(list(many)) == 2  # iteration stops at the end (an IndexError)
+    assert many[:, 1].batch_shape == (2,) and many[1, 2].batch_shape == ()
+    assert torch.equal(many[-1, 0].start, many.start[-1, 0])
+    for bad in (2, (0, 3), (slice(None), slice(None), 1), "a", 0.5):
+        with pytest.raises(BatchIndexError):
+            many[bad]
+
+
+def test_baselines_take_a_robot_or_its_name(robot):
+    from kinlearn import Problem
+    from kinlearn.errors import UnknownRobotError
+    from kinlearn.planning.baselines import RRTConnect
+    from kinlearn.planning.obstacle_baselines import JointLine
+
+    problem = Problem.make(robot, START[None], GOAL[None], obstacles=[[3.0, 3.0, 3.0, 0.1]])
+    for make in (kinlearn.JointInterpolation, kinlearn.CartesianDLS, RRTConnect, JointLine):
+        by_name, by_robot = make("iiwa14"), make(robot)
+        assert by_name.robot.name == by_robot.robot.name == "iiwa14"
+        if make is not RRTConnect:  # (needs OMPL)
+            assert torch.equal(by_name.plan(problem).joints, by_robot.plan(problem).joints)
+        with pytest.raises(UnknownRobotError):
+            make("no-such-arm")
+        with pytest.raises(ConfigError, match="robot"):
+            make(7)

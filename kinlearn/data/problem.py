@@ -19,6 +19,7 @@ problem) or the problems' batch shape, or ``None`` (free space).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -30,7 +31,7 @@ from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import check_finite, check_real_dtype, real_array
 from ..collision.scene import Scene, as_scene
-from ..errors import ConfigError, ShapeError, StateError
+from ..errors import BatchIndexError, ConfigError, ShapeError, StateError
 
 __all__ = ["GOAL_KINDS", "STATE_EF_TOLERANCE", "Problem"]
 
@@ -140,15 +141,32 @@ class Problem:
 
     def __len__(self) -> int:
         if not self.batch_shape:
-            raise TypeError("a single problem (batch shape ()) has no len()")
+            raise BatchIndexError(
+                "a single problem (batch shape ()) has no len(); Problem.make with inputs of shape (N, dof) "
+                "gives a batch of N"
+            )
         return self.batch_shape[0]
 
     def __getitem__(self, index) -> Problem:
-        """The problems at ``index`` of the leading batch dimensions (the scene too, where it has them)."""
+        """The problems at ``index`` of the leading batch dimensions (the scene too, where it has them);
+        :class:`BatchIndexError` for an index out of range or past the batch dimensions."""
+        batch = tuple(self.batch_shape)
+        if not batch:
+            raise BatchIndexError("a single problem (batch shape ()) cannot be indexed")
+        if isinstance(index, (str, bytes, float)):
+            raise BatchIndexError(f"problems are indexed by integers, slices or masks, got {index!r}")
+        try:  # the index applies to the batch dimensions only, never to a state's entries
+            picked = torch.arange(self.start[..., 0].numel()).reshape(batch)[index]
+        except (IndexError, TypeError, ValueError, RuntimeError) as exc:
+            raise BatchIndexError(
+                f"index {index!r} does not fit problems of batch shape {batch}: {exc}"
+            ) from exc
         scene = self.obstacles
         if scene is not None and tuple(scene.batch_shape) != ():
-            scene = scene[index]
-        return Problem(self.robot, self.start[index], self.goal[index], self.goal_kind, scene)
+            scene = scene.reshape(int(math.prod(batch)))[picked]
+        start = self.start.reshape(-1, self.start.shape[-1])[picked]
+        goal = self.goal.reshape(-1, self.goal.shape[-1])[picked]
+        return Problem(self.robot, start, goal, self.goal_kind, scene)
 
     @property
     def start_joints(self) -> torch.Tensor:

@@ -29,9 +29,9 @@ import numpy as np
 import torch
 
 from ..body.kinematics import dls_step, kinematics
-from ..body.robot import Robot
+from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout, straight_line
-from ..checks import check_finite, check_last_dim
+from ..checks import as_int, check_finite, check_last_dim
 from ..data.problem import LIMIT_TOLERANCE, Problem
 from ..errors import ConfigError, MissingDependencyError, PlanningError, ShapeError
 from .plan import Plan, judge
@@ -49,10 +49,28 @@ __all__ = [
 
 
 def _check_steps(steps) -> None:
-    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 2:
-        raise ConfigError(
-            f"steps must be an integer >= 2 (at least one intermediate waypoint), got {steps!r}"
-        )
+    as_int(steps, "steps (at least one intermediate waypoint)", minimum=2, maximum=MAX_STEPS)
+
+
+#: The most steps a baseline's path may have (a bound on its work and memory).
+MAX_STEPS = 10_000
+
+
+def as_robot(robot) -> Robot:
+    """``robot`` as a :class:`Robot`: one already, or the name of a bundled or registered arm (as the
+    planner takes it); :class:`ConfigError` for anything else, ``UnknownRobotError`` for an unknown name."""
+    if isinstance(robot, Robot):
+        return robot
+    if isinstance(robot, str):
+        return load_robot(robot)
+    raise ConfigError(f"robot must be a kinlearn.Robot or a robot's name, got {type(robot).__name__}")
+
+
+class _RobotPlanner:
+    """A baseline planner of a frozen dataclass whose ``robot`` field may be given as a name."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "robot", as_robot(self.robot))
 
 
 def _check_dls(iterations, damping) -> None:
@@ -298,14 +316,15 @@ def _check_problem(planner, problem: Problem, who: str) -> None:
 
 
 @dataclass(frozen=True)
-class JointInterpolation:
+class JointInterpolation(_RobotPlanner):
     """:func:`joint_interpolation` as a planner (:class:`~kinlearn.planning.plan.PlannerLike`): goal states
     only; obstacles are not avoided, but a plan among them is checked and says whether it collides."""
 
-    robot: Robot
+    robot: Robot | str
     steps: int = 11
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         _check_steps(self.steps)
 
     @torch.no_grad()
@@ -316,16 +335,17 @@ class JointInterpolation:
 
 
 @dataclass(frozen=True)
-class CartesianDLS:
+class CartesianDLS(_RobotPlanner):
     """:func:`cartesian_dls` as a planner: the end effector on a straight line to the goal (a state's end
     effector or a position), followed by DLS IK; ignores obstacles (a plan among them is checked)."""
 
-    robot: Robot
+    robot: Robot | str
     steps: int = 11
     iterations: int = 20
     damping: float = 1e-2
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         _check_steps(self.steps)
         _check_dls(self.iterations, self.damping)
 
@@ -340,11 +360,11 @@ class CartesianDLS:
 
 
 @dataclass(frozen=True)
-class RRTConnect:
+class RRTConnect(_RobotPlanner):
     """:func:`rrt_connect` (free space: every state valid) as a planner; goal states only. For planning
     around obstacles use :class:`kinlearn.planning.obstacle_baselines.SceneRRTConnect`."""
 
-    robot: Robot
+    robot: Robot | str
     steps: int = 11
     time_limit: float = 1.0
     seed: int | None = 0

@@ -113,7 +113,7 @@ class NumpyPathModel:
         h = _run_mlp(h, self.weights, self.biases, self.silu)
         h = h.astype(np.float64)
         n, nj = h.shape[0], self.n_joint_out
-        r = h[:, :nj].reshape(n, -1, self.dof)
+        r = h[:, :nj].reshape(n, nj // self.dof, self.dof)  # explicit sizes: n may be 0
         if self.modes:
             r = self.basis @ r
         f = self.fractions

@@ -47,7 +47,7 @@ from ..collision import BodySpheres, Scene, body_obstacle_distance, body_spheres
 from ..collision.problems import rrt_connect_solve
 from ..data.problem import Problem
 from ..errors import ConfigError, ShapeError
-from .baselines import _check_problem, cartesian_dls, joint_interpolation
+from .baselines import _check_problem, as_robot, cartesian_dls, joint_interpolation
 from .plan import Plan, judge
 
 __all__ = [
@@ -340,6 +340,12 @@ class _PathPlanner:
 
     name = "planner"
     body: BodySpheres
+
+    def __post_init__(self) -> None:  # a robot or its name: its sphere body
+        if isinstance(self.body, str):
+            object.__setattr__(self, "body", default_body(as_robot(self.body).name))
+        elif not isinstance(self.body, BodySpheres):
+            object.__setattr__(self, "body", body_spheres(as_robot(self.body)).double())
 
     @property
     def robot(self):

@@ -380,7 +380,7 @@ class Planner:
         if obstacles is not None:
             scene = self._scene(obstacles, batch, n)
             joints, free = self._plan_around(theta0, ef0, thetaT, efT, scene, steps)
-            ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(n, -1, 3)
+            ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(n, joints.shape[1], 3)
             waypoints = ef[:, 1:-1]
         elif self._np_tm is not None:
             joints, waypoints, ef = self._joint_path(theta0, ef0, thetaT, efT)
@@ -585,7 +585,7 @@ class Planner:
         mid, waypoints = self._tm_forward(theta0, ef0, thetaT, efT)
         np.clip(mid, self._lo_np, self._hi_np, out=mid)
         joints = np.concatenate((theta0[:, None], mid, thetaT[:, None]), axis=1)
-        ef_mid = self._position(mid.reshape(-1, dof)).reshape(n, -1, 3)
+        ef_mid = self._position(mid.reshape(-1, dof)).reshape(n, mid.shape[1], 3)
         ef = np.concatenate((ef0[:, None], ef_mid, efT[:, None]), axis=1)
         return joints, waypoints, ef
 
