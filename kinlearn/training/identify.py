@@ -1,0 +1,408 @@
+"""Identification of a serial chain (:class:`~kinlearn.models.chain.ChainFM`) from observed end-effector
+positions: calibration with or without a URDF.
+
+Given N observations (θₖ, yₖ) — joint encoder values and the end effector's measured position in the
+base frame (a camera, motion capture, or babbling with simulated sensor noise) — the chain's
+parameters x = (ωᵢ, qᵢ, p₀) minimise a robust sum over the samples
+
+    Σₖ ρ(‖p(θₖ; x) − yₖ‖ / δ),      ρ = Huber,
+
+in three rounds: δ = 1 cm; then δ = 3σ̂ with σ̂ the robust (median-absolute-deviation) scale of the
+residuals; then again after dropping the samples whose residual exceeds ``outlier_sigma`` σ̂ (gross
+outliers, counted in the report). Each round is Levenberg–Marquardt on the reweighted residuals in
+float64 (``_fit``).
+
+Initialisation, the hard part (a chain started at random stalls 10–50 cm away):
+
+- **with a prior** (a user's URDF, possibly wrong): the chain the URDF describes
+  (:meth:`ChainFM.from_robot`);
+- **with nothing but the joint count**: a first MLP g(θ) fitted to the data (``_fit_mlp``), then
+  for each joint a virtual sweep through g — joint i moved over its observed range, the others held
+  at a reference configuration θ̄ — and a circle fitted to the swept points (``_circle``): its plane's
+  normal is the joint's axis (its sign from the sense of rotation), its centre a point on the axis,
+  at θ̄, which is exactly the chain's parameterisation about θ̄. Several reference configurations
+  drawn from the data are scored by their sweeps' radii (a joint whose sweep barely moves the end
+  effector is poorly determined there) and each best-scored one is fitted briefly; the best fit is
+  refined.
+
+Parameters the data cannot determine are handled deliberately: a point slides along its axis and a
+direction has no length (the fit's gradient is zero along both; :meth:`ChainFM.canonicalize` fixes
+them afterwards), and the direction of a trailing joint whose axis passes through the end-effector
+point does not move the end effector at all. Such joints are found after the fit (distance of the
+end-effector point to the axis below ``unobservable_distance``), keep their initial direction (the
+prior's, or the sweep's), and are named in the report: the exported URDF is then right in position
+and arbitrary about that joint's orientation.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import torch
+from torch import nn
+
+from ..body.robot import Robot
+from ..checks import check_finite
+from ..errors import ConfigError, DatasetError
+from ..models.chain import ChainConfig, ChainFM, chain_parameter_jacobian, chain_position
+
+__all__ = ["Identification", "IdentifyConfig", "identify"]
+
+
+@dataclass(frozen=True)
+class IdentifyConfig:
+    """Settings of :func:`identify`.
+
+    Attributes:
+        holdout: fraction of the samples kept out of the fit to report the held-out residual.
+        seed: seeds the split, the first MLP and the reference configurations.
+        iterations: Levenberg–Marquardt iterations of each robust round (at most; it stops converged).
+        outlier_sigma: residuals beyond this many robust standard deviations are dropped in the last round.
+        mlp_hidden, mlp_steps: the first MLP of the no-prior initialisation.
+        references: reference configurations tried by the no-prior initialisation.
+        unobservable_distance: a trailing joint whose axis passes closer than this (m) to the
+            end-effector point is reported as undetermined in direction.
+        residual, residual_steps: widths and Adam steps of the optional residual MLP (empty: none).
+    """
+
+    holdout: float = 0.1
+    seed: int = 0
+    iterations: int = 30
+    outlier_sigma: float = 6.0
+    mlp_hidden: tuple[int, ...] = (256, 256, 256)
+    mlp_steps: int = 3000
+    references: int = 3
+    unobservable_distance: float = 1e-3
+    residual: tuple[int, ...] = ()
+    residual_steps: int = 2000
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.holdout < 0.5:
+            raise ConfigError(f"holdout must lie in [0, 0.5), got {self.holdout}")
+        for name in ("iterations", "mlp_steps", "references", "residual_steps"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ConfigError(f"{name} must be an integer ≥ 1, got {v!r}")
+        if not self.outlier_sigma > 1.0:
+            raise ConfigError(f"outlier_sigma must be > 1, got {self.outlier_sigma}")
+        if not self.unobservable_distance >= 0.0:
+            raise ConfigError(f"unobservable_distance must be ≥ 0 m, got {self.unobservable_distance}")
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
+@dataclass
+class Identification:
+    """What :func:`identify` found: the chain and a report (JSON-able: residuals in metres)."""
+
+    model: ChainFM
+    report: dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------------------------------
+# Fitting
+# --------------------------------------------------------------------------------------------------
+
+
+def _residuals(model: ChainFM, theta: torch.Tensor, ef: torch.Tensor) -> torch.Tensor:
+    return (model.position(theta) - ef).norm(dim=-1)
+
+
+def _robust_scale(r: torch.Tensor) -> float:
+    """σ of a 3-D isotropic Gaussian from the median residual norm (median of a χ₃ is 1.5382 σ)."""
+    return float(r.median()) / 1.5382
+
+
+def _unpack(x: torch.Tensor, n: int):
+    """The parameter vector (axes, points, tip) as the chain's tensors, axes normalised."""
+    w = x[: 3 * n].reshape(n, 3)
+    return w / w.norm(dim=-1, keepdim=True), x[3 * n : 6 * n].reshape(n, 3), x[6 * n :]
+
+
+def _fit(model: ChainFM, theta, ef, delta: float, iterations: int, chunk: int = 8192) -> float:
+    """Levenberg–Marquardt on the Huber loss of the residual norms / δ (iteratively reweighted least
+    squares: weight min(1, δ / ‖r‖) per sample). The residuals' Jacobian in the 6n + 3 parameters is
+    analytic (:func:`~kinlearn.models.chain.chain_parameter_jacobian`); the damping λ·I takes no step along the directions the data cannot
+    see (a point sliding along its axis, an axis's length). Returns the final mean Huber loss."""
+    n = model.dof
+    ref = model.reference.detach()
+    phi = theta - ref
+    x = torch.cat((model.axis.detach().flatten(), model.point.detach().flatten(), model.tip.detach()))
+
+    def residual(x: torch.Tensor, ph: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        return chain_position(*_unpack(x, n), ph) - y
+
+    def loss_of(r: torch.Tensor) -> torch.Tensor:
+        a = r.norm(dim=-1) / delta
+        return torch.where(a < 1.0, 0.5 * a.square(), a - 0.5).mean()
+
+    def evaluate(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        r = torch.cat([residual(x, phi[k : k + chunk], ef[k : k + chunk]) for k in range(0, len(phi), chunk)])
+        return r, loss_of(r)
+
+    r, loss = evaluate(x)
+    lam = None
+    for _ in range(iterations):
+        weight = (delta / r.norm(dim=-1).clamp_min(1e-15)).clamp(max=1.0)
+        H = torch.zeros(x.numel(), x.numel(), dtype=x.dtype)
+        g = torch.zeros(x.numel(), dtype=x.dtype)
+        for k in range(0, len(phi), chunk):
+            ph, y, wk = phi[k : k + chunk], ef[k : k + chunk], weight[k : k + chunk]
+            _, J = chain_parameter_jacobian(x[: 3 * n].reshape(n, 3), *_unpack(x, n)[1:], ph)
+            J = J.reshape(-1, x.numel())  # (3m, P)
+            wr = wk.repeat_interleave(3)
+            H += J.T @ (J * wr[:, None])
+            g += J.T @ (r[k : k + chunk].reshape(-1) * wr)
+        if lam is None:
+            lam = 1e-6 * float(H.diagonal().mean())
+        improved = False
+        for _ in range(10):
+            step = torch.linalg.solve(H + lam * torch.eye(x.numel(), dtype=x.dtype), -g)
+            x_new = x + step
+            r_new, loss_new = evaluate(x_new)
+            if loss_new < loss:
+                x, r, improved = x_new, r_new, float(loss - loss_new) > 1e-12 * float(loss)
+                loss, lam = loss_new, lam / 3.0
+                break
+            lam *= 8.0
+        if not improved:
+            break
+    w, q, tip = _unpack(x, n)
+    with torch.no_grad():
+        model.axis.copy_(w)
+        model.point.copy_(q)
+        model.tip.copy_(tip)
+    return float(loss)
+
+
+def _fit_mlp(theta, ef, hidden, steps: int, gen: torch.Generator) -> nn.Module:
+    """A first, rough model of the end effector: an MLP of (sin θ, cos θ), standardised output."""
+    torch.manual_seed(int(torch.randint(0, 2**31 - 1, (1,), generator=gen)))
+    x = torch.cat((theta.sin(), theta.cos()), -1).float()
+    mean, std = ef.mean(0).float(), ef.std(0).float().clamp_min(1e-6)
+    y = (ef.float() - mean) / std
+    sizes = (x.shape[-1], *hidden)
+    layers: list[nn.Module] = []
+    for a, b in zip(sizes[:-1], sizes[1:], strict=True):
+        layers += [nn.Linear(a, b), nn.SiLU()]
+    net = nn.Sequential(*layers, nn.Linear(sizes[-1], 3))
+    opt = torch.optim.Adam(net.parameters(), lr=2e-3)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=2e-3, total_steps=steps, pct_start=0.05)
+    n = x.shape[0]
+    batch = min(2048, n)
+    with torch.enable_grad():
+        for _ in range(steps):
+            idx = torch.randint(0, n, (batch,), generator=gen)
+            loss = torch.nn.functional.smooth_l1_loss(net(x[idx]), y[idx], beta=0.05)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+    net.requires_grad_(False)
+
+    def g(th: torch.Tensor) -> torch.Tensor:
+        return (net(torch.cat((th.sin(), th.cos()), -1).float()) * std + mean).double()
+
+    return g
+
+
+def _circle(P: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The circle through 3-D points swept by increasing ``angles``: unit axis (right-handed with the
+    sweep), centre, radius."""
+    c = P.mean(0)
+    _, _, Vt = np.linalg.svd(P - c)
+    u, v, n = Vt
+    x, y = (P - c) @ u, (P - c) @ v
+    A = np.column_stack((2 * x, 2 * y, np.ones_like(x)))
+    (a, b, k), *_ = np.linalg.lstsq(A, x**2 + y**2, rcond=None)
+    centre = c + a * u + b * v
+    radius = math.sqrt(max(k + a * a + b * b, 0.0))
+    d = P - centre
+    sense = np.cross(d[:-1], d[1:]).sum(0) @ n
+    return (n if sense >= 0 else -n), centre, radius
+
+
+def _sweep_init(g, reference: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor, points: int = 48):
+    """Axes and points of every joint at ``reference`` from circles swept through ``g``; radii."""
+    dof = reference.shape[0]
+    axes, centres, radii = np.zeros((dof, 3)), np.zeros((dof, 3)), np.zeros(dof)
+    tip = g(reference[None])[0].numpy()
+    for i in range(dof):
+        angles = torch.linspace(float(lo[i]), float(hi[i]), points, dtype=torch.float64)
+        th = reference.repeat(points, 1)
+        th[:, i] = angles
+        axes[i], centres[i], radii[i] = _circle(g(th).numpy(), angles.numpy())
+    return axes, centres, radii, tip
+
+
+def _chain_from(axes, points, tip, reference, robot_name: str, lo, hi) -> ChainFM:
+    model = ChainFM(ChainConfig(robot=robot_name, dof=len(reference)))
+    with torch.no_grad():
+        model.axis.copy_(torch.as_tensor(axes, dtype=torch.float64))
+        model.point.copy_(torch.as_tensor(points, dtype=torch.float64))
+        model.tip.copy_(torch.as_tensor(tip, dtype=torch.float64))
+        model.reference.copy_(torch.as_tensor(reference, dtype=torch.float64))
+        model.lower.copy_(torch.as_tensor(lo, dtype=torch.float64))
+        model.upper.copy_(torch.as_tensor(hi, dtype=torch.float64))
+    return model
+
+
+def _check_observations(theta, ef) -> tuple[torch.Tensor, torch.Tensor]:
+    theta = torch.as_tensor(theta).detach().double().cpu()
+    ef = torch.as_tensor(ef).detach().double().cpu()
+    if theta.ndim != 2 or ef.ndim != 2 or ef.shape[-1] != 3 or theta.shape[0] != ef.shape[0]:
+        raise DatasetError(
+            f"identification needs theta (N, dof) and ef (N, 3) of one length; got {tuple(theta.shape)} "
+            f"and {tuple(ef.shape)}"
+        )
+    check_finite(theta, "theta")
+    check_finite(ef, "ef")
+    return theta, ef
+
+
+def identify(
+    theta,
+    ef,
+    *,
+    prior: Robot | None = None,
+    dof: int | None = None,
+    robot_name: str | None = None,
+    limits: tuple | None = None,
+    config: IdentifyConfig | None = None,
+    progress: bool = False,
+) -> Identification:
+    """Identify a serial chain from joint values ``theta (N, dof)`` (rad) and observed end-effector
+    positions ``ef (N, 3)`` (m, base frame).
+
+    ``prior``: a robot whose URDF starts the fit (it may be wrong); without one, only the joint count
+    (``dof``, or ``theta``'s) is used. ``robot_name``: the name the model records (default: the
+    prior's, else ``"chain"``). ``limits``: ``(lower, upper)`` of the joints (default: the prior's,
+    else the data's range). Needs at least 20 samples per parameter.
+    """
+    cfg = config or IdentifyConfig()
+    t_start = time.perf_counter()
+    theta, ef = _check_observations(theta, ef)
+    n, n_joints = theta.shape
+    if dof is not None and dof != n_joints:
+        raise DatasetError(f"the data hold {n_joints} joints, dof={dof} was asked for")
+    if prior is not None and prior.dof != n_joints:
+        raise DatasetError(f"the data hold {n_joints} joints, the prior {prior.name} has {prior.dof}")
+    needed = 20 * (6 * n_joints + 3)
+    if n < needed:
+        raise DatasetError(f"identifying a {n_joints}-joint chain needs at least {needed} samples, got {n}")
+    name = robot_name or (prior.name if prior is not None else "chain")
+    if limits is not None:
+        lo, hi = (torch.as_tensor(v, dtype=torch.float64) for v in limits)
+    elif prior is not None:
+        lo, hi = torch.from_numpy(prior.lower), torch.from_numpy(prior.upper)
+    else:
+        lo, hi = theta.min(0).values, theta.max(0).values
+    gen = torch.Generator().manual_seed(int(cfg.seed))
+    perm = torch.randperm(n, generator=gen)
+    n_val = round(n * cfg.holdout)
+    val, fit = perm[:n_val], perm[n_val:]
+    th_fit, ef_fit = theta[fit], ef[fit]
+    log = print if progress else (lambda *a, **k: None)
+
+    report: dict = {"samples": n, "fit_samples": int(fit.numel()), "holdout_samples": n_val}
+    if prior is not None:
+        model = ChainFM.from_robot(prior)
+        with torch.no_grad():
+            model.lower.copy_(lo)
+            model.upper.copy_(hi)
+        report["initialisation"] = f"prior URDF {prior.name}"
+        _fit(model, th_fit, ef_fit, 1e-2, cfg.iterations)
+    else:
+        t0 = time.perf_counter()
+        g = _fit_mlp(th_fit, ef_fit, cfg.mlp_hidden, cfg.mlp_steps, gen)
+        mlp_err = float((g(th_fit[:5000]) - ef_fit[:5000]).norm(dim=-1).median())
+        log(f"first MLP: median error {mlp_err * 1e3:.2f} mm ({time.perf_counter() - t0:.1f} s)")
+        q_lo, q_hi = (torch.quantile(th_fit, v, dim=0) for v in (0.05, 0.95))
+        # Candidate references from the data, scored by how well every joint's sweep is determined.
+        candidates = th_fit[torch.randperm(th_fit.shape[0], generator=gen)[: 8 * cfg.references]]
+        scored = []
+        for ref in candidates:
+            init = _sweep_init(g, ref, q_lo, q_hi)
+            scored.append((float(np.log(np.clip(init[2], 1e-3, 0.2)).sum()), ref, init))
+        scored.sort(key=lambda s: -s[0])
+        best, best_loss = None, math.inf
+        for _, ref, (axes, centres, radii, tip) in scored[: cfg.references]:
+            for i in np.flatnonzero(radii < 1e-3):  # a joint that does not move the point here
+                centres[i] = tip
+            cand = _chain_from(axes, centres, tip, ref, name, lo, hi)
+            loss = _fit(cand, th_fit, ef_fit, 1e-2, max(5, cfg.iterations // 3))
+            log(f"reference candidate: loss {loss:.4g}")
+            if loss < best_loss:
+                best, best_loss = cand, loss
+        model = best
+        report["initialisation"] = (
+            f"no prior: first MLP (median {mlp_err * 1e3:.2f} mm) swept into circles at "
+            f"{cfg.references} reference configurations, the best kept"
+        )
+        _fit(model, th_fit, ef_fit, 1e-2, cfg.iterations)
+    # Robust rounds.
+    r = _residuals(model, th_fit, ef_fit).detach()
+    sigma = _robust_scale(r)
+    _fit(model, th_fit, ef_fit, max(3.0 * sigma, 1e-6), cfg.iterations)
+    r = _residuals(model, th_fit, ef_fit).detach()
+    sigma = _robust_scale(r)
+    keep = r <= cfg.outlier_sigma * max(sigma, 1e-7) * 1.5382
+    _fit(model, th_fit[keep], ef_fit[keep], max(3.0 * sigma, 1e-6), cfg.iterations)
+    model.canonicalize()
+    r = _residuals(model, th_fit, ef_fit).detach()
+    sigma = _robust_scale(r[keep])
+    report["outliers_dropped"] = int((~keep).sum())
+    report["noise_sigma"] = sigma
+    # Undetermined directions: trailing joints whose axes pass through the end-effector point.
+    w, q, tip = model.unit_axes().detach(), model.point.detach(), model.tip.detach()
+    dist = torch.linalg.cross(w, (tip - q)).norm(dim=-1)
+    unobservable = []
+    for i in reversed(range(n_joints)):
+        if float(dist[i]) >= cfg.unobservable_distance:
+            break
+        unobservable.append(i)
+    report["undetermined_axis_directions"] = sorted(unobservable)
+    if cfg.residual:
+        _fit_residual(model, th_fit[keep], ef_fit[keep], cfg, gen)
+    with torch.no_grad():
+        rv = _residuals(model, theta[val], ef[val]) if n_val else torch.zeros(1)
+        rf = _residuals(model, th_fit, ef_fit)
+    report["holdout_residual"] = _summary(rv)
+    report["fit_residual"] = _summary(rf)
+    report["seconds"] = time.perf_counter() - t_start
+    model.eval()
+    return Identification(model, report)
+
+
+def _fit_residual(model: ChainFM, theta, ef, cfg: IdentifyConfig, gen: torch.Generator) -> None:
+    """Add and train the residual MLP on what the rigid chain leaves (the chain held fixed)."""
+    torch.manual_seed(int(torch.randint(0, 2**31 - 1, (1,), generator=gen)))
+    full = ChainFM(ChainConfig(model.config.robot, model.dof, tuple(cfg.residual)))
+    full.load_state_dict(model.state_dict(), strict=False)
+    model.config = full.config
+    model.residual = full.residual
+    opt = torch.optim.Adam(model.residual.parameters(), lr=1e-3)
+    n = theta.shape[0]
+    with torch.enable_grad():
+        for _ in range(cfg.residual_steps):
+            idx = torch.randint(0, n, (min(4096, n),), generator=gen)
+            r = (model.position(theta[idx]) - ef[idx]).norm(dim=-1) / 1e-3
+            loss = torch.where(r < 1.0, 0.5 * r.square(), r - 0.5).mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+
+
+def _summary(r: torch.Tensor) -> dict[str, float]:
+    r = r.double()
+    return {
+        "median": float(r.median()),
+        "mean": float(r.mean()),
+        "p99": float(torch.quantile(r, 0.99)),
+        "max": float(r.max()),
+    }
