@@ -68,7 +68,10 @@ def check_finite(x: torch.Tensor, what: str) -> None:
 def check_region(region, what: str = "region") -> tuple[float, ...]:
     """``region`` as 6 floats (m: x_min, x_max, y_min, y_max, z_min, z_max); :class:`ConfigError` unless
     they are 6 finite numbers with each min ≤ max."""
-    r = np.asarray(region, dtype=float)
+    try:
+        r = np.asarray(region, dtype=float)
+    except (TypeError, ValueError):
+        r = np.full(0, np.nan)
     if r.shape != (6,) or not np.isfinite(r).all() or (r[0::2] > r[1::2]).any():
         raise ConfigError(
             f"{what} must be 6 finite numbers x_min, x_max, y_min, y_max, z_min, z_max with each min ≤ max, "

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import math
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..checks import check_finite, check_last_dim, check_region
+from ..checks import check_finite, check_last_dim, check_region, real_array
 from ..errors import (
     ConfigError,
     JointLimitError,
@@ -90,8 +91,15 @@ def register_robot(
     body (:func:`kinlearn.collision.body_spheres`; spheres on fixed links are folded onto their moving
     parent). Returns the loaded robot.
     """
-    if not isinstance(name, str) or not name or name.strip() != name or name.lower().endswith(".urdf"):
-        raise ConfigError(f"a robot name must be a non-empty word, not a path; got {name!r}")
+    if (
+        not isinstance(name, str)
+        or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.+-]*", name)
+        or name.lower().endswith(".urdf")
+    ):
+        raise ConfigError(
+            f"a robot name must be a word of letters, digits and _ . + - (it names files and folders), not a "
+            f"path; got {name!r}"
+        )
     if name in BUILTIN_ROBOTS:
         raise ConfigError(f"{name!r} is one of kinlearn's own robots; register yours under another name")
     if name in ROBOTS and not overwrite:
@@ -106,7 +114,7 @@ def register_robot(
             raise UnknownRobotError(f"no sphere URDF file at {sphere_path}")
         robot.sphere_urdf = sphere_path
     if home is not None:
-        h = np.asarray(home, dtype=float)
+        h = real_array(home, "home").astype(float)
         if h.shape != (robot.dof,) or not np.isfinite(h).all():
             raise ConfigError(f"home must be {robot.dof} finite joint values, got {home!r}")
         if ((h < robot.lower) | (h > robot.upper)).any():
@@ -175,12 +183,102 @@ def _rpy_matrix(r: float, p: float, y: float) -> np.ndarray:
 
 
 def _floats(text: str | None, n: int, default: float, what: str) -> list[float]:
+    """``n`` finite numbers from an attribute's text (``default`` each where it is absent);
+    :class:`RobotDescriptionError` naming ``what`` for anything else."""
     if text is None:
         return [default] * n
-    values = [float(v) for v in text.split()]
-    if len(values) != n:
-        raise RobotDescriptionError(f"{what}: expected {n} numbers, got {text!r}")
+    try:
+        values = [float(v) for v in text.split()]
+    except ValueError:
+        values = []
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        raise RobotDescriptionError(f"{what}: expected {n} finite numbers, got {text!r}")
     return values
+
+
+def _number(text: str | None, what: str, default: float | None = None) -> float:
+    """One number from an attribute's text; :class:`RobotDescriptionError` naming ``what`` if it is none."""
+    if text is None:
+        if default is None:
+            raise RobotDescriptionError(f"{what} is missing")
+        return default
+    try:
+        return float(text)
+    except ValueError:
+        raise RobotDescriptionError(f"{what} must be a number, got {text!r}") from None
+
+
+def _line_of(text: str, tag: str, name: str | None) -> str:
+    """`` (line N)`` of the first ``<tag name="name"`` in the URDF's text, or nothing if not found."""
+    pattern = rf"<{tag}\b[^>]*\bname\s*=\s*[\"']{re.escape(name or '')}[\"']"
+    m = re.search(pattern, text)
+    return f" (line {text.count(chr(10), 0, m.start()) + 1})" if m else ""
+
+
+def validate_urdf(urdf: bytes, name: str) -> ET.Element:
+    """The parsed URDF ``urdf`` of robot ``name``, checked as a kinematic tree; raises
+    :class:`RobotDescriptionError` naming the element (and its line) for: XML that does not parse, a
+    root that is no ``<robot>``, an unexpanded xacro expression (``${…}``, ``$(…)``: run xacro first), a
+    link or joint without a name, duplicate link or joint names, a joint without ``<parent link>`` or
+    ``<child link>``, or naming a link that is not declared, a link with two parent joints, a loop, or
+    more than one root link. The chain's own numbers (origins, axes, limits) are checked where the
+    chain is built (:class:`Robot`)."""
+    try:
+        root = ET.fromstring(urdf)
+    except ET.ParseError as exc:
+        raise RobotDescriptionError(f"{name}: the URDF is not valid XML: {exc}") from exc
+    text = urdf.decode("utf-8", errors="replace")
+    if root.tag != "robot":
+        raise RobotDescriptionError(f"{name}: a URDF's root element is <robot>, this one's is <{root.tag}>")
+    for el in root.iter():
+        for key, value in el.attrib.items():
+            if "${" in value or "$(" in value:
+                where = _line_of(text, el.tag, el.get("name"))
+                raise RobotDescriptionError(
+                    f"{name}: <{el.tag}{' name=' + repr(el.get('name')) if el.get('name') else ''}>{where} holds "
+                    f"the unexpanded xacro expression {key}={value!r}: run xacro on the file first "
+                    "(`xacro robot.urdf.xacro > robot.urdf`)"
+                )
+    seen: dict[str, set[str]] = {"link": set(), "joint": set()}
+    for tag in ("link", "joint"):
+        for el in root.findall(tag):
+            n = el.get("name")
+            if not n:
+                raise RobotDescriptionError(f"{name}: a <{tag}> without a name")
+            if n in seen[tag]:
+                raise RobotDescriptionError(f"{name}: two {tag}s are named {n!r}{_line_of(text, tag, n)}")
+            seen[tag].add(n)
+    links = seen["link"]
+    parent_of: dict[str, str] = {}
+    for el in root.findall("joint"):
+        jname = el.get("name")
+        ends = {}
+        for end in ("parent", "child"):
+            e = el.find(end)
+            if e is None or not e.get("link"):
+                raise RobotDescriptionError(
+                    f"{name}: joint {jname!r}{_line_of(text, 'joint', jname)} has no <{end} link=...>"
+                )
+            if e.get("link") not in links:
+                raise RobotDescriptionError(
+                    f"{name}: joint {jname!r}{_line_of(text, 'joint', jname)} names {end} link "
+                    f"{e.get('link')!r}, which the URDF does not declare as a <link>"
+                )
+            ends[end] = e.get("link")
+        child = ends["child"]
+        if child in parent_of:
+            raise RobotDescriptionError(
+                f"{name}: link {child!r} is the child of two joints, {parent_of[child]!r} and {jname!r}"
+                f"{_line_of(text, 'joint', jname)}: a URDF is a tree, each link has one parent joint"
+            )
+        parent_of[child] = jname
+    roots = sorted(links - set(parent_of))
+    if len(roots) != 1:
+        raise RobotDescriptionError(
+            f"{name}: a URDF is a tree with one root link; "
+            + (f"this one has {len(roots)}: {', '.join(roots[:10])}" if roots else "its joints form a loop")
+        )
+    return root
 
 
 @dataclass(frozen=True)
@@ -287,10 +385,7 @@ def _origin(el: ET.Element | None, what: str) -> np.ndarray:
 def _parse_chain(
     urdf: bytes, ee_frame: str, name: str
 ) -> tuple[str, tuple[Joint, ...], np.ndarray, dict[str, np.ndarray]]:
-    try:
-        root = ET.fromstring(urdf)
-    except ET.ParseError as exc:
-        raise RobotDescriptionError(f"{name}: the URDF is not valid XML: {exc}") from exc
+    root = validate_urdf(urdf, name)
     links = {el.get("name") for el in root.findall("link")}
     by_child: dict[str, ET.Element] = {}
     for el in root.findall("joint"):
@@ -342,8 +437,21 @@ def _parse_chain(
         elif limit is None or limit.get("lower") is None or limit.get("upper") is None:
             raise RobotDescriptionError(f"{name}: joint {jname} has no position limits")
         else:
-            lower, upper = float(limit.get("lower")), float(limit.get("upper"))
-        velocity = float(limit.get("velocity", "inf")) if limit is not None else math.inf
+            what = f"{name}: joint {jname}'s limit"
+            lower = _number(limit.get("lower"), f"{what} lower")
+            upper = _number(limit.get("upper"), f"{what} upper")
+            if not (math.isfinite(lower) and math.isfinite(upper) and lower < upper):
+                raise RobotDescriptionError(
+                    f"{what}s must be finite with lower < upper, got lower={limit.get('lower')!r}, "
+                    f"upper={limit.get('upper')!r}"
+                )
+        velocity = math.inf
+        if limit is not None:
+            velocity = _number(limit.get("velocity"), f"{name}: joint {jname}'s velocity limit", math.inf)
+            if math.isnan(velocity) or velocity <= 0:
+                raise RobotDescriptionError(
+                    f"{name}: joint {jname}'s velocity limit must be > 0, got {limit.get('velocity')!r}"
+                )
         joints.append(
             Joint(
                 jname,

@@ -34,7 +34,7 @@ import numpy as np
 import torch
 
 from ..body.kinematics import kinematics
-from ..body.robot import Robot, load_robot
+from ..body.robot import BUILTIN_ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import as_int, check_finite, real_array
 from ..collision.body import BodySpheres, body_spheres
@@ -683,7 +683,8 @@ def _robot(robot: str | Robot | None, name: str) -> Robot:
 @lru_cache(maxsize=8)
 def _default_planner(robot: str) -> Planner:
     path = DEFAULT_CHECKPOINTS / robot
-    if not (path / "tm.pt").is_file():
+    # Only kinlearn's own arms ship planners: a registered arm never gets another arm's.
+    if robot not in BUILTIN_ROBOTS or not (path / "tm.pt").is_file():
         shipped = sorted(p.name for p in DEFAULT_CHECKPOINTS.iterdir() if (p / "tm.pt").is_file())
         raise ConfigError(
             f"kinlearn ships no planner for {robot!r} (shipped: {', '.join(shipped)}); train one with "
