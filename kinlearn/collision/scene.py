@@ -170,6 +170,12 @@ class Scene:
             tables[name], masks[mask_name] = t, m
         f = None
         if floor is not None:
+            if isinstance(floor, (bool, np.bool_, complex, np.complexfloating)) or (
+                isinstance(floor, torch.Tensor) and (floor.dtype == torch.bool or floor.is_complex())
+            ):
+                raise ObstacleError(
+                    f"the floor height must be a real number of metres or None, got {floor!r}"
+                )
             f = _tensor(floor, "floor", dtype, device)
             if not bool(torch.isfinite(f).all()):
                 raise ObstacleError("floor height holds NaN/inf; give a finite height in metres or None")
@@ -484,7 +490,10 @@ def _sphere_scene(obstacles) -> Scene:
     if isinstance(obstacles, torch.Tensor) and (obstacles.dtype == torch.bool or obstacles.is_complex()):
         raise ObstacleError(f"obstacle spheres must hold real numbers, got a {obstacles.dtype} tensor")
     try:
-        spheres = torch.as_tensor(np.asarray(obstacles, dtype=np.float64))
+        a = np.asarray(obstacles)
+        if a.dtype.kind not in "fiu":  # True is no metre, and 1+0j no radius
+            raise TypeError(f"they hold {a.dtype} values, not real numbers")
+        spheres = torch.as_tensor(a.astype(np.float64))
     except (TypeError, ValueError) as exc:
         raise ObstacleError(f"obstacles must be numbers of shape (K, 4) or (..., K, 4): {exc}") from exc
     if spheres.ndim < 2 or spheres.shape[-1] != 4:

@@ -26,6 +26,7 @@ learned model, kept within the joint limits. Identification from data is
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -193,7 +194,7 @@ class ChainFM(ForwardModel):
         if config.residual:
             layers: list[nn.Module] = []
             sizes = (2 * n, *config.residual)
-            for a, b in zip(sizes[:-1], sizes[1:], strict=True):
+            for a, b in itertools.pairwise(sizes):
                 layers += [nn.Linear(a, b, dtype=f64), nn.SiLU()]
             out = nn.Linear(sizes[-1], 3, dtype=f64)
             nn.init.zeros_(out.weight)

@@ -36,6 +36,7 @@ and arbitrary about that joint's orientation.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -152,7 +153,7 @@ def _fit(model: ChainFM, theta, ef, delta: float, iterations: int, chunk: int = 
         H = torch.zeros(x.numel(), x.numel(), dtype=x.dtype)
         g = torch.zeros(x.numel(), dtype=x.dtype)
         for k in range(0, len(phi), chunk):
-            ph, y, wk = phi[k : k + chunk], ef[k : k + chunk], weight[k : k + chunk]
+            ph, wk = phi[k : k + chunk], weight[k : k + chunk]
             _, J = chain_parameter_jacobian(x[: 3 * n].reshape(n, 3), *_unpack(x, n)[1:], ph)
             J = J.reshape(-1, x.numel())  # (3m, P)
             wr = wk.repeat_interleave(3)
@@ -188,7 +189,7 @@ def _fit_mlp(theta, ef, hidden, steps: int, gen: torch.Generator) -> nn.Module:
     y = (ef.float() - mean) / std
     sizes = (x.shape[-1], *hidden)
     layers: list[nn.Module] = []
-    for a, b in zip(sizes[:-1], sizes[1:], strict=True):
+    for a, b in itertools.pairwise(sizes):
         layers += [nn.Linear(a, b), nn.SiLU()]
     net = nn.Sequential(*layers, nn.Linear(sizes[-1], 3))
     opt = torch.optim.Adam(net.parameters(), lr=2e-3)
