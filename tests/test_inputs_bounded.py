@@ -324,3 +324,20 @@ def test_baselines_take_a_robot_or_its_name(robot):
             make("no-such-arm")
         with pytest.raises(ConfigError, match="robot"):
             make(7)
+
+
+def test_obstacles_and_floors_must_be_real_numbers():
+    from kinlearn.collision import Scene
+    from kinlearn.errors import ObstacleError
+
+    for obs in (
+        np.ones((1, 4), dtype=bool),
+        np.array([[3, 3, 3, 0.1]], dtype=complex),
+        torch.ones(1, 4).bool(),
+    ):
+        with pytest.raises(ObstacleError, match="real numbers"):
+            kinlearn.plan(START, GOAL, obstacles=obs)
+    for floor in (True, np.bool_(False), 1j, torch.tensor(True)):
+        with pytest.raises(ObstacleError, match="floor"):
+            Scene(torch.tensor([[3.0, 3.0, 3.0, 0.1]]), floor=floor)
+    assert Scene(torch.tensor([[3.0, 3.0, 3.0, 0.1]]), floor=np.float32(0.0)).floor is not None
