@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 from ..data.recorded import load_data
 from ..errors import ConfigError
@@ -18,6 +17,7 @@ from ..models.body import BodyModelConfig, save_body_model
 from ..models.forward_inverse import ACTIVATIONS
 from ..training.body import HELDOUT_PROBLEMS, train_body_model, validate_body_model
 from .common import (
+    EXISTING_FILE,
     NONNEGATIVE_INT,
     POSITIVE_FLOAT,
     POSITIVE_INT,
@@ -93,7 +93,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--problems",
-        type=Path,
+        type=EXISTING_FILE,
         default=HELDOUT_PROBLEMS,
         help="obstacle problems for the collision-verdict check (default: the committed benchmark)",
     )

@@ -21,11 +21,16 @@ from ..io import file_sha256
 from ..runs import IGNORED_KEYS, Run, open_run
 
 __all__ = [
+    "EXISTING_DIR",
+    "EXISTING_FILE",
     "NONNEGATIVE_FLOAT",
     "NONNEGATIVE_INT",
+    "OUTPUT_DIR",
+    "OUTPUT_FILE",
     "POSITIVE_FLOAT",
     "POSITIVE_INT",
     "PROBABILITY",
+    "SEED",
     "add_command",
     "add_data_options",
     "add_run_options",
@@ -82,6 +87,66 @@ def number_type(
     return parse
 
 
+def _path_type(check: Callable[[Path], str | None], name: str) -> Callable[[str], Path]:
+    def parse(text: str) -> Path:
+        path = Path(text)
+        problem = check(path)
+        if problem:
+            raise argparse.ArgumentTypeError(problem)
+        return path
+
+    parse.__name__ = name
+    return parse
+
+
+def _output_problem(path: Path) -> str | None:
+    from ..io import check_output
+
+    try:
+        check_output(path)
+    except OSError as exc:  # OutputError
+        return str(exc)
+    return None
+
+
+def _folder_problem(path: Path) -> str | None:
+    if path.exists() and not path.is_dir():
+        return f"{path} is a file, not a folder"
+    return _output_problem(path / "x")  # a folder that exists or can be made, to write in
+
+
+#: argparse ``type``s for paths, checked when the command line is parsed (before anything runs or is
+#: written): an input file or folder that must exist, an output file that can be written, a folder
+#: that is one (or can be made) and may be written in.
+EXISTING_FILE = _path_type(
+    lambda p: (
+        None if p.is_file() else (f"{p} is a folder, not a file" if p.is_dir() else f"no such file: {p}")
+    ),
+    "an existing file",
+)
+EXISTING_DIR = _path_type(
+    lambda p: (
+        None if p.is_dir() else (f"{p} is a file, not a folder" if p.exists() else f"no such folder: {p}")
+    ),
+    "an existing folder",
+)
+OUTPUT_FILE = _path_type(_output_problem, "a file to write")
+OUTPUT_DIR = _path_type(_folder_problem, "a folder to write in")
+
+
+def _robot_name(text: str) -> str:
+    if text in available_robots() or (text.lower().endswith(".urdf") and Path(text).is_file()):
+        return text
+    raise argparse.ArgumentTypeError(
+        f"unknown robot {text!r}; valid names are {', '.join(available_robots())}, or a path to a .urdf file"
+    )
+
+
+#: A robot's name (or a URDF file), checked when the command line is read: a refused command writes nothing.
+ROBOT = _robot_name
+#: Seeds: integers a NumPy and a torch generator both take.
+SEED = number_type(int, low=0, high=2**32 - 1)
+
 POSITIVE_INT = number_type(int, low=1)
 NONNEGATIVE_INT = number_type(int, low=0)
 POSITIVE_FLOAT = number_type(float, low=0, open_low=True)
@@ -102,11 +167,16 @@ def add_command(
     """Add subcommand ``name`` with the options every subcommand has: robot, threads, and unless
     turned off (a command that draws nothing at random or writes no run directory), seed and run dir."""
     p = sub.add_parser(name, help=help, description=help)
-    p.add_argument("--robot", default="iiwa14", help=f"robot name ({', '.join(available_robots())})")
+    p.add_argument(
+        "--robot",
+        type=ROBOT,
+        default="iiwa14",
+        help=f"robot name ({', '.join(available_robots())}) or a .urdf file",
+    )
     if seed:
         p.add_argument(
             "--seed",
-            type=int,
+            type=SEED,
             default=seed_default,
             help=f"seed of everything random (default: {seed_default})",
         )
@@ -144,7 +214,7 @@ def add_data_options(p: argparse.ArgumentParser, purpose: str) -> None:
     and ``--drop-nan``."""
     p.add_argument(
         "--data",
-        type=Path,
+        type=EXISTING_FILE,
         default=None,
         help=f"babbling.npz, or a recorded log (.npz/.csv: joints in rad, ef_x/ef_y/ef_z in m), {purpose}",
     )

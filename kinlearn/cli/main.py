@@ -53,6 +53,7 @@ from ..training.forward_inverse import (
 from . import body, planning, view
 from .common import (
     _SUBCOMMANDS,
+    EXISTING_FILE,
     NONNEGATIVE_FLOAT,
     NONNEGATIVE_INT,
     POSITIVE_FLOAT,
@@ -160,7 +161,7 @@ def _add_babble(sub) -> None:
     )
     p.add_argument(
         "--urdf",
-        type=Path,
+        type=EXISTING_FILE,
         default=None,
         help="babble with the robot of this URDF file (needs --ee-frame; the data are named after the "
         "file unless --robot is given)",
@@ -250,7 +251,7 @@ def _add_train(sub, kind: str) -> None:
     if kind == "im":
         p.add_argument(
             "--through-fm",
-            type=Path,
+            type=EXISTING_FILE,
             default=None,
             help="after supervised training (in <run-dir>/supervised), refine the IM through this frozen "
             "fm.pt so that its actions reach their targets (in <run-dir>/through-fm; see train_im_distal)",

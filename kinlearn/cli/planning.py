@@ -23,8 +23,12 @@ from ..planning.planner import DEFAULT_CHECKPOINTS, Planner
 from ..runs import open_run
 from ..training.tm import MODEL_FIELDS, TM_PRESETS, tm_preset, train_tm
 from .common import (
+    EXISTING_DIR,
+    EXISTING_FILE,
     NONNEGATIVE_FLOAT,
     NONNEGATIVE_INT,
+    OUTPUT_DIR,
+    OUTPUT_FILE,
     POSITIVE_FLOAT,
     POSITIVE_INT,
     add_command,
@@ -97,10 +101,16 @@ def _add_train_tm(sub) -> None:
         _run_train_tm,
     )
     p.add_argument("--preset", choices=sorted(TM_PRESETS), default="default", help="training preset")
-    p.add_argument("--endpoints", type=Path, required=True, help="a make-endpoints run directory")
-    p.add_argument("--fm-checkpoint", type=Path, default=None, help="a learned fm.pt (from train-fm)")
-    p.add_argument("--im-checkpoint", type=Path, default=None, help="a learned im.pt (from train-im)")
-    p.add_argument("--models-dir", type=Path, default=None, help="or: one folder holding fm.pt and im.pt")
+    p.add_argument("--endpoints", type=EXISTING_DIR, required=True, help="a make-endpoints run directory")
+    p.add_argument(
+        "--fm-checkpoint", type=EXISTING_FILE, default=None, help="a learned fm.pt (from train-fm)"
+    )
+    p.add_argument(
+        "--im-checkpoint", type=EXISTING_FILE, default=None, help="a learned im.pt (from train-im)"
+    )
+    p.add_argument(
+        "--models-dir", type=EXISTING_DIR, default=None, help="or: one folder holding fm.pt and im.pt"
+    )
     p.add_argument(
         "--fm",
         choices=("learned", "analytic"),
@@ -262,17 +272,19 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
         type=_floats,
         help="goal end-effector position x,y,z (m, base frame), any configuration",
     )
-    p.add_argument("--model", type=Path, default=None, help="a planner folder (default: the shipped planner)")
+    p.add_argument(
+        "--model", type=EXISTING_DIR, default=None, help="a planner folder (default: the shipped planner)"
+    )
     p.add_argument(
         "--obstacles",
-        type=Path,
+        type=EXISTING_FILE,
         default=None,
         metavar="SCENE",
         help="plan around the obstacles of a scene file (.npz, kinlearn.collision.Scene.save)",
     )
     p.add_argument(
         "--scene",
-        type=Path,
+        type=EXISTING_FILE,
         default=None,
         metavar="YAML",
         help="plan around the obstacles of a MoveIt planning scene (.yaml: world.collision_objects)",
@@ -286,7 +298,7 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--request",
-        type=Path,
+        type=EXISTING_FILE,
         default=None,
         metavar="YAML",
         help="take start and goal joints from a MoveIt motion plan request (.yaml: start_state, "
@@ -355,7 +367,7 @@ def _add_plan(sub) -> None:
     p.add_argument("--joints", action="store_true", help="also print the joint path")
     p.add_argument(
         "--timed",
-        type=Path,
+        type=OUTPUT_FILE,
         default=None,
         metavar="FILE",
         help="write a time-parameterised trajectory within the robot's limits (.csv or .json) for a controller",
@@ -395,13 +407,13 @@ def _add_train_planner(sub) -> None:
         _run_train_planner,
     )
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--fm-checkpoint", type=Path, help="the learned FM to train through (fm.pt)")
+    src.add_argument("--fm-checkpoint", type=EXISTING_FILE, help="the learned FM to train through (fm.pt)")
     src.add_argument(
         "--analytic-fm", action="store_true", help="train through the analytic FK (the ablation)"
     )
     p.add_argument(
         "--im-checkpoint",
-        type=Path,
+        type=EXISTING_FILE,
         default=None,
         help="a learned IM kept beside the TM for position goals (im.pt)",
     )
@@ -515,13 +527,13 @@ def _add_train_obstacle_planner(sub) -> None:
     )
     p.add_argument(
         "--problems-dir",
-        type=Path,
+        type=OUTPUT_DIR,
         default=None,
         help="where training problems are generated or found (default: RUN_DIR/problems)",
     )
     p.add_argument(
         "--body-checkpoint",
-        type=Path,
+        type=EXISTING_FILE,
         default=None,
         help="train through a learned body model (body.pt) instead of the analytic sphere body",
     )
@@ -537,13 +549,13 @@ def _add_train_obstacle_planner(sub) -> None:
     )
     p.add_argument(
         "--init-checkpoint",
-        type=Path,
+        type=EXISTING_FILE,
         default=None,
         help="fine-tune a trained tm_obstacles.pt (same architecture) instead of starting afresh",
     )
     p.add_argument(
         "--planner",
-        type=Path,
+        type=OUTPUT_DIR,
         default=None,
         help="a planner folder to copy the trained model into (as tm_obstacles.pt), e.g. a train-planner run",
     )
@@ -606,7 +618,9 @@ def _add_model_error(sub) -> None:
         "writes model_error.json, model_error.md and model_error.png.",
         _run_model_error,
     )
-    p.add_argument("--model", type=Path, default=None, help="a planner folder (default: the shipped planner)")
+    p.add_argument(
+        "--model", type=EXISTING_DIR, default=None, help="a planner folder (default: the shipped planner)"
+    )
     p.add_argument(
         "--n-goals", type=POSITIVE_INT, default=2000, help="held-out position goals (default: 2000)"
     )
@@ -709,6 +723,7 @@ def _run_reproduce(args: argparse.Namespace) -> int:
         "results.md",
         "models",
         "tm",
+        "workspace",
         "endpoints_train.npz",
         "endpoints_heldout.npz",
         "fig3_trajectories.png",
@@ -742,7 +757,7 @@ def _add_export(sub) -> None:
         seed=False,
         run_dir=False,
     )
-    p.add_argument("--model", type=Path, required=True, help="a train-tm run directory")
+    p.add_argument("--model", type=EXISTING_DIR, required=True, help="a train-tm run directory")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--out", type=Path, default=None, help="the folder to write")
     where.add_argument(

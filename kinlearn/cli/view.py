@@ -12,10 +12,9 @@ The subcommand is added to a parser by :func:`register`.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from ..errors import ConfigError
-from .common import add_command, number_type
+from .common import OUTPUT_FILE, add_command, number_type
 from .planning import add_plan_inputs, plan_from_args
 
 __all__ = ["register"]
@@ -39,7 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_plan_inputs(p)
     p.add_argument(
         "--gif",
-        type=Path,
+        type=OUTPUT_FILE,
         default=None,
         metavar="PATH",
         help="write an animation of the plan to this .gif file instead of opening the viewer",

@@ -50,6 +50,7 @@ __all__ = [
     "REACH_FACTOR",
     "Observations",
     "load_data",
+    "load_observations",
     "load_recorded",
     "save_recorded",
 ]
@@ -597,6 +598,25 @@ def load_data(path: str | Path, robot: str | Robot | None = None, *, drop_nan: b
         return load_transitions(path, robot=robot)
     name = robot.name if isinstance(robot, Robot) else robot
     return load_recorded(path, robot=robot, drop_nan=drop_nan).transitions(name or "")
+
+
+def load_observations(
+    path: str | Path, robot: str | Robot | None = None, *, dof: int | None = None, drop_nan: bool = False
+) -> Observations:
+    """Observations (θ, ef) from a kinlearn babbling ``.npz`` (its states,
+    :meth:`Observations.from_transitions`) or a recorded log (:func:`load_recorded`): what
+    identification learns from. Raises :class:`~kinlearn.DatasetError` for a bad file."""
+    path = Path(path)
+    if path.suffix.lower() == ".npz" and path.is_file() and _is_kinlearn_npz(path):
+        data = load_transitions(path, robot=robot)
+        if dof is not None and data.layout.dof != dof:
+            raise RecordedDataError(f"{path} holds {data.layout.dof} joints, not {dof}")
+        obs = Observations.from_transitions(
+            data, joint_names=robot.joint_names if isinstance(robot, Robot) else None
+        )
+        obs.path, obs.sha256 = path, file_sha256(path)
+        return obs
+    return load_recorded(path, robot=robot, dof=dof, drop_nan=drop_nan)
 
 
 def _is_kinlearn_npz(path: Path) -> bool:

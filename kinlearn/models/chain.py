@@ -26,9 +26,11 @@ learned model, kept within the joint limits. Identification from data is
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import torch
@@ -302,6 +304,20 @@ class ChainFM(ForwardModel):
         return self.position(theta[:, ::every])
 
     @torch.no_grad()
+    def kernel_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Unit axes, points, tip and reference as float64 arrays for the compiled kernel (cached until
+        a parameter changes)."""
+        key = tuple(t._version for t in (self.axis, self.point, self.tip, self.reference))
+        cached = getattr(self, "_kernel_cache", None)
+        if cached is None or cached[0] != key:
+            arrays = tuple(
+                np.ascontiguousarray(t.detach().double().cpu().numpy())
+                for t in (self.unit_axes(), self.point, self.tip, self.reference)
+            )
+            self._kernel_cache = cached = (key, arrays)
+        return cached[1]
+
+    @torch.no_grad()
     def canonicalize(self) -> None:
         """Unit axes, and each point the foot of its line's perpendicular from the origin (the same chain)."""
         w = self.unit_axes()
@@ -363,6 +379,7 @@ def gauss_newton(
 #: Fixed restart configurations of :func:`solve_position`, as fractions of each joint's range (a
 #: scrambled Halton-like sequence drawn once from a fixed seed): the same for every problem, so a
 #: solution never depends on the rest of its batch.
+@functools.lru_cache(maxsize=16)
 def _restart_fractions(count: int, dof: int) -> torch.Tensor:
     gen = torch.Generator().manual_seed(7919)
     return 0.05 + 0.9 * torch.rand((count, dof), generator=gen, dtype=torch.float64)
@@ -375,31 +392,61 @@ def solve_position(
     lower: torch.Tensor,
     upper: torch.Tensor,
     *,
-    iterations: int = 30,
+    iterations: int = 40,
     restarts: int = 8,
     damping: float = 1e-3,
     tolerance: float = 2e-4,
+    backend: Literal["auto", "torch", "compiled"] = "auto",
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Joint values within ``[lower, upper]`` at which the model ``fm`` puts the end effector on
     ``target``, for each problem of a batch: ``theta0 (N, dof)``, ``target (N, 3)`` → ``(N, dof)`` and
     the model's remaining error ``(N,)`` (m).
 
     A fixed budget: ``iterations`` projected damped least-squares steps from θ(0) and from ``restarts``
-    − 1 fixed configurations spread over the joint range, run side by side. Of the solutions within
-    ``tolerance`` of the target the one closest to θ(0) (joint-space distance) is kept, else the one
-    of least error; each problem is solved on its own (its result does not depend on its batch).
+    − 1 fixed configurations spread over the joint range. The solution reached from θ(0) is kept when
+    it is within ``tolerance`` of the target, else the restarts' solution within it closest to θ(0)
+    (joint-space distance), else the one of least error; each problem is solved on its own (its
+    result does not depend on its batch). The compiled kernel stops a descent at its fixed point and
+    skips the restarts when θ(0)'s solution is kept: the same answer, sooner.
+
+    ``backend``: ``"compiled"`` (the numba kernel of :mod:`kinlearn.models.chain_kernel`; a rigid
+    :class:`ChainFM` on the CPU), ``"torch"`` (any device, any FM with ``position_and_jacobian``), or
+    ``"auto"``: compiled where it applies.
     """
     if restarts < 1 or iterations < 1:
         raise ConfigError(f"restarts and iterations must be ≥ 1, got {restarts}, {iterations}")
-    jac = _jacobian_of(fm)
+    if backend not in ("auto", "torch", "compiled"):
+        raise ConfigError(f"backend must be 'auto', 'torch' or 'compiled', got {backend!r}")
+    rigid_cpu = isinstance(fm, ChainFM) and fm.residual is None and theta0.device.type == "cpu"
+    if backend == "compiled" and not rigid_cpu:
+        raise ConfigError("the compiled solver takes a ChainFM without a residual MLP, on the CPU")
     n, dof = theta0.shape
     dt = theta0.dtype
+    fractions = _restart_fractions(restarts - 1, dof)
+    if backend != "torch" and rigid_cpu:
+        from .chain_kernel import solve_position_numba
+
+        lo, hi = lower.double().numpy(), upper.double().numpy()
+        out, err = solve_position_numba(
+            *fm.kernel_arrays(),
+            theta0.detach().double().numpy(),
+            target.detach().double().numpy(),
+            lo,
+            hi,
+            lo + (hi - lo) * fractions.numpy() if restarts > 1 else np.zeros((0, dof)),
+            iterations=iterations,
+            damping=damping,
+            tolerance=tolerance,
+        )
+        return torch.from_numpy(out).to(dt), torch.from_numpy(err)
+    jac = _jacobian_of(fm)
     lo, hi = lower.to(dt), upper.to(dt)
-    seeds = lo + (hi - lo) * _restart_fractions(restarts - 1, dof).to(dt)
+    seeds = lo + (hi - lo) * fractions.to(dt)
     starts = torch.cat((theta0.unsqueeze(1), seeds.expand(n, -1, -1)), dim=1)  # (N, R, dof)
     aim = target.unsqueeze(1).expand(n, restarts, 3)
     theta, err = gauss_newton(jac, starts, aim, lo, hi, iterations, damping)
     dist = (theta - theta0.unsqueeze(1)).norm(dim=-1)
+    dist[:, 0] = -1.0  # the solution reached from the start itself, when it reaches the target
     score = torch.where(err <= tolerance, dist, 1e6 + err)
     best = score.argmin(dim=1)
     idx = torch.arange(n, device=theta.device)

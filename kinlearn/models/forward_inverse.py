@@ -44,6 +44,7 @@ from ..body.kinematics import dls_step, kinematics
 from ..body.robot import Robot, load_robot
 from ..errors import CheckpointError, ConfigError
 from ..io import load_checkpoint, save_checkpoint
+from .chain import ChainConfig, ChainFM
 from .interface import ForwardModel, InverseModel, resolve_robot
 
 __all__ = [
@@ -457,6 +458,10 @@ def save_model(model: ForwardModel | InverseModel, path: str | Path, extra: dict
     config = model.config_dict()
     if isinstance(model, (LearnedFM, LearnedIM)):
         config = {"type": "learned", **config}
+    elif isinstance(model, ChainFM):
+        config = {"type": "chain", **config}
+    elif not isinstance(model, (AnalyticFM, AnalyticIM)):
+        raise ConfigError(f"save_model cannot save a {type(model).__name__} (it has no checkpoint form)")
     return save_checkpoint(
         path,
         kind=model.kind,
@@ -474,11 +479,13 @@ def _build(payload: dict, path, kind: str):
         if mtype == "analytic":
             robot = config.pop("robot")
             model = AnalyticFM(robot) if kind == "fm" else AnalyticIM(robot, **config)
+        elif mtype == "chain" and kind == "fm":
+            model = ChainFM(ChainConfig.from_dict(config))
         elif mtype == "learned":
             cls, cfg_cls = (LearnedFM, FMConfig) if kind == "fm" else (LearnedIM, IMConfig)
             model = cls(cfg_cls.from_dict(config))
         else:
-            raise CheckpointError(f"{path}: unknown model type {mtype!r} (expected 'learned' or 'analytic')")
+            raise CheckpointError(f"{path}: unknown {kind.upper()} type {mtype!r} (expected 'learned', 'chain' or 'analytic')")
         model.load_state_dict(payload["state_dict"], strict=True)
     except CheckpointError:
         raise

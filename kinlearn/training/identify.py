@@ -40,15 +40,19 @@ import itertools
 import math
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 import torch
 from torch import nn
 
-from ..body.robot import Robot
+from ..body.robot import Robot, load_robot
 from ..checks import check_finite
+from ..data.babbling import Transitions
+from ..data.recorded import Observations, load_observations
 from ..errors import ConfigError, DatasetError
-from ..models.chain import ChainConfig, ChainFM, chain_parameter_jacobian, chain_position
+from ..models.chain import ChainConfig, ChainFM, chain_parameter_jacobian, chain_position, chain_urdf
+from ..models.forward_inverse import save_model
 
 __all__ = ["Identification", "IdentifyConfig", "identify"]
 
@@ -73,8 +77,8 @@ class IdentifyConfig:
     seed: int = 0
     iterations: int = 30
     outlier_sigma: float = 6.0
-    mlp_hidden: tuple[int, ...] = (256, 256, 256)
-    mlp_steps: int = 3000
+    mlp_hidden: tuple[int, ...] = (128, 128, 128)
+    mlp_steps: int = 1500
     references: int = 3
     unobservable_distance: float = 1e-3
     residual: tuple[int, ...] = ()
@@ -99,10 +103,23 @@ class IdentifyConfig:
 
 @dataclass
 class Identification:
-    """What :func:`identify` found: the chain and a report (JSON-able: residuals in metres)."""
+    """What :func:`identify` found: the chain, a report (JSON-able: residuals in metres) and the
+    joint names it was identified for (or ``None``)."""
 
     model: ChainFM
     report: dict = field(default_factory=dict)
+    joint_names: tuple[str, ...] | None = None
+
+    def save(self, path: str | Path, config: IdentifyConfig | None = None) -> Path:
+        """Save the chain as an FM checkpoint (``kinlearn.load(path)`` / ``load_fm``) with its report."""
+        extra = {"report": self.report, "joint_names": list(self.joint_names or ())}
+        if config is not None:
+            extra["identify"] = config.to_dict()
+        return save_model(self.model, path, extra=extra)
+
+    def urdf(self, name: str | None = None) -> str:
+        """The chain as a URDF document (see :func:`~kinlearn.models.chain.chain_urdf`)."""
+        return chain_urdf(self.model, name=name or self.model.robot_name, joint_names=self.joint_names)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -195,7 +212,7 @@ def _fit_mlp(theta, ef, hidden, steps: int, gen: torch.Generator) -> nn.Module:
     opt = torch.optim.Adam(net.parameters(), lr=2e-3)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=2e-3, total_steps=steps, pct_start=0.05)
     n = x.shape[0]
-    batch = min(2048, n)
+    batch = min(1024, n)
     with torch.enable_grad():
         for _ in range(steps):
             idx = torch.randint(0, n, (batch,), generator=gen)
@@ -267,24 +284,86 @@ def _check_observations(theta, ef) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def identify(
+    data,
+    *,
+    robot: Robot | str | None = None,
+    prior: bool | Robot | str | Path = True,
+    dof: int | None = None,
+    config: IdentifyConfig | None = None,
+    progress: bool = False,
+    drop_nan: bool = False,
+) -> Identification:
+    """Identify a robot's serial chain from observed end-effector positions: calibration.
+
+    ``data``: the path of a babbling ``.npz`` or a recorded log (``.npz``/``.csv``, see
+    :mod:`kinlearn.data.recorded`), :class:`~kinlearn.data.recorded.Observations`, babbling
+    :class:`~kinlearn.data.babbling.Transitions`, or a pair ``(theta (N, dof) rad, ef (N, 3) m)``.
+
+    ``robot``: the arm the chain is of (a name or a :class:`~kinlearn.Robot`): its joint names and
+    limits, and — unless ``prior=False`` — its URDF as the starting guess (it may be wrong).
+    ``prior``: ``True`` (the robot's URDF, if a robot is given), ``False`` (no URDF: only the joint
+    count), or another robot / a URDF path whose model starts the fit (a user's rough model).
+    ``dof``: the joint count when no robot is given. Returns the chain and a report (held-out residual
+    in metres, the noise's robust σ, outliers dropped, undetermined joint directions, seconds).
+    """
+    rob = load_robot(robot) if isinstance(robot, str) else robot
+    if isinstance(prior, bool):
+        prior_robot = rob if prior else None
+    elif isinstance(prior, Robot):
+        prior_robot = prior
+    else:
+        raise ConfigError(
+            f"prior must be True, False or a Robot (load_robot(path, ee_frame) for a URDF file), got {prior!r}"
+        )
+    theta, ef, source = _observations(data, rob, dof, drop_nan)
+    limits = (torch.from_numpy(rob.lower), torch.from_numpy(rob.upper)) if rob is not None else None
+    name = rob.name if rob is not None else (prior_robot.name if prior_robot is not None else "chain")
+    result = _identify(
+        theta,
+        ef,
+        prior=prior_robot,
+        dof=dof,
+        robot_name=name,
+        limits=limits,
+        config=config,
+        progress=progress,
+    )
+    result.report["data"] = source
+    result.joint_names = (rob or prior_robot).joint_names if (rob or prior_robot) is not None else None
+    return result
+
+
+def _observations(data, robot: Robot | None, dof: int | None, drop_nan: bool):
+    """(θ, ef) float64 tensors and a record of where they came from."""
+    if isinstance(data, (str, Path)):
+        obs = load_observations(data, robot=robot, dof=dof, drop_nan=drop_nan)
+        return obs.theta, obs.ef, {"path": str(data), "sha256": obs.sha256, "rows": len(obs)}
+    if isinstance(data, Transitions):
+        obs = Observations.from_transitions(data)
+        return obs.theta, obs.ef, {"transitions": len(data)}
+    if isinstance(data, Observations):
+        return data.theta, data.ef, data.record()
+    if isinstance(data, (tuple, list)) and len(data) == 2:
+        theta, ef = _check_observations(*data)
+        return theta, ef, {"rows": int(theta.shape[0])}
+    raise ConfigError(
+        "data must be a file path, Observations, Transitions or a pair (theta, ef); "
+        f"got {type(data).__name__}"
+    )
+
+
+def _identify(
     theta,
     ef,
     *,
-    prior: Robot | None = None,
-    dof: int | None = None,
-    robot_name: str | None = None,
-    limits: tuple | None = None,
-    config: IdentifyConfig | None = None,
-    progress: bool = False,
+    prior: Robot | None,
+    dof: int | None,
+    robot_name: str,
+    limits: tuple | None,
+    config: IdentifyConfig | None,
+    progress: bool,
 ) -> Identification:
-    """Identify a serial chain from joint values ``theta (N, dof)`` (rad) and observed end-effector
-    positions ``ef (N, 3)`` (m, base frame).
-
-    ``prior``: a robot whose URDF starts the fit (it may be wrong); without one, only the joint count
-    (``dof``, or ``theta``'s) is used. ``robot_name``: the name the model records (default: the
-    prior's, else ``"chain"``). ``limits``: ``(lower, upper)`` of the joints (default: the prior's,
-    else the data's range). Needs at least 20 samples per parameter.
-    """
+    """:func:`identify` on (θ, ef) tensors; ``limits`` default to the prior's, else the data's range."""
     cfg = config or IdentifyConfig()
     t_start = time.perf_counter()
     theta, ef = _check_observations(theta, ef)
@@ -296,7 +375,7 @@ def identify(
     needed = 20 * (6 * n_joints + 3)
     if n < needed:
         raise DatasetError(f"identifying a {n_joints}-joint chain needs at least {needed} samples, got {n}")
-    name = robot_name or (prior.name if prior is not None else "chain")
+    name = robot_name
     if limits is not None:
         lo, hi = (torch.as_tensor(v, dtype=torch.float64) for v in limits)
     elif prior is not None:

@@ -1,0 +1,183 @@
+"""The compiled (numba) kernel of the chain model's position solver, for planning on the CPU.
+
+One function, :func:`solve_position_numba`, does what :func:`kinlearn.models.chain.solve_position`
+does in torch — the same fixed restarts, the same projected damped least-squares steps on the chain's
+geometric Jacobian, the same choice of solution — without a Python call per operation: a batch-1
+position goal costs microseconds instead of milliseconds. ``tests/test_chain.py`` holds the two to
+each other. A rigid chain only (the residual MLP runs in torch).
+
+Nothing is compiled at import (and the planner imports this module only when it first solves a
+position goal): the first call compiles (seconds) and caches the machine code beside this file
+(``cache=True``), so later processes load it in a fraction of a second.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["solve_position_numba"]
+
+
+@numba.njit(cache=True, fastmath=False)
+def _rot(w, c, s, out):
+    x, y, z = w[0], w[1], w[2]
+    t = 1.0 - c
+    out[0, 0] = c + t * x * x
+    out[0, 1] = t * x * y - s * z
+    out[0, 2] = t * x * z + s * y
+    out[1, 0] = t * x * y + s * z
+    out[1, 1] = c + t * y * y
+    out[1, 2] = t * y * z - s * x
+    out[2, 0] = t * x * z - s * y
+    out[2, 1] = t * y * z + s * x
+    out[2, 2] = c + t * z * z
+
+
+@numba.njit(cache=True, fastmath=False)
+def _fk_jac(w, q, tip, ref, theta, p, J, R, Ri, RR, t, axes, pts):
+    """p and J (3 × n) of the chain at theta (float64); R, Ri, RR (3 × 3), t (3), axes and pts (n × 3)
+    are work space."""
+    n = w.shape[0]
+    for a in range(3):
+        t[a] = 0.0
+        for b in range(3):
+            R[a, b] = 1.0 if a == b else 0.0
+    for i in range(n):
+        for a in range(3):
+            axes[i, a] = R[a, 0] * w[i, 0] + R[a, 1] * w[i, 1] + R[a, 2] * w[i, 2]
+            pts[i, a] = R[a, 0] * q[i, 0] + R[a, 1] * q[i, 1] + R[a, 2] * q[i, 2] + t[a]
+        phi = theta[i] - ref[i]
+        _rot(w[i], np.cos(phi), np.sin(phi), Ri)
+        # t ← R (q − Ri q) + t ; R ← R Ri
+        d0 = q[i, 0] - (Ri[0, 0] * q[i, 0] + Ri[0, 1] * q[i, 1] + Ri[0, 2] * q[i, 2])
+        d1 = q[i, 1] - (Ri[1, 0] * q[i, 0] + Ri[1, 1] * q[i, 1] + Ri[1, 2] * q[i, 2])
+        d2 = q[i, 2] - (Ri[2, 0] * q[i, 0] + Ri[2, 1] * q[i, 1] + Ri[2, 2] * q[i, 2])
+        for a in range(3):
+            t[a] += R[a, 0] * d0 + R[a, 1] * d1 + R[a, 2] * d2
+        for a in range(3):
+            for b in range(3):
+                RR[a, b] = R[a, 0] * Ri[0, b] + R[a, 1] * Ri[1, b] + R[a, 2] * Ri[2, b]
+        for a in range(3):
+            for b in range(3):
+                R[a, b] = RR[a, b]
+    for a in range(3):
+        p[a] = R[a, 0] * tip[0] + R[a, 1] * tip[1] + R[a, 2] * tip[2] + t[a]
+    for i in range(n):
+        v0, v1, v2 = p[0] - pts[i, 0], p[1] - pts[i, 1], p[2] - pts[i, 2]
+        J[0, i] = axes[i, 1] * v2 - axes[i, 2] * v1
+        J[1, i] = axes[i, 2] * v0 - axes[i, 0] * v2
+        J[2, i] = axes[i, 0] * v1 - axes[i, 1] * v0
+
+
+@numba.njit(cache=True, fastmath=False)
+def _solve3(A, b, x):
+    """x = A⁻¹ b for a symmetric positive definite 3 × 3 A (Cramer's rule)."""
+    c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
+    c01 = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
+    c02 = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
+    det = A[0, 0] * c00 + A[0, 1] * c01 + A[0, 2] * c02
+    c10 = A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]
+    c11 = A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]
+    c12 = A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]
+    c20 = A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]
+    c21 = A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]
+    c22 = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+    x[0] = (c00 * b[0] + c10 * b[1] + c20 * b[2]) / det
+    x[1] = (c01 * b[0] + c11 * b[1] + c21 * b[2]) / det
+    x[2] = (c02 * b[0] + c12 * b[1] + c22 * b[2]) / det
+
+
+@numba.njit(cache=True, fastmath=False)
+def _solve(w, q, tip, ref, theta0, target, lo, hi, seeds, iterations, damping, tolerance, out, err_out):
+    N, n = theta0.shape
+    R = seeds.shape[0] + 1
+    p = np.empty(3)
+    J = np.empty((3, n))
+    A = np.empty((3, 3))
+    e = np.empty(3)
+    y = np.empty(3)
+    th = np.empty(n)
+    R3, Ri, RR, t = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
+    axes, pts = np.empty((n, 3)), np.empty((n, 3))
+    lam2 = damping * damping
+    for k in range(N):
+        best_score = np.inf
+        for r in range(R):
+            for i in range(n):
+                th[i] = theta0[k, i] if r == 0 else seeds[r - 1, i]
+            for _ in range(iterations):
+                _fk_jac(w, q, tip, ref, th, p, J, R3, Ri, RR, t, axes, pts)
+                for a in range(3):
+                    e[a] = target[k, a] - p[a]
+                    for b in range(3):
+                        s = 0.0
+                        for i in range(n):
+                            s += J[a, i] * J[b, i]
+                        A[a, b] = s + (lam2 if a == b else 0.0)
+                _solve3(A, e, y)
+                moved = 0.0
+                for i in range(n):
+                    v = min(max(th[i] + J[0, i] * y[0] + J[1, i] * y[1] + J[2, i] * y[2], lo[i]), hi[i])
+                    moved = max(moved, abs(v - th[i]))
+                    th[i] = v
+                if moved < 1e-13:  # a fixed point: further steps change nothing
+                    break
+            _fk_jac(w, q, tip, ref, th, p, J, R3, Ri, RR, t, axes, pts)
+            err = np.sqrt(
+                (target[k, 0] - p[0]) ** 2 + (target[k, 1] - p[1]) ** 2 + (target[k, 2] - p[2]) ** 2
+            )
+            if err <= tolerance:
+                d = 0.0
+                for i in range(n):
+                    d += (th[i] - theta0[k, i]) ** 2
+                score = np.sqrt(d)
+            else:
+                score = 1e6 + err
+            if score < best_score:
+                best_score = score
+                err_out[k] = err
+                for i in range(n):
+                    out[k, i] = th[i]
+            if r == 0 and err <= tolerance:  # the solution reached from the start itself is kept
+                break
+
+
+def solve_position_numba(
+    w: np.ndarray,
+    q: np.ndarray,
+    tip: np.ndarray,
+    ref: np.ndarray,
+    theta0: np.ndarray,
+    target: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    seeds: np.ndarray,
+    *,
+    iterations: int,
+    damping: float,
+    tolerance: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The compiled :func:`~kinlearn.models.chain.solve_position` (float64 arrays; ``seeds``: the restart
+    configurations ``(R − 1, n)``, already scaled to the limits). Returns joints ``(N, n)`` and errors."""
+    f = np.float64
+    theta0 = np.ascontiguousarray(theta0, dtype=f)
+    out = np.empty_like(theta0)
+    err = np.empty(theta0.shape[0])
+    _solve(
+        np.ascontiguousarray(w, dtype=f),
+        np.ascontiguousarray(q, dtype=f),
+        np.ascontiguousarray(tip, dtype=f),
+        np.ascontiguousarray(ref, dtype=f),
+        theta0,
+        np.ascontiguousarray(target, dtype=f),
+        np.ascontiguousarray(lower, dtype=f),
+        np.ascontiguousarray(upper, dtype=f),
+        np.ascontiguousarray(seeds, dtype=f).reshape(-1, theta0.shape[1]),
+        int(iterations),
+        float(damping),
+        float(tolerance),
+        out,
+        err,
+    )
+    return out, err
