@@ -127,7 +127,13 @@ def _run_train_body(args: argparse.Namespace) -> int:
     if args.data is not None:
         data = load_data(args.data, robot=args.robot, drop_nan=args.drop_nan)
         configs["data"] = file_identity(args.data)
-    if args.validate > 0:
+    problems = None
+    if (
+        args.validate > 0
+    ):  # read now, not after the training: a bad file is refused before anything is written
+        from ..collision.problems import ProblemSet
+
+        problems = ProblemSet.load(args.problems, robot=args.robot)
         configs["validation"] = {
             "n": args.validate,
             "seed": args.seed + 20_000,
@@ -150,16 +156,14 @@ def _run_train_body(args: argparse.Namespace) -> int:
     margin = args.margin
     if args.validate > 0:
         seed = args.seed + 20_000
-        res = validate_body_model(model, n=args.validate, seed=seed, problems=args.problems)
+        res = validate_body_model(model, n=args.validate, seed=seed, problems=problems)
         res["train_wall_s"] = dt
         print(_summary(res))
         if margin == "p99":
             margin = res["centre_err_mm_p99"] / 1e3
         if margin > 0:
             model.set_margin(margin)
-            res["with_margin"] = validate_body_model(
-                model, n=args.validate, seed=seed, problems=args.problems
-            )
+            res["with_margin"] = validate_body_model(model, n=args.validate, seed=seed, problems=problems)
             print(_summary(res["with_margin"]))
         write_json(run_dir / "validation.json", res)
     if margin > 0:  # the checkpoint keeps its training state beside the margin

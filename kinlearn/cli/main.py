@@ -50,7 +50,7 @@ from ..training.forward_inverse import (
     train_im_distal,
     validate_models,
 )
-from . import body, planning, view
+from . import body, identify, planning, view
 from .common import (
     _SUBCOMMANDS,
     EXISTING_FILE,
@@ -403,7 +403,7 @@ def _run_validate(args: argparse.Namespace) -> int:
 
 #: Modules holding further subcommands; each registers its commands with
 #: :func:`~kinlearn.cli.common.register_subcommand` (or has a ``register`` function added here).
-SUBCOMMAND_MODULES = (planning, body, view)
+SUBCOMMAND_MODULES = (planning, body, identify, view)
 
 
 def _load_subcommand_modules() -> None:
