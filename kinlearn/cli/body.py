@@ -128,9 +128,8 @@ def _run_train_body(args: argparse.Namespace) -> int:
         data = load_data(args.data, robot=args.robot, drop_nan=args.drop_nan)
         configs["data"] = file_identity(args.data)
     problems = None
-    if (
-        args.validate > 0
-    ):  # read now, not after the training: a bad file is refused before anything is written
+    if args.validate > 0:
+        # Read now, not after the training: a bad file is refused before anything is written.
         from ..collision.problems import ProblemSet
 
         problems = ProblemSet.load(args.problems, robot=args.robot)
