@@ -330,7 +330,7 @@ def test_babbling_walkers_are_rejected_not_clamped(capsys, tmp_path):
 @pytest.mark.parametrize("command", ["train-fm", "train-im", "train-tm"])
 @pytest.mark.parametrize("lr", ["-1", "0", "nan", "inf", "fast"])
 def test_learning_rates_must_be_positive_finite_numbers(command, lr, capsys):
-    extra = ["--endpoints", "ep"] if command == "train-tm" else []
+    extra = ["--endpoints", "."] if command == "train-tm" else []
     with pytest.raises(SystemExit) as exc:
         build_parser().parse_args([command, *extra, "--lr", lr])
     assert exc.value.code == 2
@@ -355,9 +355,9 @@ def test_learning_rates_must_be_positive_finite_numbers(command, lr, capsys):
         ["make-endpoints", "--heldout", "-1"],
         ["make-endpoints", "--min-distance", "inf"],
         ["make-endpoints", "--start-spread", "-1"],
-        ["train-tm", "--endpoints", "ep", "--epochs", "0"],
-        ["train-tm", "--endpoints", "ep", "--alpha", "1"],
-        ["train-tm", "--endpoints", "ep", "--batch-size", "1.5"],
+        ["train-tm", "--endpoints", ".", "--epochs", "0"],
+        ["train-tm", "--endpoints", ".", "--alpha", "1"],
+        ["train-tm", "--endpoints", ".", "--batch-size", "1.5"],
         ["reproduce", "--workers", "0"],
     ],
 )
@@ -411,7 +411,7 @@ def test_validate_help_states_its_real_default_seed(capsys):
 def test_export_takes_no_seed_or_run_dir(capsys):
     for option in (["--seed", "1"], ["--run-dir", "x"]):
         with pytest.raises(SystemExit) as exc:
-            build_parser().parse_args(["export", "--model", "m", "--out", "o", *option])
+            build_parser().parse_args(["export", "--model", ".", "--out", "o", *option])
         assert exc.value.code == 2
         assert "unrecognized arguments" in capsys.readouterr().err
 

@@ -42,6 +42,17 @@ def test_reproduce_smoke_writes_tables_and_figures(smoke):
     assert json.loads((out / "results.json").read_text())["best_table1"] in OPTIMIZER_SWEEP
 
 
+@pytest.mark.slow
+def test_overwrite_knows_everything_reproduce_writes(smoke):
+    """`reproduce --overwrite` deletes the outputs it knows of: every one the run writes (workspace/ was
+    left behind, and the new run then failed partway)."""
+    from kinlearn.cli.planning import REPRODUCE_OUTPUTS
+
+    out, _ = smoke
+    written = {p.name for p in out.iterdir()} - {"config.json"}
+    assert written and written <= set(REPRODUCE_OUTPUTS), written - set(REPRODUCE_OUTPUTS)
+
+
 def test_reproduce_config_errors():
     with pytest.raises(ConfigError, match="quick"):
         preset_config("huge")
@@ -104,8 +115,10 @@ def test_cli_endpoints_train_tm_plan_export(tmp_path, capsys):
     assert main(["plan", "--model", str(tmp_path / "tm-learned"), "--start", start, "--goal", goal]) in (0, 1)
     assert "plans succeeded" in capsys.readouterr().out
     # bad input: a missing checkpoint, a joint outside its limits: clear errors with exit status 2
-    assert main([*args, "--fm-checkpoint", str(tmp_path / "nope.pt"), "--run-dir", str(tmp_path / "x")]) == 2
-    assert "no file at" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # refused as the command line is read: nothing written
+        main([*args, "--fm-checkpoint", str(tmp_path / "nope.pt"), "--run-dir", str(tmp_path / "x")])
+    assert exc.value.code == 2 and "no such file" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
     assert main(["plan", "--model", str(tm), "--start", "0,3,0,0,0,0,0", "--goal", goal]) == 2
     assert "iiwa_joint_2" in capsys.readouterr().err
 

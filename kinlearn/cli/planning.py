@@ -708,6 +708,21 @@ def _add_reproduce(sub) -> None:
     p.set_defaults(preset="quick")
 
 
+#: Everything ``reproduce`` writes into its run directory beside config.json (``--overwrite`` removes it all).
+REPRODUCE_OUTPUTS = (
+    "results.json",
+    "results.md",
+    "metrics.jsonl",
+    "models",
+    "tm",
+    "workspace",
+    "endpoints_train.npz",
+    "endpoints_heldout.npz",
+    "fig3_trajectories.png",
+    "fig4_histograms.png",
+)
+
+
 def _run_reproduce(args: argparse.Namespace) -> int:
     from ..evaluation.reproduce import default_workers, preset_config, reproduce
 
@@ -718,20 +733,13 @@ def _run_reproduce(args: argparse.Namespace) -> int:
         workers=args.workers or default_workers(),
         backend=args.backend,
     )
-    outputs = (
-        "results.json",
-        "results.md",
-        "models",
-        "tm",
-        "workspace",
-        "endpoints_train.npz",
-        "endpoints_heldout.npz",
-        "fig3_trajectories.png",
-        "fig4_histograms.png",
-    )
     # where and how wide the sweep runs does not change its results: a resume may change them
     run = open_command_run(
-        args, outputs, resumable=True, ignore=("workers", "backend"), reproduce=dataclasses.asdict(cfg)
+        args,
+        REPRODUCE_OUTPUTS,
+        resumable=True,
+        ignore=("workers", "backend"),
+        reproduce=dataclasses.asdict(cfg),
     )
     run_dir = run.begin()
     reproduce(cfg, run_dir, progress=not args.no_progress, write_config=False)
