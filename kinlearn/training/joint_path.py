@@ -38,7 +38,7 @@ from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..body.state import straight_line
 from ..data.endpoints import workspace_box
-from ..errors import ConfigError
+from ..errors import ConfigError, TrainingDivergedError
 from ..models.forward_inverse import AnalyticFM, ForwardModel, load_fm
 from ..models.joint_path import JointPathConfig, JointPathModel, densify, save_path_model
 from .loop import iteration_loop, seed_everything
@@ -147,6 +147,14 @@ def path_loss(
     out = tm(s0, sT)
     theta0, thetaT, ef0 = s0[:, J], sT[:, J], s0[:, E]
     knots = torch.cat((theta0[:, None], out.joints, thetaT[:, None]), dim=1)
+    # A diverged model's paths leave every joint range (or turn NaN); densifying them would try to
+    # allocate without bound. The training loop's own check sees the loss only after this.
+    step = float((knots[:, 1:] - knots[:, :-1]).detach().abs().amax()) if knots.numel() else 0.0
+    if not (step <= 20 * float(tm.half_range.max())):
+        raise TrainingDivergedError(
+            f"joint-path TM training diverged (its paths step {step:.3g} rad between knots, beyond 10× the "
+            "joint range); lower the learning rate"
+        )
     dense, m = densify(knots, max_step, multiple_of=LENGTH_POINTS)
     every = m // LENGTH_POINTS  # the path is measured at LENGTH_POINTS points per segment
     ef = fm.ef_along(dense, ef0, every)
