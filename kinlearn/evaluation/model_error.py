@@ -191,14 +191,17 @@ def _fmt(values) -> str:
 
 
 def _perturb(
-    robot_name_or_path, length_error: float, angle_error_deg: float, seed: int
+    robot_name_or_path, length_error: float, angle_error_deg: float, seed: int, misalign_deg: float = 0.0
 ) -> tuple[ModelError, bytes]:
     e = _check_amount(length_error, "length_error", 1.0, "(a fraction of each length)")
     a = _check_amount(angle_error_deg, "angle_error_deg", 180.0, "degrees")
+    m = _check_amount(misalign_deg, "misalign_deg", 180.0, "degrees")
     seed = _check_seed(seed)
     name, urdf, _ = _source(robot_name_or_path)
     root = _parse(urdf, name)
     rng = np.random.default_rng(seed)
+    # Misalignment from a stream of its own: the other draws of a seed stay what they were.
+    tilt_rng = np.random.default_rng([seed, 1])
     scales: dict[str, float] = {}
     offsets: dict[str, float] = {}
     for el in root.iter("joint"):
@@ -211,7 +214,8 @@ def _perturb(
         scale = 1.0 + e * float(u_len)
         offset = math.radians(a) * float(u_ang) if el.get("type") in ("revolute", "continuous") else 0.0
         scales[jname], offsets[jname] = scale, offset
-        if scale == 1.0 and offset == 0.0:
+        tilt_axis, tilt = tilt_rng.normal(size=3), math.radians(m) * float(tilt_rng.uniform(-1.0, 1.0))
+        if scale == 1.0 and offset == 0.0 and tilt == 0.0:
             continue
         origin = el.find("origin")
         if origin is None:
@@ -221,6 +225,9 @@ def _perturb(
         rpy = _numbers(origin.get("rpy"), (0.0, 0.0, 0.0), f"{what} origin rpy")
         if scale != 1.0 and np.any(xyz != 0.0):
             origin.set("xyz", _fmt(xyz * scale))
+        if tilt != 0.0:  # the origin's rotation tilted about a random axis: misaligned joint axes
+            rpy = np.array(_matrix_to_rpy(_rpy_to_matrix(*rpy) @ _axis_rotation(tilt_axis, tilt)))
+            origin.set("rpy", _fmt(rpy))
         if offset != 0.0:
             axis_el = el.find("axis")
             axis = _numbers(None if axis_el is None else axis_el.get("xyz"), (1.0, 0.0, 0.0), f"{what} axis")
@@ -249,6 +256,7 @@ def perturb_urdf(
     length_error: float = 0.02,
     angle_error_deg: float = 1.0,
     seed: int = 0,
+    misalign_deg: float = 0.0,
 ) -> bytes:
     """A *believed* copy of a robot's URDF, as UTF-8 bytes: lengths off by up to ``length_error``
     (a fraction), joint zeros off by up to ``angle_error_deg`` degrees, drawn uniformly with ``seed``.
@@ -256,14 +264,16 @@ def perturb_urdf(
     ``robot_name_or_path``: a name of :data:`~kinlearn.body.robot.ROBOTS`, the path of a URDF file, or a
     :class:`~kinlearn.body.robot.Robot`. Each joint's origin translation is scaled by ``1 + U(-e, e)``; each
     revolute or continuous joint's origin rotation is followed by a rotation of ``U(-a, a)`` about the
-    joint's axis (see :func:`draw_model_error` for the values drawn). Names, limits, axes, links and
-    everything else are kept; with both errors 0 the joints are unchanged.
+    joint's axis (see :func:`draw_model_error` for the values drawn); with ``misalign_deg`` it is also
+    tilted by up to that angle about a random axis (misaligned joint axes, drawn from a stream of its
+    own). Names, limits, axes, links and everything else are kept; with every error 0 the joints are
+    unchanged.
 
     Raises :class:`~kinlearn.errors.ConfigError` for an error outside [0, 1) (lengths) or [0, 180)
     (degrees), NaN, or a seed that is not an integer ≥ 0; :class:`~kinlearn.errors.UnknownRobotError`
     for a name that is no robot and no file.
     """
-    return _perturb(robot_name_or_path, length_error, angle_error_deg, seed)[1]
+    return _perturb(robot_name_or_path, length_error, angle_error_deg, seed, misalign_deg)[1]
 
 
 def write_perturbed_urdf(
@@ -273,6 +283,7 @@ def write_perturbed_urdf(
     length_error: float = 0.02,
     angle_error_deg: float = 1.0,
     seed: int = 0,
+    misalign_deg: float = 0.0,
 ) -> Path:
     """Write :func:`perturb_urdf`'s believed URDF to ``path`` (atomically) and return the path.
 
@@ -280,7 +291,11 @@ def write_perturbed_urdf(
     path: write each believed model to its own file, or use :func:`believed_robot`.
     """
     data = perturb_urdf(
-        robot_name_or_path, length_error=length_error, angle_error_deg=angle_error_deg, seed=seed
+        robot_name_or_path,
+        length_error=length_error,
+        angle_error_deg=angle_error_deg,
+        seed=seed,
+        misalign_deg=misalign_deg,
     )
     return atomic_write(path, lambda tmp: tmp.write_bytes(data))
 
@@ -297,6 +312,7 @@ def believed_robot(
     angle_error_deg: float = 1.0,
     seed: int = 0,
     ee_frame: str | None = None,
+    misalign_deg: float = 0.0,
 ) -> Robot:
     """The believed robot of :func:`perturb_urdf`, parsed in memory (no file written).
 
@@ -308,7 +324,11 @@ def believed_robot(
     if ee is None:
         raise ConfigError(f"a believed model of {robot_name_or_path} needs ee_frame=<end-effector link>")
     data = perturb_urdf(
-        robot_name_or_path, length_error=length_error, angle_error_deg=angle_error_deg, seed=seed
+        robot_name_or_path,
+        length_error=length_error,
+        angle_error_deg=angle_error_deg,
+        seed=seed,
+        misalign_deg=misalign_deg,
     )
     key = (hashlib.sha256(data).hexdigest(), ee)
     if key not in _BELIEVED:

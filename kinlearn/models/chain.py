@@ -47,6 +47,7 @@ __all__ = [
     "chain_parameter_jacobian",
     "chain_position",
     "chain_urdf",
+    "restart_fractions",
     "rotate_about",
     "solve_position",
 ]
@@ -380,7 +381,7 @@ def gauss_newton(
 #: scrambled Halton-like sequence drawn once from a fixed seed): the same for every problem, so a
 #: solution never depends on the rest of its batch.
 @functools.lru_cache(maxsize=16)
-def _restart_fractions(count: int, dof: int) -> torch.Tensor:
+def restart_fractions(count: int, dof: int) -> torch.Tensor:
     gen = torch.Generator().manual_seed(7919)
     return 0.05 + 0.9 * torch.rand((count, dof), generator=gen, dtype=torch.float64)
 
@@ -403,7 +404,8 @@ def solve_position(
     the model's remaining error ``(N,)`` (m).
 
     A fixed budget: ``iterations`` projected damped least-squares steps from θ(0) and from ``restarts``
-    − 1 fixed configurations spread over the joint range. The solution reached from θ(0) is kept when
+    − 1 fixed configurations spread over the joint range. A start already within ``tolerance`` of the
+    target keeps its joints (a move of zero). The solution reached from θ(0) is kept when
     it is within ``tolerance`` of the target, else the restarts' solution within it closest to θ(0)
     (joint-space distance), else the one of least error; each problem is solved on its own (its
     result does not depend on its batch). The compiled kernel stops a descent at its fixed point and
@@ -422,7 +424,7 @@ def solve_position(
         raise ConfigError("the compiled solver takes a ChainFM without a residual MLP, on the CPU")
     n, dof = theta0.shape
     dt = theta0.dtype
-    fractions = _restart_fractions(restarts - 1, dof)
+    fractions = restart_fractions(restarts - 1, dof)
     if backend != "torch" and rigid_cpu:
         from .chain_kernel import solve_position_numba
 
@@ -445,6 +447,10 @@ def solve_position(
     starts = torch.cat((theta0.unsqueeze(1), seeds.expand(n, -1, -1)), dim=1)  # (N, R, dof)
     aim = target.unsqueeze(1).expand(n, restarts, 3)
     theta, err = gauss_newton(jac, starts, aim, lo, hi, iterations, damping)
+    p0, _ = jac(theta0)
+    at_goal = (target - p0).norm(dim=-1) <= tolerance  # already there: a move of zero
+    theta[:, 0] = torch.where(at_goal[:, None], theta0, theta[:, 0])
+    err[:, 0] = torch.where(at_goal, (target - p0).norm(dim=-1), err[:, 0])
     dist = (theta - theta0.unsqueeze(1)).norm(dim=-1)
     dist[:, 0] = -1.0  # the solution reached from the start itself, when it reaches the target
     score = torch.where(err <= tolerance, dist, 1e6 + err)

@@ -106,7 +106,15 @@ def _solve(w, q, tip, ref, theta0, target, lo, hi, seeds, iterations, damping, t
         for r in range(R):
             for i in range(n):
                 th[i] = theta0[k, i] if r == 0 else seeds[r - 1, i]
-            for _ in range(iterations):
+            steps = iterations
+            if r == 0:  # a start already at the target keeps its joints (a move of zero)
+                _fk_jac(w, q, tip, ref, th, p, J, R3, Ri, RR, t, axes, pts)
+                e0 = np.sqrt(
+                    (target[k, 0] - p[0]) ** 2 + (target[k, 1] - p[1]) ** 2 + (target[k, 2] - p[2]) ** 2
+                )
+                if e0 <= tolerance:
+                    steps = 0
+            for _ in range(steps):
                 _fk_jac(w, q, tip, ref, th, p, J, R3, Ri, RR, t, axes, pts)
                 for a in range(3):
                     e[a] = target[k, a] - p[a]
