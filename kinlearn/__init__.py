@@ -11,13 +11,11 @@ Quick start::
     plan.timed()                                       # times, velocities, accelerations within limits
 """
 
-from .body.kinematics import BACKENDS, Kinematics, dls_step, kinematics
-from .body.robot import ROBOTS, Robot, available_robots, load_robot, register_robot, unregister_robot
-from .body.state import StateLayout
-from .collision import BodySpheres, Scene, body_spheres, check_path
-from .data.babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
-from .data.endpoints import EndpointConfig, EndpointPairs, load_endpoints, make_endpoints, save_endpoints
-from .data.problem import Problem
+import ast
+import importlib
+from pathlib import Path
+from typing import TYPE_CHECKING
+
 from .errors import (
     CheckpointError,
     ConfigError,
@@ -37,41 +35,52 @@ from .errors import (
     StateError,
     UnknownRobotError,
 )
-from .evaluation.metrics import plan_metrics, summarize, trajectory_metrics
-from .models.body import LearnedBody, load_body_model
-from .models.forward_inverse import (
-    AnalyticFM,
-    AnalyticIM,
-    FMConfig,
-    ForwardModel,
-    IMConfig,
-    InverseModel,
-    LearnedFM,
-    LearnedIM,
-    load_fm,
-    load_im,
-    save_model,
-)
-from .models.joint_path import JointPathConfig, JointPathModel, load_path_model
-from .models.obstacle_path import ObstaclePathConfig, ObstaclePathModel, load_obstacle_model
-from .models.rollout import LossConfig, rectify, tm_loss
-from .models.trajectory import TMConfig, TrajectoryModel
-from .planning.baselines import (
-    CartesianDLS,
-    JointInterpolation,
-    RRTConnect,
-    cartesian_dls,
-    joint_interpolation,
-    rrt_connect,
-)
-from .planning.plan import Plan, PlannerLike, Tolerance, judge
-from .planning.planner import Planner, plan
-from .planning.timing import TimedTrajectory, time_parameterize
-from .training.forward_inverse import train_config, train_fm, train_im, validate_models
-from .training.joint_path import PathLossConfig, PathTrainConfig, train_path_model
-from .training.loop import OptimConfig, TrainConfig
-from .training.obstacle_path import ObstacleLossConfig, ObstacleTrainConfig, train_obstacle_model
-from .training.tm import TMTrainConfig, load_tm, tm_preset, train_tm
+
+# Everything else is imported when first used (PEP 562), so that `import kinlearn` and the `kinlearn`
+# command start without torch: the imports below are the table of those names, read from this file.
+if TYPE_CHECKING:
+    from .body.kinematics import BACKENDS, Kinematics, dls_step, kinematics
+    from .body.robot import ROBOTS, Robot, available_robots, load_robot, register_robot, unregister_robot
+    from .body.state import StateLayout
+    from .collision import BodySpheres, Scene, body_spheres, check_path
+    from .data.babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
+    from .data.endpoints import EndpointConfig, EndpointPairs, load_endpoints, make_endpoints, save_endpoints
+    from .data.problem import Problem
+    from .evaluation.metrics import plan_metrics, summarize, trajectory_metrics
+    from .models.body import LearnedBody, load_body_model
+    from .models.forward_inverse import (
+        AnalyticFM,
+        AnalyticIM,
+        FMConfig,
+        ForwardModel,
+        IMConfig,
+        InverseModel,
+        LearnedFM,
+        LearnedIM,
+        load_fm,
+        load_im,
+        save_model,
+    )
+    from .models.joint_path import JointPathConfig, JointPathModel, load_path_model
+    from .models.obstacle_path import ObstaclePathConfig, ObstaclePathModel, load_obstacle_model
+    from .models.rollout import LossConfig, rectify, tm_loss
+    from .models.trajectory import TMConfig, TrajectoryModel
+    from .planning.baselines import (
+        CartesianDLS,
+        JointInterpolation,
+        RRTConnect,
+        cartesian_dls,
+        joint_interpolation,
+        rrt_connect,
+    )
+    from .planning.plan import Plan, PlannerLike, Tolerance, judge
+    from .planning.planner import Planner, plan
+    from .planning.timing import TimedTrajectory, time_parameterize
+    from .training.forward_inverse import train_config, train_fm, train_im, validate_models
+    from .training.joint_path import PathLossConfig, PathTrainConfig, train_path_model
+    from .training.loop import OptimConfig, TrainConfig
+    from .training.obstacle_path import ObstacleLossConfig, ObstacleTrainConfig, train_obstacle_model
+    from .training.tm import TMTrainConfig, load_tm, tm_preset, train_tm
 
 __version__ = "0.1.0"
 
@@ -178,3 +187,40 @@ __all__ = [
     "unregister_robot",
     "validate_models",
 ]
+
+
+def _lazy_table() -> dict[str, str]:
+    """Exported name → the module it comes from, as the ``TYPE_CHECKING`` imports above list them."""
+    tree = ast.parse(Path(__file__).read_text(encoding="utf-8"))
+    table = {}
+    for node in tree.body:
+        if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
+            for imp in node.body:
+                if isinstance(imp, ast.ImportFrom):
+                    for alias in imp.names:
+                        table[alias.asname or alias.name] = "." * imp.level + (imp.module or "")
+    return table
+
+
+_LAZY: dict[str, str] | None = None
+
+
+def __getattr__(name: str):
+    global _LAZY
+    if _LAZY is None:
+        _LAZY = _lazy_table()
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+    else:
+        try:  # a sub-package or module (kinlearn.collision, kinlearn.io, ...)
+            value = importlib.import_module(f".{name}", __name__)
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__name__}.{name}":
+                raise
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
