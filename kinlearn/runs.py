@@ -10,23 +10,108 @@ command's outputs. :func:`open_run` decides, before anything is written, what ma
   starts afresh (refused when the folder holds another command's run);
 - otherwise: refused with :class:`~kinlearn.errors.RunDirectoryError`, a finished run or not.
 
+While a command writes a run directory it holds its lock (``.kinlearn.lock``: the writer's process
+id, host, command and start): a second writer gets a :class:`~kinlearn.errors.RunDirectoryError`
+naming the holder; a lock whose process is gone (a killed run) is cleared by the next writer.
+
 :meth:`Run.begin` then creates the folder, deletes what ``--overwrite`` replaces and temporary
 files of killed writes, and writes ``config.json``; commands call it once all their checks passed.
 """
 
 from __future__ import annotations
 
+import atexit
 import json
+import os
 import shutil
+import socket
+import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
 from .errors import RunDirectoryError
-from .io import read_json, remove_stale_tmp, write_json
+from .io import _pid_alive, read_json, remove_stale_tmp, write_json
 
-__all__ = ["CONFIG_FILE", "IGNORED_KEYS", "META_KEYS", "Run", "diff_configs", "open_run"]
+__all__ = [
+    "CONFIG_FILE",
+    "IGNORED_KEYS",
+    "LOCK_FILE",
+    "META_KEYS",
+    "Run",
+    "diff_configs",
+    "open_run",
+    "release_locks",
+]
+
+#: The lock a writing command holds in its run directory.
+LOCK_FILE = ".kinlearn.lock"
+_HELD: set[Path] = set()  # locks this process holds
+
+
+def _live_holder(path: Path) -> dict | None:
+    """The record of the live process (other than this one) that holds ``path``'s lock, or None; a lock
+    left by a process that is gone is deleted."""
+    lock = path / LOCK_FILE
+    try:
+        holder = json.loads(lock.read_text())
+        pid, host = int(holder["pid"]), str(holder["host"])
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, KeyError, TypeError):  # torn or foreign: as good as stale
+        lock.unlink(missing_ok=True)
+        return None
+    if host == socket.gethostname():
+        if pid == os.getpid():
+            return None
+        if not _pid_alive(pid):
+            lock.unlink(missing_ok=True)  # a killed run's
+            return None
+    return holder  # alive here, or on another host (cannot tell: kept)
+
+
+def _refuse_held(path: Path, holder: dict) -> RunDirectoryError:
+    since = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(float(holder.get("since", 0))))
+    return RunDirectoryError(
+        f"{path} is being written by another command: {holder.get('command')} (process {holder['pid']} on "
+        f"{holder['host']}, since {since}); wait for it to end or stop it (if no such process runs, delete "
+        f"{path / LOCK_FILE})"
+    )
+
+
+def _acquire(path: Path, command: str) -> None:
+    lock = path / LOCK_FILE
+    if lock in _HELD:
+        return
+    record = {"pid": os.getpid(), "host": socket.gethostname(), "command": command, "since": time.time()}
+    for _ in range(3):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            holder = _live_holder(path)
+            if holder is not None:
+                raise _refuse_held(path, holder) from None
+            continue  # a stale lock, cleared: try again
+        with os.fdopen(fd, "w") as fh:
+            json.dump(record, fh)
+        _HELD.add(lock)
+        return
+    raise RunDirectoryError(f"could not lock {path} ({lock} keeps reappearing)")
+
+
+def release_locks() -> None:
+    """Release the run-directory locks this process holds (at the end of a command, and at exit)."""
+    for lock in list(_HELD):
+        try:
+            if json.loads(lock.read_text()).get("pid") == os.getpid():
+                lock.unlink()
+        except (OSError, ValueError):
+            pass
+        _HELD.discard(lock)
+
+
+atexit.register(release_locks)
 
 #: The run record every command writes first.
 CONFIG_FILE = "config.json"
@@ -99,6 +184,7 @@ class Run:
         """Create the folder, delete what ``overwrite`` replaces and stale temporary files, write
         ``config.json`` (unless the command keeps none); returns the folder."""
         self.path.mkdir(parents=True, exist_ok=True)
+        _acquire(self.path, self.command)  # before anything is written
         if self.mode == "overwrite":
             # config.json first: a folder never holds a config.json beside another run's outputs
             (self.path / CONFIG_FILE).unlink(missing_ok=True)
@@ -163,6 +249,8 @@ def open_run(
         raise RunDirectoryError("--resume and --overwrite exclude each other: continue the run or replace it")
     if path.exists() and not path.is_dir():
         raise RunDirectoryError(f"{path} is a file, not a run directory")
+    if path.is_dir() and (holder := _live_holder(path)) is not None:
+        raise _refuse_held(path, holder)
     outputs = tuple(outputs)
     record = {"command": command, **_plain(dict(config)), **_plain(dict(meta or {}))}
     record = record if write_config else None

@@ -32,6 +32,7 @@ from ..data.babbling import BabblingConfig, babble, save_transitions
 from ..data.recorded import load_data
 from ..errors import ConfigError, KinlearnError
 from ..io import atomic_copy, atomic_write, read_json, write_json
+from ..runs import release_locks
 from ..models.forward_inverse import (
     FM_PRESETS,
     AnalyticFM,
@@ -427,6 +428,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         hint = " (continue it with --resume)" if "resume" in vars(args) else ""
         print(f"kinlearn {args.command}: interrupted{hint}", file=sys.stderr)
         return 130
+    finally:
+        release_locks()  # the run directory is free for the next command
 
 
 if __name__ == "__main__":
