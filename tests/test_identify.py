@@ -112,7 +112,7 @@ def test_identify_refuses_bad_input(gen):
         identify(42, dof=7)
     bad = theta.clone()
     bad[3, 2] = float("nan")
-    with pytest.raises(Exception, match="NaN|finite"):
+    with pytest.raises(Exception, match=r"NaN|finite"):
         identify((bad, torch.zeros(100, 3)), dof=7)
     with pytest.raises(ConfigError):
         IdentifyConfig(holdout=0.7)
