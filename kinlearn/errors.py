@@ -99,5 +99,10 @@ class OutputError(KinlearnError, OSError):
     permission, a read-only or full disk. The message names the path and what to do."""
 
 
+class NoObstacleModelWarning(UserWarning):
+    """Planning around obstacles for an arm whose planner has no obstacle-trained network: the plan comes
+    from the straight joint line and bounded refinement alone (its ``collision_free`` says how it went)."""
+
+
 class DomainWarning(UserWarning):
     """A start or goal outside the domain the planner was trained on: its plan may be poor."""

@@ -227,3 +227,28 @@ def test_cli_plans_a_moveit_scene_and_request(tmp_path, capsys):
     assert "leave out --start" in capsys.readouterr().err
     assert main(args) == 2
     assert "--request" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_arm_without_an_obstacle_network_says_so_and_checks_densely(name, tmp_path):
+    import kinlearn
+    from kinlearn.collision import body_spheres, check_path
+    from kinlearn.errors import NoObstacleModelWarning
+
+    robot = load_robot(name)
+    mid = (robot.lower + robot.upper) / 2
+    start = torch.tensor(mid + 0.1 * (robot.upper - mid), dtype=torch.float64)
+    goal = torch.tensor(mid - 0.1 * (robot.upper - mid), dtype=torch.float64)
+    R = rotation_from_quaternion([0.0, 0.0, 0.3826834324, 0.9238795325])
+    far = Scene.from_primitives(
+        [Box((2.0, 2.0, 0.5), (0.1, 0.1, 0.5), R), Cylinder((-2.0, 0.0, 0.5), 0.1, 0.5)]
+    )
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(far.to_moveit()))
+    body = body_spheres(robot).double()
+    for scene in (Scene.from_moveit(path), Scene.from_primitives([Sphere((0.0, 0.0, 0.0), 3.0)])):
+        with pytest.warns(NoObstacleModelWarning, match="no obstacle-trained network"):
+            plan = kinlearn.plan(start, goal, obstacles=scene, robot=name)
+        dense = check_path(body, plan.joints.double(), scene)
+        assert bool(plan.collision_free) == bool(dense.collision_free)
+    assert not bool(plan.collision_free)  # inside a ball that holds the whole arm: flagged, not silent

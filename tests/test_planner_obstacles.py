@@ -115,10 +115,18 @@ def test_scene_of_another_batch_raises(planner):
 
 
 def test_planner_without_obstacle_model_says_so(robot):
+    """No obstacle-trained network: a warning, then the straight joint line and bounded refinement,
+    checked densely (never a silent plan)."""
+    from kinlearn.collision import Scene, body_spheres, check_path
+    from kinlearn.errors import NoObstacleModelWarning
+
     base = Planner.default("iiwa14")
     plain = Planner(robot, base.tm, base.fm, base.im)
-    with pytest.raises(ConfigError, match="obstacle"):
-        plain.plan(torch.zeros(7), torch.full((7,), 0.3), obstacles=[[0.5, 0.0, 0.5, 0.1]])
+    ball = [[0.5, 0.0, 0.5, 0.1]]
+    with pytest.warns(NoObstacleModelWarning, match="straight joint line"):
+        plan = plain.plan(torch.zeros(7), torch.full((7,), 0.3), obstacles=ball)
+    dense = check_path(body_spheres(robot).double(), plan.joints.double(), Scene.from_spheres(ball))
+    assert bool(plan.collision_free) == bool(dense.collision_free)
 
 
 def test_without_obstacles_nothing_changes(planner, robot):

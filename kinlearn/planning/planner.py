@@ -39,13 +39,13 @@ from ..body.state import StateLayout
 from ..checks import as_int, check_finite, real_array
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
-from ..collision.fast import NumpyBody, NumpyScene, check_paths, first_free
 from ..collision.scene import Scene, as_scene
 from ..data.problem import LIMIT_TOLERANCE, STATE_EF_TOLERANCE, Problem, state_error
 from ..errors import (
     ConfigError,
     DomainError,
     DomainWarning,
+    NoObstacleModelWarning,
     DTypeError,
     ShapeError,
 )
@@ -62,6 +62,19 @@ __all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan"]
 
 #: Planners shipped inside the package, one folder per robot (see ``kinlearn/checkpoints/README.md``).
 DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
+
+#: Without an obstacle-trained network: the straight joint line's segments, and the refinement steps
+#: taken by default where it collides.
+NO_MODEL_KNOTS = 11
+NO_MODEL_REFINE_STEPS = 25
+
+
+def _kernel():
+    """The compiled collision kernels, imported on first use (numba takes about a second to load)."""
+    from ..collision import kernel
+
+    return kernel
+
 
 #: Batches up to this many plans run in NumPy (a few microseconds per operation), larger ones in torch.
 SMALL_BATCH = 16
@@ -379,6 +392,8 @@ class Planner:
         free = None
         if obstacles is not None:
             scene = self._scene(obstacles, batch, n)
+            if self.obstacle_tm is None and refine_steps is None:
+                steps = max(steps, NO_MODEL_REFINE_STEPS)
             joints, free = self._plan_around(theta0, ef0, thetaT, efT, scene, steps)
             ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(n, joints.shape[1], 3)
             waypoints = ef[:, 1:-1]
@@ -441,17 +456,22 @@ class Planner:
         return self._body64
 
     @property
-    def _np_body(self) -> NumpyBody:
+    def _np_body(self):
+        """The body packed for the compiled batch-1 checks (:class:`~kinlearn.collision.kernel.KernelBody`)."""
         if self._np_body_cache is None:
-            self._np_body_cache = NumpyBody(self.body)
+            self._np_body_cache = _kernel().KernelBody(self.body)
         return self._np_body_cache
 
     def _scene(self, obstacles, batch: tuple, n: int) -> Scene:
         """``obstacles`` as a float64 scene of batch shape ``()`` or ``(n,)``."""
         if self.obstacle_tm is None:
-            raise ConfigError(
-                f"this planner has no obstacle-aware TM ({OBSTACLE_TM}); load a planner folder holding one, "
-                "or train one with kinlearn.train_obstacles"
+            warnings.warn(
+                f"{self.robot.name} has no obstacle-trained network in this planner ({OBSTACLE_TM}): planning "
+                "with the straight joint line and bounded gradient refinement (refine_steps, default "
+                f"{NO_MODEL_REFINE_STEPS} here), checked densely; plan.collision_free says whether it cleared "
+                "the obstacles",
+                NoObstacleModelWarning,
+                stacklevel=4,
             )
         scene = as_scene(obstacles, batch).to(dtype=torch.float64, device="cpu")
         return scene.reshape(n) if len(scene.batch_shape) > 1 else scene
@@ -463,7 +483,10 @@ class Planner:
         obstacle-aware TM's; segments halved when refining) and each problem's order of them, shortest
         first (the straight line leads among equals). NumPy for small batches, torch for large ones."""
         n, dof = theta0.shape
-        if n <= SMALL_BATCH:
+        if self.obstacle_tm is None:  # the straight joint line alone
+            f = np.linspace(0.0, 1.0, NO_MODEL_KNOTS + 1)[1:-1, None]
+            mid = np.zeros((n, 0, NO_MODEL_KNOTS - 1, dof))
+        elif n <= SMALL_BATCH:
             mid = self._np_obstacle_tm(theta0, ef0, thetaT, efT, rows.numpy(), mask.numpy(), floor.numpy())
         else:
             dtype = self.obstacle_tm.in_mean.dtype
@@ -473,7 +496,8 @@ class Planner:
                 mid = self.obstacle_tm(s0, sT, rows.to(dtype), mask, floor.to(dtype)).double().numpy()
         np.clip(mid, self._lo_np, self._hi_np, out=mid)
         C = mid.shape[1]
-        f = self.obstacle_tm.fractions.double().numpy()[:, None]
+        if self.obstacle_tm is not None:
+            f = self.obstacle_tm.fractions.double().numpy()[:, None]
         line = theta0[:, None] + f * (thetaT - theta0)[:, None]  # the straight joint line's knots
         inner = np.concatenate((line[:, None], mid), axis=1)  # (N, C + 1, T − 1, dof)
         paths = np.concatenate(
@@ -501,13 +525,13 @@ class Planner:
         rows, mask, floor = scene_primitives(scene, n, torch.float64)
         paths, order = self._proposals(theta0, ef0, thetaT, efT, rows, mask, floor, steps)
         batched = len(scene.batch_shape) > 0
-        shared = None if batched else NumpyScene.from_scene(scene)
+        shared = None if batched else _kernel().KernelScene(scene)
         if n <= SMALL_BATCH:
             free = np.zeros(n, dtype=bool)
             pick = order[:, 0].copy()  # none free: the shortest, flagged
             for i in range(n):
-                nscene = NumpyScene.from_scene(scene[i]) if batched else shared
-                k = first_free(self._np_body, paths[i], nscene, order[i], max_travel=CHECK_TRAVEL)
+                nscene = _kernel().KernelScene(scene[i]) if batched else shared
+                k = _kernel().first_free(self._np_body, paths[i], nscene, order[i], max_travel=CHECK_TRAVEL)
                 if k >= 0:
                     pick[i], free[i] = k, True
         else:
@@ -525,7 +549,7 @@ class Planner:
         if steps:
             for i in np.flatnonzero(~free):
                 one = scene[int(i)] if batched else scene
-                nscene = NumpyScene.from_scene(one) if batched else shared
+                nscene = _kernel().KernelScene(one) if batched else shared
                 # As a batch-1 plan makes them: its FK in NumPy, its scene without padding.
                 ends = np.concatenate((theta0[i : i + 1], thetaT[i : i + 1]))
                 e0, eT = self._fk.position(ends)
@@ -540,7 +564,7 @@ class Planner:
                     floor[i : i + 1],
                     steps,
                 )
-                _, clear, _ = check_paths(self._np_body, alone[0], nscene, max_travel=CHECK_TRAVEL)
+                _, clear, _ = _kernel().check_paths(self._np_body, alone[0], nscene, max_travel=CHECK_TRAVEL)
                 best = alone[0, int(np.argmax(clear))]  # from the least colliding one
                 out[i], free[i] = self._refine(best, one, nscene, steps)
         return out, free
@@ -558,7 +582,9 @@ class Planner:
             p[0], p[-1], scene, steps=steps, config=config, body=self.body, init=p
         )
         refined = refined.numpy()
-        free, _, _ = check_paths(self._np_body, refined[None], nscene, max_travel=CHECK_TRAVEL)
+        free, _, _ = _kernel().check_paths(
+            self._np_body, refined[None], nscene, max_travel=CHECK_TRAVEL, exact=False
+        )
         return (refined, True) if bool(free[0]) else (path, False)
 
     def _position(self, q: np.ndarray) -> np.ndarray:

@@ -1,0 +1,602 @@
+"""Compiled CPU kernels (numba) for batch-1 planning: the body's sphere FK, signed distances to every
+kind of primitive, and the dense path check.
+
+torch (:mod:`kinlearn.collision.distance`, :func:`~kinlearn.collision.check_path`) stays the
+implementation for training and large batches; this module is the one compiled twin for a single scene
+and a handful of paths, where torch's per-operation dispatch (microseconds) dominates. A contract test
+(``tests/test_collision_kernel.py``) holds the two to each other on random scenes of every primitive
+kind. numba is a dependency (a wheel on every platform kinlearn supports): one kernel set, no NumPy twin
+to keep in step. It is imported with this module, which the planner imports only when it first checks a
+path; every function is compiled on its first call (nothing at import), and ``cache=True`` keeps the
+machine code on disk, so a later process loads it instead of compiling again (about 10 s the first
+time, a fraction of a second after; :func:`warm_up` compiles ahead).
+
+**The dense check** (:func:`check_paths`, :func:`first_free`) checks the configurations
+:func:`~kinlearn.collision.check_path` checks: segment k is cut into n_k = ⌈L_k / max_travel⌉ sub-steps,
+L_k the largest lever bound Σ_j |Δθ_j| · lever_mj over the spheres; every sub-step's start and the last
+knot are checked; one collides when its body–scene distance is ≤ ``margin`` or a self-collision pair's
+distance is ≤ 0. Where only the verdict is wanted (``first_free``, and ``check_paths(..., exact=False)``)
+sub-steps that provably cannot collide are skipped: along a segment sphere m moves at most
+t_m = Σ_j |Δθ_j| lever_mj, so t_m / n_k per sub-step, and its distance to the scene (1-Lipschitz in its
+centre) can fall by no more than that; a pair's distance by no more than the sum of its spheres'. From a
+checked configuration whose per-sphere clearances above ``margin`` (and pair distances above 0) are
+d_m, the next ⌊min_m (d_m − slack) / (t_m / n_k)⌋ sub-steps are free and are not evaluated. The verdict
+and the first colliding segment are those of checking every sub-step; only the clearance (a minimum
+over the evaluated configurations) needs ``exact=True``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numba
+import numpy as np
+import torch
+
+from ..errors import ConfigError, DTypeError, NonFiniteError, ObstacleError, ShapeError
+from .body import BodySpheres
+from .scene import Scene
+
+__all__ = [
+    "KernelBody",
+    "KernelScene",
+    "centres",
+    "check_paths",
+    "clearances",
+    "first_free",
+    "warm_up",
+]
+
+_TINY = float(np.finfo(np.float64).tiny)
+#: Metres of slack in the skipping bound (the float64 error of a distance is ~1e-15 m).
+_SLACK = 1e-9
+
+#: Share of its budget's span after which an item is recomputed at a configuration evaluated anyway.
+_REFRESH = 0.5
+
+_jit = numba.njit(cache=True, nogil=True, fastmath=False)
+
+
+# --------------------------------------------------------------------------------------------------
+# One signed distance per kind (the compiled rows of the dispatch table), then the body's FK
+# --------------------------------------------------------------------------------------------------
+
+
+@_jit
+def _sd_sphere(x, y, z, t, i):
+    dx, dy, dz = x - t[i, 0], y - t[i, 1], z - t[i, 2]
+    return math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - t[i, 3]
+
+
+@_jit
+def _sd_box(x, y, z, t, i):
+    dx, dy, dz = x - t[i, 0], y - t[i, 1], z - t[i, 2]
+    qx = abs(dx * t[i, 6] + dy * t[i, 9] + dz * t[i, 12]) - t[i, 3]
+    qy = abs(dx * t[i, 7] + dy * t[i, 10] + dz * t[i, 13]) - t[i, 4]
+    qz = abs(dx * t[i, 8] + dy * t[i, 11] + dz * t[i, 14]) - t[i, 5]
+    ox, oy, oz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
+    return math.sqrt(max(ox * ox + oy * oy + oz * oz, _TINY)) + min(max(max(qx, qy), qz), 0.0)
+
+
+@_jit
+def _sd_cylinder(x, y, z, t, i):
+    dx, dy, dz = x - t[i, 0], y - t[i, 1], z - t[i, 2]
+    lx = dx * t[i, 5] + dy * t[i, 8] + dz * t[i, 11]
+    ly = dx * t[i, 6] + dy * t[i, 9] + dz * t[i, 12]
+    lz = dx * t[i, 7] + dy * t[i, 10] + dz * t[i, 13]
+    radial = math.sqrt(max(lx * lx + ly * ly, _TINY)) - t[i, 3]
+    axial = abs(lz) - t[i, 4]
+    o_r, o_a = max(radial, 0.0), max(axial, 0.0)
+    return math.sqrt(max(o_r * o_r + o_a * o_a, _TINY)) + min(max(radial, axial), 0.0)
+
+
+@_jit
+def _sphere_scene(x, y, z, r, on_floor, spheres, boxes, cylinders, floor):
+    """One sphere's signed distance to the scene (+inf when empty)."""
+    d = np.inf
+    for i in range(spheres.shape[0]):
+        d = min(d, _sd_sphere(x, y, z, spheres, i))
+    for i in range(boxes.shape[0]):
+        d = min(d, _sd_box(x, y, z, boxes, i))
+    for i in range(cylinders.shape[0]):
+        d = min(d, _sd_cylinder(x, y, z, cylinders, i))
+    d = d - r
+    if floor[0] > 0.5 and on_floor:
+        d = min(d, z - r - floor[1])
+    return d
+
+
+@_jit
+def _fk(q, F, prismatic, link, folded, out, frames):
+    """Sphere centres ``out (M, 3)`` at joints ``q (dof,)``: frames T_i = T_{i−1} F_i Z(q_i), Z a rotation
+    about (or shift along) z, and each moving sphere at R_k · folded + p_k (base spheres: folded).
+    ``frames (dof + 1, 3, 4)``: work space."""
+    dof = q.shape[0]
+    for a in range(3):
+        for b in range(4):
+            frames[0, a, b] = 1.0 if a == b else 0.0
+    for i in range(dof):
+        c, s = (1.0, 0.0) if prismatic[i] else (math.cos(q[i]), math.sin(q[i]))
+        for a in range(3):
+            p0, p1, p2 = frames[i, a, 0], frames[i, a, 1], frames[i, a, 2]
+            a0 = p0 * F[i, 0, 0] + p1 * F[i, 1, 0] + p2 * F[i, 2, 0]
+            a1 = p0 * F[i, 0, 1] + p1 * F[i, 1, 1] + p2 * F[i, 2, 1]
+            a2 = p0 * F[i, 0, 2] + p1 * F[i, 1, 2] + p2 * F[i, 2, 2]
+            a3 = p0 * F[i, 0, 3] + p1 * F[i, 1, 3] + p2 * F[i, 2, 3] + frames[i, a, 3]
+            frames[i + 1, a, 0] = c * a0 + s * a1
+            frames[i + 1, a, 1] = c * a1 - s * a0
+            frames[i + 1, a, 2] = a2
+            frames[i + 1, a, 3] = a3 + q[i] * a2 if prismatic[i] else a3
+    for m in range(link.shape[0]):
+        k = link[m]
+        f0, f1, f2 = folded[m, 0], folded[m, 1], folded[m, 2]
+        for a in range(3):
+            out[m, a] = frames[k, a, 0] * f0 + frames[k, a, 1] * f1 + frames[k, a, 2] * f2 + frames[k, a, 3]
+
+
+@_jit
+def _evaluate(
+    q, F, prismatic, link, folded, radii, on_floor, pairs, spheres, boxes, cylinders, floor, c, dm, dp, frames
+):
+    """FK and every distance at ``q``: fills ``c (M, 3)``, ``dm (M,)`` (per sphere, to the scene) and
+    ``dp (P,)`` (per self-collision pair); returns (scene clearance, self clearance)."""
+    _fk(q, F, prismatic, link, folded, c, frames)
+    d = np.inf
+    for m in range(link.shape[0]):
+        dm[m] = _sphere_scene(
+            c[m, 0], c[m, 1], c[m, 2], radii[m], on_floor[m], spheres, boxes, cylinders, floor
+        )
+        d = min(d, dm[m])
+    s = np.inf
+    for p in range(pairs.shape[0]):
+        a, b = pairs[p, 0], pairs[p, 1]
+        dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
+        dp[p] = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[a] - radii[b]
+        s = min(s, dp[p])
+    return d, s
+
+
+@_jit
+def _clearances(
+    qs, F, prismatic, link, folded, radii, on_floor, pairs, spheres, boxes, cylinders, floor, per
+):
+    """Configurations ``qs (N, dof)`` → scene and self clearances ``(N,)`` each; ``per (N, M)`` filled with
+    each sphere's distance to the scene."""
+    n, M = qs.shape[0], link.shape[0]
+    d, s = np.empty(n), np.empty(n)
+    c, dp, frames = np.empty((M, 3)), np.empty(pairs.shape[0]), np.empty((qs.shape[1] + 1, 3, 4))
+    for i in range(n):
+        d[i], s[i] = _evaluate(
+            qs[i], F, prismatic, link, folded, radii, on_floor, pairs, spheres, boxes, cylinders, floor, c, per[i], dp,
+            frames,
+        )  # fmt: skip
+    return d, s
+
+
+@_jit
+def _centres(qs, F, prismatic, link, folded):
+    out = np.empty((qs.shape[0], link.shape[0], 3))
+    frames = np.empty((qs.shape[1] + 1, 3, 4))
+    for i in range(qs.shape[0]):
+        _fk(qs[i], F, prismatic, link, folded, out[i], frames)
+    return out
+
+
+@_jit
+def _check(
+    path, max_travel, margin, exact, F, prismatic, link, folded, radii, on_floor, pairs, lever,
+    spheres, boxes, cylinders, floor,
+):  # fmt: skip
+    """One path ``(W, dof)``: (first colliding segment or −1, scene clearance, self clearance, configurations
+    evaluated). ``exact``: evaluate every sub-step (the clearance is then check_path's); else stop at the
+    first collision and skip the sub-steps that provably cannot collide (see the module docstring)."""
+    W, dof = path.shape
+    M, P = link.shape[0], pairs.shape[0]
+    c, dm, dp = np.empty((M, 3)), np.empty(M), np.empty(P)
+    frames = np.empty((dof + 1, 3, 4))
+    travel = np.empty(M)
+    q = np.empty(dof)
+    first = -1
+    clear, self_clear = np.inf, np.inf
+    evaluated = 0
+    for k in range(W):
+        if k < W - 1:
+            bound = 0.0
+            for m in range(M):
+                t = 0.0
+                for j in range(dof):
+                    t += abs(path[k + 1, j] - path[k, j]) * lever[m, j]
+                travel[m] = t
+                bound = max(bound, t)
+            n = max(1.0, math.ceil(bound / max_travel))
+        else:  # the last knot alone
+            n = 1.0
+        i = 0.0
+        while i < n:
+            frac = i / n
+            for j in range(dof):
+                q[j] = path[k, j] + frac * (path[k + 1, j] - path[k, j]) if k < W - 1 else path[k, j]
+            d, s = _evaluate(
+                q, F, prismatic, link, folded, radii, on_floor, pairs, spheres, boxes, cylinders, floor, c, dm, dp,
+                frames,
+            )  # fmt: skip
+            evaluated += 1
+            clear, self_clear = min(clear, d), min(self_clear, s)
+            if d <= margin or s <= 0.0:
+                if first < 0:
+                    first = k
+                if not exact:
+                    return first, clear, self_clear, evaluated
+                i += 1.0
+                continue
+            if exact or k == W - 1:
+                i += 1.0
+                continue
+            skip = np.inf
+            for m in range(M):
+                if travel[m] > 0.0:
+                    skip = min(skip, (dm[m] - margin - _SLACK) * n / travel[m])
+            for p in range(P):
+                t = travel[pairs[p, 0]] + travel[pairs[p, 1]]
+                if t > 0.0:
+                    skip = min(skip, (dp[p] - _SLACK) * n / t)
+            i += 1.0 + max(math.floor(skip), 0.0) if skip < n else n
+    return first, clear, self_clear, evaluated
+
+
+@_jit
+def _expiry(b, k, i, cj, item, lo, hi, steps, offset):
+    """The global sub-step index at which an item with ``b`` metres of budget at sub-step ``i`` of segment
+    ``k`` must be looked at again: where its travel bound per sub-step may have used the budget up
+    (+inf if it lasts to the end of the path). Its bound on segment k is ``cj[k, item, hi] −
+    cj[k, item, lo]`` (``cj`` the segments' Σ_j |Δθ_j| lever_j summed over the joints, cumulatively)."""
+    T = steps.shape[0] if cj.shape[0] else 0
+    while k < T:
+        rate = cj[k, item, hi] - cj[k, item, lo]
+        if rate > 0.0:
+            per = rate / steps[k]
+            left = steps[k] - i
+            if b < left * per:
+                return offset[k] + i + max(1.0, math.floor(b / per))
+            b -= left * per
+        k += 1
+        i = 0.0
+    return np.inf
+
+
+@_jit
+def _verdict(
+    path, max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs, lever, pair_lever,
+    spheres, boxes, cylinders, floor,
+):  # fmt: skip
+    """One path ``(W, dof)``: (first colliding segment or −1, configurations evaluated), the verdict of
+    checking every sub-step. Each sphere's clearance and each pair's distance, once computed, is a
+    budget that the spheres' travel bounds use up along the path; a configuration is evaluated only
+    where some budget may be spent, and then only the spent items are recomputed."""
+    W, dof = path.shape
+    M, P, T = link.shape[0], pairs.shape[0], W - 1
+    absd = np.empty((T, dof))
+    cj = np.zeros((T, M, dof + 1))  # per segment and sphere: Σ_{j' < j} |Δθ_j'| lever_j'
+    steps = np.ones(max(T, 1))
+    for k in range(T):
+        for j in range(dof):
+            absd[k, j] = abs(path[k + 1, j] - path[k, j])
+        bound = 0.0
+        for m in range(M):
+            t = 0.0
+            for j in range(dof):
+                t += absd[k, j] * lever[m, j]
+                cj[k, m, j + 1] = t
+            bound = max(bound, t)
+        steps[k] = max(1.0, math.ceil(bound / max_travel))
+    offset = np.zeros(max(T, 1) + 1)
+    for k in range(T):
+        offset[k + 1] = offset[k] + steps[k]
+    end = offset[T] if T else 0.0  # the last knot's global index
+    # Over the whole path, how far each sphere can travel per joint (prefix sums over the joints): an
+    # item whose budget exceeds its whole-path bound needs no walk along the segments.
+    total = np.zeros(dof)
+    for k in range(T):
+        for j in range(dof):
+            total[j] += absd[k, j]
+    reach = np.zeros((M, dof + 1))
+    for m in range(M):
+        for j in range(dof):
+            reach[m, j + 1] = reach[m, j] + total[j] * lever[m, j]
+    lo_p = np.empty(P, dtype=np.int64)
+    hi_p = np.empty(P, dtype=np.int64)
+    far_p = np.empty(P, dtype=np.int64)
+    for p in range(P):
+        la, lb = link[pairs[p, 0]], link[pairs[p, 1]]
+        lo_p[p], hi_p[p] = min(la, lb), max(la, lb)
+        far_p[p] = pairs[p, 0] if la >= lb else pairs[p, 1]
+    due_m = np.zeros(M)  # global sub-step index at which each item must be recomputed
+    due_p = np.zeros(P)
+    # Where each item was last computed: an evaluated configuration also refreshes the items that have
+    # spent more than ``REFRESH`` of their budget's span, so that far items do not each call for one.
+    from_m = np.zeros(M)
+    from_p = np.zeros(P)
+    c, frames, q = np.empty((M, 3)), np.empty((dof + 1, 3, 4)), np.empty(dof)
+    pos, evaluated = 0.0, 0
+    k = 0
+    while True:
+        while k < T and pos >= offset[k + 1]:
+            k += 1
+        i = pos - offset[k]
+        if k < T:
+            frac = i / steps[k]
+            for j in range(dof):
+                q[j] = path[k, j] + frac * (path[k + 1, j] - path[k, j])
+        else:
+            for j in range(dof):
+                q[j] = path[T, j]
+        _fk(q, F, prismatic, link, folded, c, frames)
+        evaluated += 1
+        nxt = np.inf
+        for m in range(M):
+            if due_m[m] <= pos or pos - from_m[m] >= _REFRESH * (due_m[m] - from_m[m]):
+                from_m[m] = pos
+                d = _sphere_scene(
+                    c[m, 0], c[m, 1], c[m, 2], radii[m], on_floor[m], spheres, boxes, cylinders, floor
+                )
+                if d <= margin:
+                    return k, evaluated
+                budget = d - margin - _SLACK
+                if budget > reach[m, dof]:
+                    due_m[m] = np.inf
+                else:
+                    due_m[m] = _expiry(budget, k, i, cj, m, 0, dof, steps, offset)
+            nxt = min(nxt, due_m[m])
+        for p in range(P):
+            if due_p[p] <= pos or pos - from_p[p] >= _REFRESH * (due_p[p] - from_p[p]):
+                from_p[p] = pos
+                a, b = pairs[p, 0], pairs[p, 1]
+                dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
+                d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[a] - radii[b]
+                if d <= 0.0:
+                    return k, evaluated
+                f = far_p[p]
+                if d - _SLACK > reach[f, hi_p[p]] - reach[f, lo_p[p]]:
+                    due_p[p] = np.inf
+                else:
+                    due_p[p] = _expiry(d - _SLACK, k, i, cj, f, lo_p[p], hi_p[p], steps, offset)
+            nxt = min(nxt, due_p[p])
+        if nxt > end:
+            return -1, evaluated
+        pos = nxt
+
+
+@_jit
+def _first_free(
+    paths, order, max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs, lever, pair_lever,
+    spheres, boxes, cylinders, floor,
+):  # fmt: skip
+    for i in range(order.shape[0]):
+        first, _ = _verdict(
+            paths[order[i]], max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs,
+            lever, pair_lever, spheres, boxes, cylinders, floor,
+        )  # fmt: skip
+        if first < 0:
+            return order[i]
+    return -1
+
+
+# --------------------------------------------------------------------------------------------------
+# Python side: the body and the scene packed once, checked arguments
+# --------------------------------------------------------------------------------------------------
+
+
+class KernelBody:
+    """A :class:`BodySpheres` packed for the kernels (float64 arrays): the canonical fixed transforms
+    ``F (dof, 4, 4)`` of its chain, each sphere's link and centre in its link's canonical frame, radii,
+    the spheres the floor applies to, self-collision pairs and lever bounds."""
+
+    def __init__(self, body: BodySpheres):
+        if not isinstance(body, BodySpheres):
+            raise ConfigError(f"KernelBody needs a BodySpheres, got {type(body).__name__}")
+        from ..body.kinematics import _z_to_axis
+
+        robot = body.robot
+        self.robot, self.name, self.dof = robot, body.name, robot.dof
+        local = body.local.detach().cpu().double().numpy()
+        self.link = np.ascontiguousarray(body.link.cpu().numpy().astype(np.int64))
+        folded = local.copy()
+        for m, k in enumerate(self.link):
+            if k > 0:
+                folded[m] = _z_to_axis(robot.joints[k - 1].axis).T @ local[m]
+        self.folded = np.ascontiguousarray(folded)
+        self.F = np.ascontiguousarray(np.asarray(body._kin.F[: robot.dof], dtype=np.float64))
+        self.prismatic = np.array([j.kind == "prismatic" for j in robot.joints], dtype=np.bool_)
+        self.radii = np.ascontiguousarray(body.radii.detach().cpu().double().numpy())
+        self.on_floor = np.ascontiguousarray(body.floor_mask.cpu().numpy().astype(np.bool_))
+        self.pairs = np.ascontiguousarray(body.pairs.cpu().numpy().astype(np.int64).reshape(-1, 2))
+        self.lever = np.ascontiguousarray(body.lever.detach().cpu().double().numpy())
+        # A pair's distance is unchanged by the joints that move both its spheres rigidly (those before
+        # the nearer link): only the joints between its links change it, by at most the farther
+        # sphere's lever on each.
+        a, b = self.pairs[:, 0], self.pairs[:, 1]
+        lo, hi = np.minimum(self.link[a], self.link[b]), np.maximum(self.link[a], self.link[b])
+        later = np.where(self.link[a] >= self.link[b], a, b)
+        j = np.arange(self.dof)
+        between = (j[None] >= lo[:, None]) & (j[None] < hi[:, None])
+        self.pair_lever = np.ascontiguousarray(self.lever[later] * between)
+
+    @property
+    def num_spheres(self) -> int:
+        return int(self.radii.shape[0])
+
+    def fk_args(self) -> tuple:
+        return self.F, self.prismatic, self.link, self.folded
+
+    def args(self) -> tuple:
+        return self.F, self.prismatic, self.link, self.folded, self.radii, self.on_floor, self.pairs
+
+    def __repr__(self) -> str:
+        return f"KernelBody(robot={self.robot.name!r}, set={self.name!r}, spheres={self.num_spheres}, pairs={len(self.pairs)})"
+
+
+class KernelScene:
+    """One (unbatched) :class:`Scene` packed for the kernels: a float64 table per kind, padding dropped,
+    and ``floor = [has floor, height]``."""
+
+    __slots__ = ("boxes", "cylinders", "floor", "spheres")
+
+    def __init__(self, scene: Scene):
+        if not isinstance(scene, Scene):
+            raise ObstacleError(f"expected a kinlearn Scene, got {type(scene).__name__}")
+        if len(scene.batch_shape):
+            raise ObstacleError(
+                f"a KernelScene holds one scene, got batch shape {tuple(scene.batch_shape)}; index it first"
+            )
+        tables = {
+            k.table: np.ascontiguousarray(t.detach().cpu().double().numpy())
+            for k, t, _ in scene.tables(live=True)
+        }
+        self.spheres, self.boxes, self.cylinders = tables["spheres"], tables["boxes"], tables["cylinders"]
+        self.floor = np.array([0.0, 0.0] if scene.floor is None else [1.0, float(scene.floor)])
+
+    def args(self) -> tuple:
+        return self.spheres, self.boxes, self.cylinders, self.floor
+
+    def __repr__(self) -> str:
+        return (
+            f"KernelScene(spheres={len(self.spheres)}, boxes={len(self.boxes)}, cylinders={len(self.cylinders)}, "
+            f"floor={'none' if not self.floor[0] else f'{self.floor[1]:.3f} m'})"
+        )
+
+
+def _joints(x, dof: int, what: str, ndim: int) -> np.ndarray:
+    if isinstance(x, torch.Tensor):
+        x = x.detach().cpu().numpy()
+    a = np.asarray(x)
+    if a.dtype.kind != "f":
+        raise DTypeError(f"{what} must hold real floating-point numbers, got dtype {a.dtype}")
+    if a.ndim != ndim or a.shape[-1] != dof:
+        raise ShapeError(f"{what} must have {ndim} dimensions, the last of size {dof}; got {a.shape}")
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    if not np.isfinite(a).all():
+        raise NonFiniteError(f"{what} holds {int((~np.isfinite(a)).sum())} NaN/inf value(s)")
+    return a
+
+
+def _check_args(body, scene, max_travel, margin) -> None:
+    if not isinstance(body, KernelBody):
+        raise ConfigError(
+            f"body must be a KernelBody (KernelBody(body_spheres(robot))), got {type(body).__name__}"
+        )
+    if not isinstance(scene, KernelScene):
+        raise ObstacleError(f"scene must be a KernelScene (KernelScene(scene)), got {type(scene).__name__}")
+    if not (isinstance(max_travel, (int, float)) and math.isfinite(max_travel) and max_travel > 0):
+        raise ConfigError(f"max_travel must be a finite number of metres > 0, got {max_travel!r}")
+    if not (isinstance(margin, (int, float)) and math.isfinite(margin)):
+        raise ConfigError(f"margin must be a finite number of metres, got {margin!r}")
+
+
+def centres(body: KernelBody, q) -> np.ndarray:
+    """World sphere centres ``(N, M, 3)`` of joints ``q (N, dof)``."""
+    return _centres(_joints(q, body.dof, "joint values q", 2), *body.fk_args())
+
+
+def clearances(body: KernelBody, scene: KernelScene, q, per_sphere: bool = False):
+    """``(scene clearance (N,), self clearance (N,))`` of configurations ``q (N, dof)`` (and, with
+    ``per_sphere``, each sphere's distance to the scene ``(N, M)``): the numbers of
+    :func:`kinlearn.collision.clearances`."""
+    _check_args(body, scene, 1.0, 0.0)
+    qs = _joints(q, body.dof, "joint values q", 2)
+    per = np.empty((qs.shape[0], body.num_spheres))
+    d, s = _clearances(qs, *body.args(), *scene.args(), per)
+    return (d, s, per) if per_sphere else (d, s)
+
+
+def check_paths(
+    body: KernelBody,
+    paths,
+    scene: KernelScene,
+    max_travel: float = 0.01,
+    margin: float = 0.0,
+    exact: bool = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Check joint paths ``paths (P, T+1, dof)`` against one scene and self-collision, densely.
+
+    Returns ``(free (P,) bool, clearance (P,), first_collision (P,) int64)``: per path the
+    ``collision_free``, ``clearance`` and ``first_collision`` of :func:`~kinlearn.collision.check_path`
+    (the same sub-steps, pairs and floor rule; touching counts as a collision). ``exact=False`` skips the
+    sub-steps that cannot collide and stops at a path's first collision: the same ``free`` and
+    ``first_collision``, and no clearance (NaN).
+    """
+    _check_args(body, scene, max_travel, margin)
+    arr = _joints(paths, body.dof, "joint paths", 3)
+    P = arr.shape[0]
+    free, clear, first = np.zeros(P, dtype=bool), np.empty(P), np.empty(P, dtype=np.int64)
+    for i in range(P):
+        if exact:
+            first[i], clear[i], _, _ = _check(
+                arr[i], float(max_travel), float(margin), True, *body.args(), body.lever, *scene.args()
+            )
+        else:
+            first[i], _ = _verdict(
+                arr[i],
+                float(max_travel),
+                float(margin),
+                *body.args(),
+                body.lever,
+                body.pair_lever,
+                *scene.args(),
+            )
+            clear[i] = np.nan
+        free[i] = first[i] < 0
+    return free, clear, first
+
+
+def first_free(
+    body: KernelBody,
+    paths,
+    scene: KernelScene,
+    order: Sequence[int] | np.ndarray | None = None,
+    max_travel: float = 0.01,
+    margin: float = 0.0,
+) -> int:
+    """The index of the first path in ``order`` (default 0, 1, …) that :func:`check_paths` finds
+    collision-free, or −1 if none is. ``order`` must hold distinct indices into ``paths`` (a
+    :class:`~kinlearn.errors.ConfigError` otherwise); it may leave paths out."""
+    _check_args(body, scene, max_travel, margin)
+    arr = _joints(paths, body.dof, "joint paths", 3)
+    P = arr.shape[0]
+    if order is None:
+        idx = np.arange(P, dtype=np.int64)
+    else:
+        idx = np.asarray(order)
+        if idx.ndim != 1 or (idx.size and idx.dtype.kind not in "iu"):
+            raise ConfigError(f"order must be a 1-D sequence of path indices, got {order!r}")
+        if idx.size and ((idx < 0).any() or (idx >= P).any() or np.unique(idx).shape[0] != idx.shape[0]):
+            raise ConfigError(f"order must hold distinct path indices in 0…{P - 1}, got {idx.tolist()}")
+        idx = np.ascontiguousarray(idx, dtype=np.int64)
+    if idx.shape[0] == 0:
+        return -1
+    return int(
+        _first_free(
+            arr,
+            idx,
+            float(max_travel),
+            float(margin),
+            *body.args(),
+            body.lever,
+            body.pair_lever,
+            *scene.args(),
+        )
+    )
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) every kernel now, on a tiny problem."""
+    from ..body.robot import load_robot
+    from .body import body_spheres
+
+    body = KernelBody(body_spheres(load_robot("iiwa14")).double())
+    scene = KernelScene(Scene.from_spheres([[0.5, 0.0, 0.5, 0.1]], floor=0.0))
+    path = np.zeros((1, 2, body.dof))
+    check_paths(body, path, scene)
+    first_free(body, path, scene)
+    clearances(body, scene, path[0])
+    centres(body, path[0])

@@ -1,0 +1,150 @@
+"""The compiled kernels held to torch: sphere FK, every kind of primitive's distance on random scenes
+(≤ 1e-9 m over more than 10,000 configurations), dense path checks with the verdicts, first
+collisions and clearances of check_path, and first_free over candidates; the planner's results on the
+committed held-out problems unchanged."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from kinlearn import load_robot
+from kinlearn.collision import (
+    Scene,
+    body_obstacle_distance,
+    body_spheres,
+    check_path,
+    self_collision_distance,
+)
+from kinlearn.collision import kernel as K
+from kinlearn.collision.geometry import Box, Cylinder, Sphere, rotation_from_quaternion
+from kinlearn.errors import ConfigError, NonFiniteError, ObstacleError, ShapeError
+
+TOL = 1e-9
+HELDOUT = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "obstacle_problems_heldout.npz"
+
+
+def random_scene(
+    rng: np.random.Generator, kinds=("sphere", "box", "cylinder"), n: int = 4, floor=True
+) -> Scene:
+    lo, hi = [0.2, -0.6, 0.1], [0.8, 0.6, 1.1]
+    prims = []
+    for _ in range(n):
+        kind = kinds[int(rng.integers(len(kinds)))]
+        R = rotation_from_quaternion(rng.normal(size=4))
+        c = rng.uniform(lo, hi)
+        if kind == "sphere":
+            prims.append(Sphere(c, rng.uniform(0.03, 0.15)))
+        elif kind == "box":
+            prims.append(Box(c, rng.uniform(0.02, 0.2, 3), R))
+        else:
+            prims.append(Cylinder(c, rng.uniform(0.02, 0.12), rng.uniform(0.03, 0.25), R))
+    return Scene.from_primitives(prims, floor=rng.uniform(-0.05, 0.2) if floor else None)
+
+
+@pytest.fixture(scope="module", params=["iiwa14", "panda", "ur5"])
+def arm(request):
+    robot = load_robot(request.param)
+    body = body_spheres(robot).double()
+    return robot, body, K.KernelBody(body)
+
+
+@pytest.mark.parametrize("kinds", [("sphere",), ("box",), ("cylinder",), ("sphere", "box", "cylinder")])
+def test_distances_match_torch_on_random_scenes(arm, kinds):
+    robot, body, kb = arm
+    rng = np.random.default_rng(len(kinds) + robot.dof)
+    worst, cases, signs = 0.0, 0, set()
+    for s in range(12):
+        scene = random_scene(rng, kinds, n=int(rng.integers(1, 8)), floor=bool(s % 2))
+        q = robot.sample(1000, torch.Generator().manual_seed(s), dtype=torch.float64)
+        d, sc, per = K.clearances(kb, K.KernelScene(scene), q.numpy(), per_sphere=True)
+        c = body(q)
+        dt, pt = body_obstacle_distance(c, body.radii, scene, per_sphere=True, floor_mask=body.floor_mask)
+        st = self_collision_distance(c, body.radii, body.pairs)
+        worst = max(
+            worst, np.abs(per - pt.numpy()).max(), np.abs(d - dt.numpy()).max(), np.abs(sc - st.numpy()).max()
+        )
+        cases += q.shape[0]
+        signs |= set(np.sign(d).tolist())
+    assert cases >= 10_000 and worst <= TOL and {-1.0, 1.0} <= signs
+    assert np.abs(K.centres(kb, q.numpy()) - c.numpy()).max() <= TOL
+
+
+def _random_paths(robot, n: int, knots: int, seed: int, spread: float = 0.6) -> np.ndarray:
+    mid = (robot.lower + robot.upper) / 2
+    gen = torch.Generator().manual_seed(seed)
+    pts = mid + spread * (robot.sample((n, knots), gen, dtype=torch.float64).numpy() - mid)
+    return np.ascontiguousarray(pts)
+
+
+def test_path_checks_match_check_path(arm):
+    robot, body, kb = arm
+    rng = np.random.default_rng(11)
+    frees = []
+    for s in range(4):
+        scene = random_scene(rng, n=int(rng.integers(1, 6)), floor=bool(s % 2))
+        ks = K.KernelScene(scene)
+        paths = _random_paths(robot, 16, int(rng.integers(2, 6)), seed=s, spread=0.1 + 0.1 * s)
+        ref = check_path(body, torch.from_numpy(paths), scene)
+        free, clear, first = K.check_paths(kb, paths, ks)
+        assert np.array_equal(free, ref.collision_free.numpy())
+        assert np.array_equal(first, ref.first_collision.numpy())
+        assert np.abs(clear - ref.clearance.numpy()).max() <= TOL
+        fast_free, _, fast_first = K.check_paths(kb, paths, ks, exact=False)  # skips what cannot collide
+        assert np.array_equal(fast_free, free) and np.array_equal(fast_first, first)
+        order = rng.permutation(len(paths))
+        expect = next((int(i) for i in order if free[i]), -1)
+        assert K.first_free(kb, paths, ks, order) == expect
+        margin = 0.03
+        ref_m = check_path(body, torch.from_numpy(paths), scene, margin=margin)
+        assert np.array_equal(
+            K.check_paths(kb, paths, ks, margin=margin, exact=False)[0], ref_m.collision_free.numpy()
+        )
+        frees += free.tolist()
+    assert 0 < sum(frees) < len(frees)
+
+
+def test_the_planners_verdicts_on_the_heldout_problems_are_unchanged():
+    """The NumPy check the shipped planner used and the kernel pick the same candidate on every problem."""
+    from kinlearn.collision import fast
+    from kinlearn.collision.problems import ProblemSet
+    from kinlearn.planning.planner import Planner
+
+    problems = ProblemSet.load(HELDOUT)
+    planner = Planner.default("iiwa14")
+    body = planner.body
+    kb, nb = K.KernelBody(body), fast.NumpyBody(body)
+    n = min(len(problems.start), 120)
+    for i in range(n):
+        start, goal, scene = problems.problem(i)
+        ef = planner._position(torch.stack((start, goal)).double().numpy())
+        rows, mask, floor = __import__("kinlearn").models.obstacle_path.scene_primitives(
+            scene, 1, torch.float64
+        )
+        paths, order = planner._proposals(
+            start.double().numpy()[None], ef[:1], goal.double().numpy()[None], ef[1:], rows, mask, floor, 0
+        )
+        a = K.first_free(kb, paths[0], K.KernelScene(scene), order[0], max_travel=0.01)
+        b = fast.first_free(nb, paths[0], fast.NumpyScene.from_scene(scene), order[0], max_travel=0.01)
+        assert a == b, i
+
+
+def test_typed_errors():
+    robot = load_robot("iiwa14")
+    kb = K.KernelBody(body_spheres(robot).double())
+    ks = K.KernelScene(Scene.from_spheres([[0.5, 0.0, 0.5, 0.1]]))
+    path = np.zeros((1, 3, 7))
+    with pytest.raises(ShapeError):
+        K.check_paths(kb, np.zeros((1, 3, 6)), ks)
+    with pytest.raises(NonFiniteError):
+        K.check_paths(kb, np.full((1, 3, 7), np.nan), ks)
+    with pytest.raises(ConfigError, match="max_travel"):
+        K.check_paths(kb, path, ks, max_travel=0.0)
+    with pytest.raises(ConfigError, match="distinct"):
+        K.first_free(kb, path, ks, order=[0, 0])
+    with pytest.raises(ObstacleError, match="one scene"):
+        K.KernelScene(Scene.stack([Scene(), Scene()]))
+    with pytest.raises(ObstacleError, match="KernelScene"):
+        K.check_paths(kb, path, Scene())
+    assert K.first_free(kb, path, ks, order=[]) == -1
