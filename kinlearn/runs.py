@@ -25,6 +25,8 @@ import json
 import os
 import shutil
 import socket
+import sys
+import threading
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -40,6 +42,7 @@ __all__ = [
     "LOCK_FILE",
     "META_KEYS",
     "Run",
+    "die_with_parent",
     "diff_configs",
     "open_run",
     "release_locks",
@@ -112,6 +115,33 @@ def release_locks() -> None:
 
 
 atexit.register(release_locks)
+
+
+def die_with_parent(parent: int) -> None:
+    """Make this (worker) process end when process ``parent`` ends, however it ends (``kill -9`` too):
+    on Linux the kernel kills it (``prctl(PR_SET_PDEATHSIG, SIGKILL)``); everywhere a daemon thread
+    checks twice a second that ``parent`` is still its parent. A worker pool's initializer
+    (``initializer=die_with_parent, initargs=(os.getpid(),)``): orphans would go on writing into a run
+    directory that a resumed run writes too."""
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            import signal
+
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:  # the parent ended before the above took hold
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="die-with-parent", daemon=True).start()
+
 
 #: The run record every command writes first.
 CONFIG_FILE = "config.json"

@@ -57,3 +57,40 @@ def test_a_command_holds_the_lock_while_it_runs_and_frees_it_after(tmp_path, cap
         other.wait()
     assert main(["babble", "--transitions", "100", "--walkers", "10", "--run-dir", str(run_dir)]) == 0
     assert (run_dir / "babbling.npz").is_file() and not (run_dir / LOCK_FILE).exists()
+
+
+_POOL = """
+import concurrent.futures as cf, multiprocessing as mp, os, time
+from kinlearn.runs import die_with_parent
+if __name__ == "__main__":
+    ctx = mp.get_context("spawn")
+    pool = cf.ProcessPoolExecutor(1, mp_context=ctx, initializer=die_with_parent, initargs=(os.getpid(),))
+    print(pool.submit(os.getpid).result(), flush=True)
+    pool.submit(time.sleep, 60)  # the worker busy, as a training job keeps it
+    time.sleep(60)
+"""
+
+
+def _running(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"  # a zombie has ended
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc"), reason="reads process states from /proc")
+def test_workers_die_with_their_parent_even_on_kill_9(tmp_path):
+    import signal
+
+    script = tmp_path / "pool.py"
+    script.write_text(_POOL)
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    worker = int(parent.stdout.readline())
+    assert _running(worker)
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 5.0  # the issue's bound: no worker alive 5 s after the parent
+    while _running(worker) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _running(worker)

@@ -33,6 +33,7 @@ from ..io import write_json
 from ..models.forward_inverse import fm_config, im_config
 from ..planning.baselines import cartesian_dls, joint_interpolation
 from ..planning.planner import Planner
+from ..runs import die_with_parent
 from ..training.forward_inverse import train_config, train_fm, train_im, train_im_distal, validate_models
 from ..training.imitation import train_imitation
 from ..training.tm import TMTrainConfig, tm_preset, train_tm
@@ -196,7 +197,11 @@ def _run_jobs(jobs: list[dict], workers: int, backend: str, progress: bool = Tru
     if workers <= 1:
         return [r for j in tqdm(jobs, desc="training jobs", disable=not progress) for r in _job(j)]
     ctx = torch.multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    # Workers end with this process, however it ends: orphans would race a resumed run.
+    pool_args = dict(
+        max_workers=workers, mp_context=ctx, initializer=die_with_parent, initargs=(os.getpid(),)
+    )
+    with cf.ProcessPoolExecutor(**pool_args) as pool:
         futures = [pool.submit(_job, j) for j in jobs]
         for _ in tqdm(
             cf.as_completed(futures), total=len(futures), desc="training jobs", disable=not progress
