@@ -142,7 +142,7 @@ def _unpack(x: torch.Tensor, n: int):
     return w / w.norm(dim=-1, keepdim=True), x[3 * n : 6 * n].reshape(n, 3), x[6 * n :]
 
 
-def _fit(model: ChainFM, theta, ef, delta: float, iterations: int, chunk: int = 8192) -> float:
+def _fit(model: ChainFM, theta, ef, delta: float, iterations: int, chunk: int = 16384) -> float:
     """Levenberg–Marquardt on the Huber loss of the residual norms / δ (iteratively reweighted least
     squares: weight min(1, δ / ‖r‖) per sample). The residuals' Jacobian in the 6n + 3 parameters is
     analytic (:func:`~kinlearn.models.chain.chain_parameter_jacobian`); the damping λ·I takes no step along the directions the data cannot
@@ -184,7 +184,7 @@ def _fit(model: ChainFM, theta, ef, delta: float, iterations: int, chunk: int = 
             x_new = x + step
             r_new, loss_new = evaluate(x_new)
             if loss_new < loss:
-                x, r, improved = x_new, r_new, float(loss - loss_new) > 1e-12 * float(loss)
+                x, r, improved = x_new, r_new, float(loss - loss_new) > 1e-9 * float(loss)
                 loss, lam = loss_new, lam / 3.0
                 break
             lam *= 8.0
@@ -390,6 +390,8 @@ def _identify(
     log = print if progress else (lambda *a, **k: None)
 
     report: dict = {"samples": n, "fit_samples": int(fit.numel()), "holdout_samples": n_val}
+    stages: dict[str, float] = {}
+    t_stage = time.perf_counter()
     if prior is not None:
         model = ChainFM.from_robot(prior)
         with torch.no_grad():
@@ -415,11 +417,13 @@ def _identify(
             for i in np.flatnonzero(radii < 1e-3):  # a joint that does not move the point here
                 centres[i] = tip
             cand = _chain_from(axes, centres, tip, ref, name, lo, hi)
-            loss = _fit(cand, th_fit, ef_fit, 1e-2, max(5, cfg.iterations // 3))
+            loss = _fit(cand, th_fit, ef_fit, 1e-2, max(3, cfg.iterations // 6))
             log(f"reference candidate: loss {loss:.4g}")
             if loss < best_loss:
                 best, best_loss = cand, loss
         model = best
+        stages["initialisation"] = time.perf_counter() - t_stage
+        t_stage = time.perf_counter()
         report["initialisation"] = (
             f"no prior: first MLP (median {mlp_err * 1e3:.2f} mm) swept into circles at "
             f"{cfg.references} reference configurations, the best kept"
@@ -434,6 +438,8 @@ def _identify(
     keep = r <= cfg.outlier_sigma * max(sigma, 1e-7) * 1.5382
     _fit(model, th_fit[keep], ef_fit[keep], max(3.0 * sigma, 1e-6), cfg.iterations)
     model.canonicalize()
+    stages["fit"] = time.perf_counter() - t_stage
+    log(f"robust fit: {stages['fit']:.1f} s")
     r = _residuals(model, th_fit, ef_fit).detach()
     sigma = _robust_scale(r[keep])
     report["outliers_dropped"] = int((~keep).sum())
@@ -455,6 +461,7 @@ def _identify(
     report["holdout_residual"] = _summary(rv)
     report["fit_residual"] = _summary(rf)
     report["seconds"] = time.perf_counter() - t_start
+    report["stage_seconds"] = stages
     model.eval()
     return Identification(model, report)
 
