@@ -26,3 +26,28 @@ def test_import_kinlearn_loads_no_torch():
     code = "import sys, kinlearn; print('torch' in sys.modules, 'numpy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["False", "False"]
+
+
+def test_kinlearn_help_answers_without_torch():
+    code = (
+        "import sys\n"
+        "from kinlearn.cli.main import main\n"
+        "try:\n"
+        "    main(['--help'])\n"
+        "except SystemExit as exc:\n"
+        "    assert exc.code == 0\n"
+        "print('torch' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "train-planner" in out and out.split()[-1] == "False"
+
+
+def test_the_light_help_is_the_full_parsers():
+    """`kinlearn --help` comes from a table (COMMANDS) so as not to import the commands: it must list what
+    the full parser holds, in its order, with the same help (add a new command to COMMANDS too)."""
+    from kinlearn.body.robot import BUILTIN_ROBOTS
+    from kinlearn.cli.common import OWN_ROBOTS
+    from kinlearn.cli.main import _top_level_parser, build_parser
+
+    assert _top_level_parser().format_help() == build_parser().format_help()
+    assert set(OWN_ROBOTS) == set(BUILTIN_ROBOTS)

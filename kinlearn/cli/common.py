@@ -11,14 +11,17 @@ import platform
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-
-import torch
+from typing import TYPE_CHECKING
 
 from .. import __version__
-from ..body.robot import available_robots
-from ..data.babbling import Transitions
-from ..io import file_sha256
-from ..runs import IGNORED_KEYS, Run, open_run
+
+if TYPE_CHECKING:  # imported where used: `kinlearn --help` answers without torch
+    from ..data.babbling import Transitions
+    from ..runs import Run
+
+#: kinlearn's own arms, named in the help without loading the robot registry (which imports torch);
+#: ``tests/test_lazy_imports.py`` holds it to ``kinlearn.body.robot.BUILTIN_ROBOTS``.
+OWN_ROBOTS = ("iiwa14", "panda", "ur5", "xarm7", "z1")
 
 __all__ = [
     "EXISTING_DIR",
@@ -135,6 +138,10 @@ OUTPUT_DIR = _path_type(_folder_problem, "a folder to write in")
 
 
 def _robot_name(text: str) -> str:
+    if text in OWN_ROBOTS:
+        return text
+    from ..body.robot import available_robots
+
     if text in available_robots() or (text.lower().endswith(".urdf") and Path(text).is_file()):
         return text
     raise argparse.ArgumentTypeError(
@@ -171,7 +178,7 @@ def add_command(
         "--robot",
         type=ROBOT,
         default="iiwa14",
-        help=f"robot name ({', '.join(available_robots())}) or a .urdf file",
+        help=f"robot name ({', '.join(OWN_ROBOTS)}, or one registered) or a .urdf file",
     )
     if seed:
         p.add_argument(
@@ -252,6 +259,10 @@ def open_command_run(
     writes nothing: call ``.begin()`` on the result once every other check has passed."""
     settle_run_dir(args)
     argv = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "run"}
+    import torch
+
+    from ..runs import IGNORED_KEYS, open_run
+
     versions = {"kinlearn": __version__, "torch": torch.__version__, "python": platform.python_version()}
     return open_run(
         args.run_dir,
@@ -268,4 +279,6 @@ def open_command_run(
 
 def file_identity(path: Path) -> dict:
     """An input file as a run records it: its path and its content hash (compared on --resume)."""
+    from ..io import file_sha256
+
     return {"path": str(path), "sha256": file_sha256(path)}

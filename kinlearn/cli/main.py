@@ -20,38 +20,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
-import torch
-
 from .. import __version__
-from ..data.babbling import BabblingConfig, babble, save_transitions
-from ..data.recorded import load_data
 from ..errors import ConfigError, KinlearnError
-from ..io import atomic_copy, atomic_write, read_json, write_json
-from ..runs import release_locks
-from ..models.forward_inverse import (
-    FM_PRESETS,
-    AnalyticFM,
-    AnalyticIM,
-    fm_config,
-    im_config,
-    load_fm,
-    load_im,
-)
-from ..training.forward_inverse import (
-    TrainResult,
-    format_validation_table,
-    train_config,
-    train_fm,
-    train_im,
-    train_im_distal,
-    validate_models,
-)
-from . import body, identify, planning, view
 from .common import (
     _SUBCOMMANDS,
     EXISTING_FILE,
@@ -69,6 +45,9 @@ from .common import (
     open_command_run,
     register_subcommand,
 )
+
+# The command's own modules import torch and the models where a command runs (inside its functions), so
+# that `kinlearn --help` answers without them (see COMMANDS).
 
 __all__ = ["SUBCOMMAND_MODULES", "build_parser", "main"]
 
@@ -119,7 +98,9 @@ def _add_babbling_options(p: argparse.ArgumentParser, transitions: int | None) -
     )
 
 
-def _babbling_config(args: argparse.Namespace, n: int) -> BabblingConfig:
+def _babbling_config(args: argparse.Namespace, n: int):
+    from ..data.babbling import BabblingConfig
+
     source = {}
     if getattr(args, "urdf", None) is not None:
         source = {"urdf": str(args.urdf), "ee_frame": args.ee_frame}
@@ -173,6 +154,8 @@ def _add_babble(sub) -> None:
 
 
 def _run_babble(args: argparse.Namespace) -> int:
+    from ..data.babbling import babble, save_transitions
+
     if (args.urdf is None) != (args.ee_frame is None):
         raise ConfigError("--urdf and --ee-frame go together: the URDF file and its end-effector link")
     cfg = dataclasses.replace(
@@ -196,6 +179,8 @@ def _run_babble(args: argparse.Namespace) -> int:
 
 
 def _add_train(sub, kind: str) -> None:
+    from ..models.forward_inverse import FM_PRESETS
+
     what = "forward" if kind == "fm" else "inverse"
     p = add_command(
         sub,
@@ -265,6 +250,20 @@ def _add_train(sub, kind: str) -> None:
 
 
 def _run_train(args: argparse.Namespace) -> int:
+    from ..data.babbling import babble
+    from ..data.recorded import load_data
+    from ..io import atomic_copy, write_json
+    from ..models.forward_inverse import FM_PRESETS, fm_config, im_config, load_fm
+    from ..training.forward_inverse import (
+        TrainResult,
+        format_validation_table,
+        train_config,
+        train_fm,
+        train_im,
+        train_im_distal,
+        validate_models,
+    )
+
     kind = args.kind
     # Every check first (configs, data, the frozen FM): nothing is written before they pass.
     widths = {}
@@ -367,6 +366,10 @@ def _add_validate(sub) -> None:
 
 
 def _run_validate(args: argparse.Namespace) -> int:
+    from ..io import atomic_write, read_json, write_json
+    from ..models.forward_inverse import AnalyticFM, AnalyticIM, load_fm, load_im
+    from ..training.forward_inverse import format_validation_table, validate_models
+
     if args.fm is None and args.im is None:
         raise KinlearnError("give --fm and/or --im (a checkpoint path or 'analytic')")
     fm = None
@@ -403,21 +406,97 @@ def _run_validate(args: argparse.Namespace) -> int:
 
 
 #: Modules holding further subcommands; each registers its commands with
-#: :func:`~kinlearn.cli.common.register_subcommand` (or has a ``register`` function added here).
-SUBCOMMAND_MODULES = (planning, body, identify, view)
+#: :func:`~kinlearn.cli.common.register_subcommand` (or has a ``register`` function added here). Imported
+#: when the full parser is built.
+SUBCOMMAND_MODULES = ("planning", "body", "identify", "view")
+
+#: Every command with its one-line help, in the parser's order: what ``kinlearn --help`` lists without
+#: importing the commands' modules (torch among them). ``tests/test_lazy_imports.py`` holds it to the
+#: full parser: a new command is added here too.
+COMMANDS = (
+    ("babble", "Motor babbling: write (s, a, s') transitions to babbling.npz."),
+    ("train-fm", "Train the learned forward model on babbling data; writes fm.pt and metrics.jsonl."),
+    ("train-im", "Train the learned inverse model on babbling data; writes im.pt and metrics.jsonl."),
+    ("validate", "Validate FM/IM checkpoints against the analytic robot on fresh babbling data."),
+    (
+        "make-endpoints",
+        "Draw [s(0), s(T)] endpoint pairs; writes endpoints_train.npz and endpoints_heldout.npz.",
+    ),
+    ("train-tm", "Train the trajectory model through the frozen FM and IM (Algorithm 1); writes tm.pt."),
+    (
+        "plan",
+        "Plan from a start to a goal and print how it went. Exit status 0 when every plan reaches its goal, 1 when one misses it (the table says by how much), 2 for bad input.",
+    ),
+    (
+        "train-planner",
+        "Train a joint-path TM (plans anywhere in the joint range, ends at the goal state) through a frozen FM, self-supervised; the run folder is a planner (tm.pt beside the fm.pt/im.pt it plans with).",
+    ),
+    (
+        "train-obstacle-planner",
+        "Train the obstacle-aware TM self-supervised through a frozen body model on generated scenes (tabletop, shelf, barrier; seeds apart from the benchmark's); writes tm_obstacles.pt. Copy it into a planner folder (or pass --planner) and plan(..., obstacles=...) uses it.",
+    ),
+    (
+        "model-error",
+        "Plan to held-out end-effector positions when the robot's model is wrong: kinlearn's planner (learned from the true robot) against model-based planners given a perturbed URDF, all judged by the true FK; writes model_error.json, model_error.md and model_error.png.",
+    ),
+    (
+        "reproduce",
+        "Run the whole pipeline and write results.md/results.json with the paper's tables and figures.",
+    ),
+    (
+        "export",
+        "Write a train-tm run's tm.pt and the fm.pt/im.pt it was trained through into one folder, without optimiser state: --out DIR, or --to-package for the planner shipped inside the package (checkpoints/<robot>).",
+    ),
+    (
+        "train-body",
+        "Learn the arm's collision body (joints -> sphere centres) from babbling; writes body.pt, metrics.jsonl and validation.json.",
+    ),
+    (
+        "identify",
+        "Identify a robot's kinematic chain from observed end-effector positions (calibration); writes chain.pt (a chain FM) and report.json (held-out residual).",
+    ),
+    (
+        "export-urdf",
+        "Write an identified chain (a run of `kinlearn identify`, or its chain.pt) as a URDF whose forward kinematics equal the chain's; checked through Pinocchio before it is written.",
+    ),
+    (
+        "view",
+        "Plan from a start to a goal and show the plan: in the browser (viser, on localhost, until Ctrl-C), or as a GIF with --gif. Exit status 0 when the plan reaches its goal, 1 when it misses it, 2 for bad input.",
+    ),
+)
 
 
 def _load_subcommand_modules() -> None:
-    for module in SUBCOMMAND_MODULES:
+    for name in SUBCOMMAND_MODULES:
+        module = importlib.import_module(f".{name}", __package__)
         register = getattr(module, "register", None)
         if register is not None and register not in _SUBCOMMANDS:
             register_subcommand(register)
 
 
+def _top_level_parser() -> argparse.ArgumentParser:
+    """The parser of ``kinlearn`` without its commands' options: answers ``--help`` and ``--version``."""
+    parser = argparse.ArgumentParser(
+        prog="kinlearn", description="Learn robot kinematics and trajectory planning from motor babbling."
+    )
+    parser.add_argument("--version", action="version", version=f"kinlearn {__version__}")
+    sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
+    for name, text in COMMANDS:
+        sub.add_parser(name, help=text, description=text)
+    return parser
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``kinlearn`` command; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if not argv or argv[0] in ("-h", "--help", "--version"):
+        _top_level_parser().parse_args(argv)  # prints and exits, without importing torch
     parser = build_parser()
     args = parser.parse_args(argv)  # bad options: a usage message and exit status 2
+    import torch
+
+    from ..runs import release_locks
+
     torch.set_num_threads(args.threads)
     try:
         return int(args.run(args) or 0)
