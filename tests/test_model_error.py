@@ -159,7 +159,9 @@ def test_evaluation_judges_with_the_true_robot():
 
 
 def test_sweep_table_and_figure(tmp_path):
-    results = model_error_sweep(levels=((0.0, 0.0), (0.05, 2.0)), n_goals=6, seeds=(0,), rrt=True)
+    results = model_error_sweep(
+        levels=((0.0, 0.0), (0.05, 2.0)), n_goals=6, seeds=(0,), rrt=True, calibration_samples=6000
+    )
     json.dumps(results)  # JSON-able
     first, last = (lv["planners"] for lv in results["levels"])
     assert set(first) == set(PLANNERS)
@@ -167,6 +169,8 @@ def test_sweep_table_and_figure(tmp_path):
     assert first["joint_interpolation"]["success"] == 1.0
     assert last["joint_interpolation"]["median"] > 1e-2
     assert last["rrt_connect"]["median"] == pytest.approx(last["joint_interpolation"]["median"], abs=1e-9)
+    # Calibrated from the true robot's noisy babbling, the wrong URDF is right again.
+    assert last["calibrated_ik"]["success"] == 1.0 and last["calibrated_ik"]["median"] < 1e-3
     table = model_error_table(results)
     assert table.count("| 5% / 2° |") == len(PLANNERS) and "†" in table
     png = plot_model_error(results, tmp_path / "model_error.png")
@@ -188,6 +192,7 @@ def test_model_error_command(tmp_path, capsys):
         "--seeds",
         "0",
         "--no-rrt",
+        "--no-calibrate",
         "--no-progress",
         "--run-dir",
         str(out),

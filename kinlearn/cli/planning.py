@@ -628,6 +628,17 @@ def _add_model_error(sub) -> None:
         "--seeds", type=_int_list(0), default=(0, 1, 2), help="perturbation seeds per level (default: 0,1,2)"
     )
     p.add_argument("--no-rrt", action="store_true", help="leave out RRT-Connect")
+    p.add_argument(
+        "--no-calibrate",
+        action="store_true",
+        help="leave out the believed URDFs calibrated from the true robot's babbling (kinlearn identify)",
+    )
+    p.add_argument(
+        "--calibration-samples",
+        type=POSITIVE_INT,
+        default=20_000,
+        help="babbled states (1 mm noise) each believed URDF is calibrated from (default: 20000)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_run_options(p, resumable=False)
 
@@ -651,6 +662,8 @@ def _run_model_error(args: argparse.Namespace) -> int:
             "n_goals": args.n_goals,
             "seeds": list(args.seeds),
             "rrt": not args.no_rrt,
+            "calibrate": not args.no_calibrate,
+            "calibration_samples": args.calibration_samples,
             "model": str(args.model),
         },
     )
@@ -662,6 +675,8 @@ def _run_model_error(args: argparse.Namespace) -> int:
         tuple(args.seeds),
         planner=planner,
         rrt=not args.no_rrt,
+        calibrate=not args.no_calibrate,
+        calibration_samples=args.calibration_samples,
         progress=not args.no_progress,
     )
     atomic_write(out / "model_error.json", lambda tmp: tmp.write_text(json.dumps(results, indent=1)))

@@ -62,13 +62,15 @@ DEFAULT_LEVELS: tuple[tuple[float, float], ...] = (
     (0.02, 1.0),
     (0.03, 1.5),
     (0.05, 2.0),
+    (0.10, 5.0),
 )
 
 #: Planners of the comparison, in table order: key → label. The first two are kinlearn's (they never
 #: see the believed model), the others are given the believed model.
 PLANNERS: dict[str, str] = {
     "kinlearn": "kinlearn planner (learned from babbling)",
-    "kinlearn_ik": "kinlearn goal joints (learned IM + FM)",
+    "kinlearn_ik": "kinlearn goal joints (learned models alone)",
+    "calibrated_ik": "DLS IK on the believed URDF calibrated from the same babbling",
     "cartesian_dls": "Cartesian line + DLS IK (believed model)",
     "joint_interpolation": "joint interpolation to DLS IK (believed model)",
     "rrt_connect": "RRT-Connect to DLS IK (believed model)",
@@ -460,6 +462,36 @@ def evaluate_believed(
     return out
 
 
+def _calibration_data(true_robot: Robot, n: int):
+    """``n`` babbled states of the true robot, the end effector observed with 1 mm Gaussian noise."""
+    from ..data.babbling import BabblingConfig, babble
+
+    walkers = min(1000, n)
+    cfg = BabblingConfig(
+        robot=true_robot.name,
+        walkers=walkers,
+        steps=-(-n // walkers),
+        seed=4242,
+        dtype="float64",
+        ef_noise=1e-3,
+    )
+    return babble(cfg, robot=true_robot)
+
+
+def _calibrated(true_robot: Robot, believed: Robot, q0: torch.Tensor, p: torch.Tensor, data) -> dict:
+    """The believed URDF calibrated from ``data`` (the true robot's noisy babbling), then DLS IK on it."""
+    from ..training.identify import identify
+
+    result = identify(data, robot=believed)
+    calibrated = Robot(f"{believed.name}-calibrated", result.urdf().encode(), "ee")
+    q = position_ik(calibrated, q0, p)
+    kin_c = kinematics(calibrated)
+    return {
+        "error": true_goal_error(true_robot, q[:, None], p),
+        "believed_error": torch.linalg.vector_norm(kin_c.position(q) - p, dim=-1),
+    }
+
+
 # --------------------------------------------------------------------------------------------------
 # The sweep
 # --------------------------------------------------------------------------------------------------
@@ -497,6 +529,8 @@ def model_error_sweep(
     range_fraction: float = 0.9,
     planner=None,
     rrt: bool = True,
+    calibrate: bool = True,
+    calibration_samples: int = 20_000,
     progress: bool = False,
 ) -> dict:
     """Goal error of every planner against the size of the model error (a JSON-able dict).
@@ -508,6 +542,11 @@ def model_error_sweep(
     ``(length_error, angle_error_deg)`` and each perturbation seed, the model-based planners get that
     believed robot; results are pooled over the seeds (``median``/``p95``/``mean`` in metres,
     ``success``: share within 1 cm), with each seed's own numbers under ``per_seed``.
+
+    ``calibrate``: the strongest model-based answer too — each believed URDF calibrated
+    (:func:`~kinlearn.training.identify.identify`, the believed URDF as prior) from
+    ``calibration_samples`` babbled states of the true robot observed with 1 mm noise, the same
+    kind of data kinlearn learns from, then DLS IK on the calibrated chain (``calibrated_ik``).
     """
     from ..planning.planner import Planner
     from .workspace import heldout_pairs
@@ -538,6 +577,7 @@ def model_error_sweep(
     from tqdm.auto import tqdm
 
     cache: dict[str, dict[str, dict[str, torch.Tensor]]] = {}
+    calib_data = _calibration_data(true_robot, calibration_samples) if calibrate else None
     jobs = [(lv, s) for lv in levels for s in seeds]
     results_levels = []
     runs_of: dict[tuple[float, float], list[tuple[int, dict]]] = {lv: [] for lv in levels}
@@ -547,6 +587,8 @@ def model_error_sweep(
         digest = hashlib.sha256(believed.urdf).hexdigest()
         if digest not in cache:  # zero error: every seed gives the same model
             cache[digest] = evaluate_believed(true_robot, believed, q0, p, seed=seed, rrt=rrt)
+            if calibrate:
+                cache[digest]["calibrated_ik"] = _calibrated(true_robot, believed, q0, p, calib_data)
         runs_of[(le, ae)].append((seed, cache[digest]))
     baseline_seconds = time.perf_counter() - t1
 

@@ -45,11 +45,12 @@ from ..errors import (
     ConfigError,
     DomainError,
     DomainWarning,
-    NoObstacleModelWarning,
     DTypeError,
+    NoObstacleModelWarning,
     ShapeError,
 )
 from ..io import load_checkpoint
+from ..models.chain import ChainFM, restart_fractions, solve_position
 from ..models.forward_inverse import ForwardModel, InverseModel, load_fm, load_im
 from ..models.joint_path import JointPathModel, load_path_model
 from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model, scene_primitives
@@ -84,6 +85,15 @@ MAX_STEP = 0.083
 ZERO_MOVE = 1e-9
 #: The most refinement steps a plan may take (each costs milliseconds: a bound on a plan's time).
 MAX_REFINE_STEPS = 10_000
+#: An identified chain's file in a planner folder (position goals are solved on it).
+CHAIN = "chain.pt"
+#: Position goals farther than this many of the chain's reaches from the base are refused.
+REACH_BOUND = 10.0
+#: The position solver's budget: damped least-squares steps from the start and from each restart.
+POSITION_ITERATIONS = 40
+POSITION_RESTARTS = 8
+#: The model error at which a position solution is taken as reaching its goal (m).
+POSITION_TOLERANCE = 2e-4
 #: The obstacle-aware TM's file in a planner folder.
 OBSTACLE_TM = "tm_obstacles.pt"
 
@@ -123,8 +133,14 @@ class Planner:
         obstacle_tm: ObstaclePathModel | None = None,
         body: BodySpheres | None = None,
         refine_steps: int = 0,
+        chain: ChainFM | None = None,
     ):
-        """``fm``/``im``: needed by a waypoint TM, and by any planner for end-effector position goals.
+        """``fm``/``im``: needed by a waypoint TM, and by a planner without ``chain`` for end-effector
+        position goals.
+
+        ``chain``: an identified chain FM (``kinlearn identify``): position goals are then solved on it
+        (:func:`~kinlearn.models.chain.solve_position`: projected damped least squares with fixed
+        restarts, within the joint limits, a fixed budget), instead of stepping the IM through the FM.
 
         ``obstacle_tm``: the obstacle-aware TM that plans when obstacles are given; ``body``: the arm's
         collision spheres its plans are checked with (default: the robot's analytic sphere model).
@@ -175,6 +191,21 @@ class Planner:
                 )
             obstacle_tm = obstacle_tm.eval().requires_grad_(False)
         self.obstacle_tm = obstacle_tm
+        if chain is not None:
+            if not isinstance(chain, ChainFM):
+                raise ConfigError(
+                    f"chain must be a ChainFM (see kinlearn identify), got {type(chain).__name__}"
+                )
+            if chain.robot_name != robot.name or chain.dof != robot.dof:
+                raise ConfigError(
+                    f"the chain was identified for {chain.robot_name!r} ({chain.dof} joints), the planner is "
+                    f"for {robot.name!r} ({robot.dof})"
+                )
+            chain = chain.eval().requires_grad_(False)
+            with torch.no_grad():  # how far the chain reaches, for refusing goals far beyond it
+                q = robot.sample(4096, torch.Generator().manual_seed(0), dtype=torch.float64)
+                self._chain_reach = float(chain.position(q).norm(dim=-1).max())
+        self.chain = chain
         self._np_obstacle_tm = NumpyObstacleModel(obstacle_tm) if obstacle_tm is not None else None
         self._body, self._body64 = body, None
         self.refine_steps = _check_steps(refine_steps)
@@ -218,6 +249,8 @@ class Planner:
             tm, sources = load_path_model(run_dir / "tm.pt", robot=name, with_dependencies=True)
             fm = load_fm(sources["fm"], robot=tm.robot_name) if "fm" in sources else None
             im = load_im(sources["im"], robot=tm.robot_name) if "im" in sources else None
+            if "chain" not in options and (run_dir / CHAIN).is_file():
+                options["chain"] = load_fm(run_dir / CHAIN, robot=tm.robot_name)
             if "obstacle_tm" not in options and (run_dir / OBSTACLE_TM).is_file():
                 options["obstacle_tm"] = load_obstacle_model(run_dir / OBSTACLE_TM, robot=tm.robot_name)
             return cls(_robot(robot, tm.robot_name), tm, fm, im, **options)
@@ -401,12 +434,13 @@ class Planner:
             joints, waypoints, ef = self._joint_path(theta0, ef0, thetaT, efT)
         else:
             joints, waypoints, ef = self._waypoint_rollout(theta0, ef0, thetaT, efT)
-        if not position:  # a move of zero plans as no motion, whatever the TM proposes
-            still = (np.abs(thetaT - theta0) <= ZERO_MOVE).all(-1)
-            if still.any():
-                joints[still] = theta0[still, None]
-                ef[still] = ef0[still, None]
-                waypoints[still] = ef0[still, None]
+        # A move of zero plans as no motion, whatever the TM proposes (a position goal the start
+        # already reaches keeps the start's joints).
+        still = (np.abs(thetaT - theta0) <= ZERO_MOVE).all(-1)
+        if still.any():
+            joints[still] = theta0[still, None]
+            ef[still] = ef0[still, None]
+            waypoints[still] = ef0[still, None]
         within = ((joints >= self._lo_tol) & (joints <= self._hi_tol)).all((-1, -2))
         single = batch == ()
 
@@ -430,16 +464,18 @@ class Planner:
             tolerance=self.tolerance,
             robot=self.robot.name,
         )
-        if np_dtype is not None and device.type == "cpu":
-            return plan
-        return dataclasses.replace(
-            plan,
-            **{
-                f: v.to(device=device, dtype=dtype if v.is_floating_point() else v.dtype)
-                for f in Plan._BATCHED
-                if (v := getattr(plan, f)) is not None
-            },
-        )
+        if not (np_dtype is not None and device.type == "cpu"):
+            plan = dataclasses.replace(
+                plan,
+                **{
+                    f: v.to(device=device, dtype=dtype if v.is_floating_point() else v.dtype)
+                    for f in Plan._BATCHED
+                    if (v := getattr(plan, f)) is not None
+                },
+            )
+        if plan.joints.dtype in (torch.float16, torch.bfloat16):  # rounding may cross a limit by 2e-3 rad
+            plan = dataclasses.replace(plan, joints=_inside(plan.joints, self._lo_np, self._hi_np))
+        return plan
 
     __call__ = plan
 
@@ -654,8 +690,56 @@ class Planner:
         return self
 
     @torch.no_grad()
+    def _solve_on_chain(self, theta0: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Goal joints for end-effector positions on the identified chain (the analytic FK only judges).
+
+        A start whose end effector the chain already puts on the goal keeps its joints (a move of zero);
+        goals farther than :data:`REACH_BOUND` reaches are a :class:`DomainError`.
+        """
+        chain = self.chain
+        far = np.linalg.norm(target, axis=-1) > REACH_BOUND * self._chain_reach
+        if far.any():
+            k = int(np.argmax(far))
+            raise DomainError(
+                f"goal_position {target[k].tolist()} lies {np.linalg.norm(target[k]):.4g} m from the base; "
+                f"{self.robot.name} reaches about {self._chain_reach:.3g} m, and goals beyond "
+                f"{REACH_BOUND:g}× that are refused (they cannot be reached)"
+            )
+        if chain.residual is None:
+            from ..models.chain_kernel import solve_position_numba
+
+            seeds = getattr(self, "_chain_seeds", None)
+            if seeds is None:
+                fractions = restart_fractions(POSITION_RESTARTS - 1, self.robot.dof).numpy()
+                seeds = self._chain_seeds = self._lo_np + (self._hi_np - self._lo_np) * fractions
+            thetaT, _ = solve_position_numba(
+                *chain.kernel_arrays(),
+                theta0,
+                target,
+                self._lo_np,
+                self._hi_np,
+                seeds,
+                iterations=POSITION_ITERATIONS,
+                damping=1e-3,
+                tolerance=POSITION_TOLERANCE,
+            )
+        else:
+            th, _ = solve_position(
+                chain,
+                torch.from_numpy(theta0),
+                torch.from_numpy(target),
+                self._lo,
+                self._hi,
+                iterations=POSITION_ITERATIONS,
+                restarts=POSITION_RESTARTS,
+                tolerance=POSITION_TOLERANCE,
+            )
+            thetaT = th.numpy()
+        return thetaT
+
     def _reach_position(self, theta0: np.ndarray, ef0: np.ndarray, target: np.ndarray) -> np.ndarray:
-        """Goal joints for end-effector positions, found with the learned IM and FM alone.
+        """Goal joints for end-effector positions: on the identified chain when the planner has one
+        (:meth:`_solve_on_chain`), else found with the learned IM and FM alone.
 
         The end effector is stepped along the straight line from ef(0) to the target in steps of at
         most 2 cm, then held at the target for 10 more steps; each action is the IM's, corrected once
@@ -663,10 +747,12 @@ class Planner:
         joint limits; the end effector of each new state is the FM's. The analytic FK is not used:
         it only judges the result (``plan.goal_error``).
         """
+        if self.chain is not None:
+            return self._solve_on_chain(theta0, target)
         if self.fm is None or self.im is None:
             raise ConfigError(
-                "this planner has no FM and IM, which an end-effector position goal needs; give joint goals "
-                "or load a planner folder holding fm.pt and im.pt"
+                "this planner has no chain and no FM and IM, which an end-effector position goal needs; give "
+                "joint goals or load a planner folder holding chain.pt (kinlearn identify) or fm.pt and im.pt"
             )
         dtype = next(self.im.parameters(), torch.empty(0)).dtype
         theta, e0, p = (torch.tensor(a, dtype=dtype) for a in (theta0, ef0, target))
@@ -685,6 +771,19 @@ class Planner:
             e = self.fm(s, nxt - theta)[..., self.layout.ef]
             theta = nxt
         return theta.double().numpy()
+
+
+def _inside(joints: torch.Tensor, lo: np.ndarray, hi: np.ndarray) -> torch.Tensor:
+    """``joints (..., K, dof)`` of a half-precision plan with its interior configurations clamped to the
+    limits rounded inward in that precision (the plan was judged within the limits in float64; its start
+    and goal are the caller's own values, kept)."""
+    lo_t, hi_t = (torch.from_numpy(b).to(device=joints.device, dtype=joints.dtype) for b in (lo, hi))
+    lo64, hi64 = (torch.from_numpy(b).to(joints.device) for b in (lo, hi))
+    lo_t = torch.where(lo_t.double() < lo64, torch.nextafter(lo_t, hi_t), lo_t)
+    hi_t = torch.where(hi_t.double() > hi64, torch.nextafter(hi_t, lo_t), hi_t)
+    out = joints.clone()
+    out[..., 1:-1, :] = torch.minimum(torch.maximum(out[..., 1:-1, :], lo_t), hi_t)
+    return out
 
 
 def _halve_segments(paths: np.ndarray) -> np.ndarray:
