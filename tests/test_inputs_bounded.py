@@ -341,3 +341,17 @@ def test_obstacles_and_floors_must_be_real_numbers():
         with pytest.raises(ObstacleError, match="floor"):
             Scene(torch.tensor([[3.0, 3.0, 3.0, 0.1]]), floor=floor)
     assert Scene(torch.tensor([[3.0, 3.0, 3.0, 0.1]]), floor=np.float32(0.0)).floor is not None
+
+
+@pytest.mark.parametrize("dtype", [torch.bfloat16, torch.float16])
+def test_half_precision_plans_stay_within_the_limits_they_are_judged_by(robot, dtype):
+    """Joints clamped to a limit in float64 rounded past it in bfloat16 (by 1.7e-3 rad) with success True."""
+    g = torch.Generator().manual_seed(1)
+    lo, hi = robot.limits(torch.float64)
+    s = robot.sample(400, g, dtype=torch.float64, margin=0.01)
+    e = robot.sample(400, g, dtype=torch.float64, margin=0.01)
+    s[::2, 2], e[::3, 2] = hi[2] - 0.01, lo[2] + 0.01  # paths that run into joint 3's limits
+    plan = kinlearn.plan(s.to(dtype), e.to(dtype))
+    assert plan.joints.dtype == dtype
+    joints = plan.joints.double()
+    assert bool(((joints >= lo) & (joints <= hi)).all())
