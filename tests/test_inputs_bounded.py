@@ -348,9 +348,9 @@ def test_half_precision_plans_stay_within_the_limits_they_are_judged_by(robot, d
     """Joints clamped to a limit in float64 rounded past it in bfloat16 (by 1.7e-3 rad) with success True."""
     g = torch.Generator().manual_seed(1)
     lo, hi = robot.limits(torch.float64)
-    s = robot.sample(400, g, dtype=torch.float64, margin=0.01)
-    e = robot.sample(400, g, dtype=torch.float64, margin=0.01)
-    s[::2, 2], e[::3, 2] = hi[2] - 0.01, lo[2] + 0.01  # paths that run into joint 3's limits
+    s = robot.sample(100, g, dtype=torch.float64, margin=0.01)
+    e = robot.sample(100, g, dtype=torch.float64, margin=0.01)
+    s[:, 0] = e[:, 0] = hi[0] - 0.01  # paths that run into joint 1's limit (a quarter crossed it before)
     plan = kinlearn.plan(s.to(dtype), e.to(dtype))
     assert plan.joints.dtype == dtype
     joints = plan.joints.double()
