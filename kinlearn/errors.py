@@ -104,5 +104,11 @@ class NoObstacleModelWarning(UserWarning):
     from the straight joint line and bounded refinement alone (its ``collision_free`` says how it went)."""
 
 
+class UnverifiedCheckpointWarning(UserWarning):
+    """A checkpoint of format 1, which carries no content hash: it loads, but tampering or corruption of its
+    weights cannot be detected. Save it again (it then records its hash), or load with ``strict=True``
+    to refuse it."""
+
+
 class DomainWarning(UserWarning):
     """A start or goal outside the domain the planner was trained on: its plan may be poor."""

@@ -19,6 +19,7 @@ import hashlib
 import json
 import os
 import shutil
+import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -26,7 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from .errors import CheckpointError, DatasetError, OutputError
+from .errors import CheckpointError, DatasetError, OutputError, UnverifiedCheckpointWarning
 
 __all__ = [
     "CHECKPOINT_FORMAT",
@@ -293,10 +294,13 @@ def half_weights(state_dict: Mapping[str, torch.Tensor]) -> dict[str, torch.Tens
     }
 
 
-def load_checkpoint(path: str | Path, *, kind: str | None, robot: str | None = None) -> dict:
+def load_checkpoint(
+    path: str | Path, *, kind: str | None, robot: str | None = None, strict: bool = False
+) -> dict:
     """Load and check a checkpoint: it must exist, be readable, of a known format, ``kind`` (``None``:
-    any) and ``robot`` (``None``: any), and its content must match its hash (format 2; format 1 files
-    carry none and load unverified). Raises :class:`~kinlearn.CheckpointError` naming what is wrong."""
+    any) and ``robot`` (``None``: any), and its content must match its hash (format 2). Format 1 files
+    carry no hash: they load with an :class:`~kinlearn.errors.UnverifiedCheckpointWarning`, or are refused
+    with ``strict=True``. Raises :class:`~kinlearn.CheckpointError` naming what is wrong."""
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"no checkpoint file at {path}")
@@ -313,7 +317,15 @@ def load_checkpoint(path: str | Path, *, kind: str | None, robot: str | None = N
             f"{path} has checkpoint format {payload['format']}; this kinlearn reads formats "
             f"{', '.join(map(str, READABLE_CHECKPOINT_FORMATS))} (a newer kinlearn wrote it?)"
         )
-    if payload["format"] >= 2:
+    if payload["format"] < 2:
+        msg = (
+            f"{path} is a format-{payload['format']} checkpoint, which records no content hash: its weights "
+            "cannot be verified; save it again to record one"
+        )
+        if strict:
+            raise CheckpointError(msg + " (refused: strict=True)")
+        warnings.warn(msg, UnverifiedCheckpointWarning, stacklevel=2)
+    else:
         stored = payload.pop("sha256", None)
         actual = content_sha256(payload)
         if stored != actual:

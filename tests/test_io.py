@@ -13,7 +13,7 @@ import kinlearn
 from kinlearn import CheckpointError, ConfigError, ShapeError, UnknownRobotError
 from kinlearn.data.babbling import BabblingConfig, babble
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
-from kinlearn.errors import DTypeError
+from kinlearn.errors import DTypeError, UnverifiedCheckpointWarning
 from kinlearn.io import (
     CHECKPOINT_FORMAT,
     atomic_write,
@@ -67,7 +67,12 @@ def test_format_1_still_loads_and_unknown_formats_are_refused(tmp_path):
     model = LearnedFM(fm_config("iiwa14", "tiny"))
     old = {"format": 1, "kind": "fm", "robot": "iiwa14", "config": {}, "state_dict": model.state_dict()}
     torch.save(old, tmp_path / "v1.pt")
-    assert load_checkpoint(tmp_path / "v1.pt", kind="fm")["depends"] == {}
+    with pytest.warns(UnverifiedCheckpointWarning, match="cannot be verified"):
+        assert load_checkpoint(tmp_path / "v1.pt", kind="fm")["depends"] == {}
+    old["state_dict"][next(iter(old["state_dict"]))] += 1.0  # tampered: nothing can tell, so it warns
+    torch.save(old, tmp_path / "v1.pt")
+    with pytest.raises(CheckpointError, match="strict"):
+        load_checkpoint(tmp_path / "v1.pt", kind="fm", strict=True)
     torch.save({**old, "format": 99}, tmp_path / "v99.pt")
     with pytest.raises(CheckpointError, match="format 99"):
         load_checkpoint(tmp_path / "v99.pt", kind="fm")
