@@ -285,9 +285,14 @@ def open_run(
     record = {"command": command, **_plain(dict(config)), **_plain(dict(meta or {}))}
     record = record if write_config else None
     held = [n for n in ((CONFIG_FILE,) if write_config else ()) + outputs if (path / n).exists()]
+    stored, stored_command = _recorded_command(path)
+    if stored_command is not None and stored_command != command and not held:
+        # another kind of run, none of whose files this command would touch: still not this command's
+        raise RunDirectoryError(
+            f"{path} holds a {stored_command} run ({CONFIG_FILE}), not a {command} run; choose another {option}"
+        )
     if not held:
         return Run(path, command, "new", outputs, record)
-    stored, stored_command = _recorded_command(path)
     what = f"a {stored_command} run" if stored_command else f"the outputs of an earlier {command}"
     held_text = ", ".join(held)
     if stored_command is not None and stored_command != command:

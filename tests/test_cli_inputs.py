@@ -80,3 +80,21 @@ def test_train_planner_reports_divergence_as_the_other_trainers_do(tmp_path, cap
     err = capsys.readouterr().err
     assert "kinlearn train-planner: error: joint-path TM training diverged" in err
     assert "lower the learning rate" in err and "Traceback" not in err
+
+
+def test_export_refuses_another_kind_of_run_and_a_partial_export_is_refused_on_load(tmp_path, capsys):
+    from kinlearn.errors import CheckpointError
+    from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
+
+    babble = tmp_path / "babble"
+    assert main(["babble", "--transitions", "100", "--walkers", "10", "--run-dir", str(babble)]) == 0
+    shipped = str(DEFAULT_CHECKPOINTS / "iiwa14")
+    assert main(["export", "--model", shipped, "--out", str(babble)]) == 2  # it wrote a planner there before
+    assert "holds a babble run" in capsys.readouterr().err
+    assert not (babble / "tm.pt").exists()
+    out = tmp_path / "planner"
+    assert main(["export", "--model", shipped, "--out", str(out)]) == 0
+    assert Planner.load(out).obstacle_tm is not None
+    (out / "tm_obstacles.pt").unlink()  # as an export killed while writing it leaves the folder
+    with pytest.raises(CheckpointError, match="obstacle_tm"):
+        Planner.load(out)

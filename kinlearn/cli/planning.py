@@ -847,21 +847,23 @@ def _run_export(args: argparse.Namespace) -> int:
             config=payload["config"],
             state_dict=weights(payload["state_dict"]),
         )
+    depends = {kind: out / f"{kind}.pt" for kind in sources}
+    if (args.model / "tm_obstacles.pt").is_file():  # before tm.pt, which records it
+        from ..models.obstacle_path import export_obstacle_model
+
+        export_obstacle_model(args.model / "tm_obstacles.pt", out / "tm_obstacles.pt", half=args.half)
+        depends["obstacle_tm"] = out / "tm_obstacles.pt"
     config = tm_payload["config"]
     if tm_payload["kind"] == "tm":  # the model's own config (older runs stored the training config)
         config = {k: config[k] for k in MODEL_FIELDS if k in config}
-    save_checkpoint(  # last: it records the exported fm.pt/im.pt by hash
+    save_checkpoint(  # last: it records the exported models by hash, so a partial export has no tm.pt
         out / "tm.pt",
         kind=tm_payload["kind"],
         robot=tm_payload["robot"],
         config=config,
         state_dict=weights(tm_payload["state_dict"]),
-        depends={kind: out / f"{kind}.pt" for kind in sources},
+        depends=depends,
     )
-    if (args.model / "tm_obstacles.pt").is_file():
-        from ..models.obstacle_path import export_obstacle_model
-
-        export_obstacle_model(args.model / "tm_obstacles.pt", out / "tm_obstacles.pt", half=args.half)
     Planner.load(out, robot=planner.robot.name)  # the exported folder loads on its own
     print(f"exported the planner of {args.model} to {out}")
     return 0
