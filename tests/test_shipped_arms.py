@@ -16,6 +16,7 @@ from kinlearn.errors import CheckpointError, ConfigError
 from kinlearn.evaluation.metrics import plan_metrics
 from kinlearn.evaluation.workspace import evaluate_workspace, heldout_pairs
 from kinlearn.io import load_checkpoint
+from kinlearn.models.chain import ChainFM
 from kinlearn.models.forward_inverse import load_fm, load_im
 from kinlearn.planning.baselines import JointInterpolation
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
@@ -181,3 +182,23 @@ def test_view_refuses_bad_input(tmp_path):
     assert not args.gif.exists()
     with pytest.raises(SystemExit):
         parser.parse_args(["view", "--robot", "z1", "--start", "0,0,0,0,0,0", "--goal", "0,0", "--port", "0"])
+
+
+def test_shipped_chain_reaches_held_out_positions(shipped):
+    """Position goals through the arm's identified chain (learned from 1 mm-noisy babbling, no URDF):
+    within 1 cm on held-out pairs, the analytic FK judging; the chain is the arm's and nobody else's."""
+    planner, _ = shipped
+    robot = planner.robot
+    assert isinstance(planner.chain, ChainFM) and planner.chain.robot_name == robot.name
+    payload = load_checkpoint(DEFAULT_CHECKPOINTS / robot.name / "chain.pt", kind="fm", robot=robot.name)
+    assert payload["extra"]["report"]["initialisation"].startswith("no prior")
+    pairs = heldout_pairs(robot, n=200)
+    plan = kinlearn.plan(
+        pairs.start[:, : robot.dof], goal_position=pairs.goal[:, robot.dof :], robot=robot.name
+    )
+    err = plan.goal_error.double()
+    assert float((err <= 0.01).double().mean()) >= 0.99 and float(err.median()) <= 1e-3
+    assert bool(robot.within_limits(plan.joints.double()).all())  # float32 joints: 1e-6 rad of rounding
+    other = next(n for n in ALL_ROBOTS if n != robot.name and load_robot(n).dof == robot.dof)
+    with pytest.raises(CheckpointError):
+        load_fm(DEFAULT_CHECKPOINTS / robot.name / "chain.pt", robot=other)
