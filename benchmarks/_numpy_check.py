@@ -1,4 +1,9 @@
-"""Dense path checks in NumPy for planning at batch 1: the answers of :func:`check_path`, fast.
+"""The NumPy dense path check the planner used at batch 1 before the compiled kernel
+(``kinlearn.collision.kernel``) replaced it: kept here, outside the package, only as the baseline that
+``dense_check_speed.py`` times the kernel against in the same run. It reads spheres and axis-aligned
+boxes only.
+
+Dense path checks in NumPy for planning at batch 1: the answers of :func:`check_path`, fast.
 
 A planner that proposes a handful of candidate joint paths for one scene must pick a collision-free one
 within a fraction of a millisecond. Through torch every small operation costs microseconds of dispatch,
@@ -46,10 +51,10 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from ..body.kinematics import _z_to_axis
-from ..errors import ConfigError, DTypeError, NonFiniteError, ObstacleError, ShapeError
-from .body import BodySpheres
-from .scene import Scene
+from kinlearn.body.kinematics import _z_to_axis
+from kinlearn.collision.body import BodySpheres
+from kinlearn.collision.scene import Scene
+from kinlearn.errors import ConfigError, DTypeError, NonFiniteError, ObstacleError, ShapeError
 
 __all__ = ["GRID", "NumpyBody", "NumpyScene", "check_paths", "first_free"]
 

@@ -1,6 +1,7 @@
 """Speed of the collision layer on one CPU thread: sphere centres, body–scene and self-collision
-distances at large batches, a single-configuration check, and dense path checks; then the NumPy path
-check of a planner at batch 1 (one benchmark scene, 1 or 8 candidate paths) against torch's check_path.
+distances at large batches, a single-configuration check, and dense path checks; then the batch-1 path
+check of a planner at batch 1 (the compiled kernel; one benchmark scene, 1 or 8 candidate paths) against
+torch's check_path.
 
     python benchmarks/collision_speed.py [--batch 100000] [--threads 1] [--problems 20] [--batch1-only]
 
@@ -24,17 +25,14 @@ from _common import header, markdown_table, time_call
 
 from kinlearn import load_robot
 from kinlearn.collision import (
-    NumpyBody,
-    NumpyScene,
     Scene,
     body_obstacle_distance,
     body_spheres,
     check_path,
-    check_paths,
-    first_free,
     in_collision,
     self_collision_distance,
 )
+from kinlearn.collision.kernel import KernelBody, KernelScene, check_paths, first_free
 from kinlearn.collision.problems import ProblemSet
 
 HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"
@@ -45,7 +43,7 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=100_000)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--problems", type=int, default=20, help="benchmark scenes of the batch-1 section")
-    ap.add_argument("--batch1-only", action="store_true", help="only the batch-1 NumPy path check")
+    ap.add_argument("--batch1-only", action="store_true", help="only the batch-1 compiled path check")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     print(header("collision speed (iiwa14)", args.threads))
@@ -129,9 +127,9 @@ def _candidates(start: torch.Tensor, goal: torch.Tensor, n: int, seed: int) -> n
 
 
 def _time_problem(body, nbody, paths: np.ndarray, scene: Scene) -> tuple[float, ...]:
-    """Median wall times (s) of the NumPy checks of 1 and 8 paths, first_free of 8, and torch's check_path
-    of 1 and 8 paths, on one scene."""
-    ns = NumpyScene.from_scene(scene)
+    """Median wall times (s) of the kernel's checks of 1 and 8 paths, first_free of 8, and torch's
+    check_path of 1 and 8 paths, on one scene."""
+    ns = KernelScene(scene)
     one, t_paths = paths[:1], torch.as_tensor(paths)
     return (
         time_call(lambda: check_paths(nbody, one, ns), repeats=100),
@@ -143,9 +141,9 @@ def _time_problem(body, nbody, paths: np.ndarray, scene: Scene) -> tuple[float, 
 
 
 def batch_one(robot, n_problems: int) -> None:
-    """Batch 1 as a planner sees it: one scene, 1 or 8 candidate 11-knot paths; NumPy vs torch."""
+    """Batch 1 as a planner sees it: one scene, 1 or 8 candidate 11-knot paths; the kernel vs torch."""
     body = body_spheres(robot).double()
-    nbody = NumpyBody(body)
+    nbody = KernelBody(body)
     problems = ProblemSet.load(HELDOUT)
     step = max(1, len(problems) // n_problems)
     names = (
@@ -162,9 +160,7 @@ def batch_one(robot, n_problems: int) -> None:
         paths = _candidates(start, goal, 8, seed=i)
         for name, t in zip(names, _time_problem(body, nbody, paths, scene), strict=True):
             times[name].append(t)
-        ns = NumpyScene.from_scene(scene)
-        arrays = (ns.spheres, ns.boxes, ns.floor)
-        scene_build.append(time_call(lambda a=arrays: NumpyScene(*a, validate=False), repeats=200))
+        scene_build.append(time_call(lambda scene=scene: KernelScene(scene), repeats=200))
         checked.append(int(check_path(body, torch.as_tensor(paths[:1]), scene).checked))
     med = statistics.median
     reference = {"check_paths, 1 path": "torch, 1 path", "check_paths, 8 paths": "torch, 8 paths"}
@@ -185,7 +181,7 @@ def batch_one(robot, n_problems: int) -> None:
             ]
         )
     print(
-        f"\nNumPy path check at batch 1: {n_problems} held-out problems (every {step}th), float64, each a "
+        f"\nCompiled path check at batch 1: {n_problems} held-out problems (every {step}th), float64, each a "
         f"straight 11-knot joint line and 7 bent copies; torch check_path on the same paths (median "
         f"{med(checked)} checked configurations per straight line). Median over problems of each one's "
         f"median wall time; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores."
@@ -194,8 +190,8 @@ def batch_one(robot, n_problems: int) -> None:
         markdown_table(
             [
                 "call",
-                "NumPy median (µs)",
-                "NumPy worst (µs)",
+                "kernel median (µs)",
+                "kernel worst (µs)",
                 "torch check_path (µs)",
                 "speed-up",
                 "target (µs)",
@@ -203,7 +199,7 @@ def batch_one(robot, n_problems: int) -> None:
             rows,
         )
     )
-    print(f"NumpyScene from arrays: {1e6 * med(scene_build):.1f} µs")
+    print(f"KernelScene from a Scene: {1e6 * med(scene_build):.1f} µs")
 
 
 if __name__ == "__main__":

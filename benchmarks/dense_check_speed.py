@@ -1,5 +1,5 @@
 """The batch-1 dense path check: the compiled kernel (kinlearn.collision.kernel) against the NumPy check
-(kinlearn.collision.fast) that the planner used before, timed in the same run on one thread.
+(benchmarks/_numpy_check.py) that the planner used before, timed in the same run on one thread.
 
     python benchmarks/dense_check_speed.py [--paths 200] [--repeats 20] [--threads 1]
 
@@ -25,13 +25,13 @@ import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import _numpy_check as numpy_check
 import numpy as np
 import torch
 from _common import header, markdown_table
 
 from kinlearn import load_robot
 from kinlearn.collision import Scene, body_spheres
-from kinlearn.collision import fast as numpy_check
 from kinlearn.collision.geometry import Box, Cylinder, Sphere, rotation_from_quaternion
 
 CHECK_TRAVEL = 0.01

@@ -106,28 +106,29 @@ def test_path_checks_match_check_path(arm):
 
 
 def test_the_planners_verdicts_on_the_heldout_problems_are_unchanged():
-    """The NumPy check the shipped planner used and the kernel pick the same candidate on every problem."""
-    from kinlearn.collision import fast
+    """On the committed held-out problems the kernel picks the candidate torch's check_path picks (the
+    first collision-free one in the planner's order), as the NumPy check before it did."""
     from kinlearn.collision.problems import ProblemSet
+    from kinlearn.models.obstacle_path import scene_primitives
     from kinlearn.planning.planner import Planner
 
     problems = ProblemSet.load(HELDOUT)
     planner = Planner.default("iiwa14")
     body = planner.body
-    kb, nb = K.KernelBody(body), fast.NumpyBody(body)
-    n = min(len(problems.start), 120)
-    for i in range(n):
+    kb = K.KernelBody(body)
+    found = 0
+    for i in range(0, len(problems.start), 5):
         start, goal, scene = problems.problem(i)
         ef = planner._position(torch.stack((start, goal)).double().numpy())
-        rows, mask, floor = __import__("kinlearn").models.obstacle_path.scene_primitives(
-            scene, 1, torch.float64
-        )
+        rows, mask, floor = scene_primitives(scene, 1, torch.float64)
         paths, order = planner._proposals(
             start.double().numpy()[None], ef[:1], goal.double().numpy()[None], ef[1:], rows, mask, floor, 0
         )
-        a = K.first_free(kb, paths[0], K.KernelScene(scene), order[0], max_travel=0.01)
-        b = fast.first_free(nb, paths[0], fast.NumpyScene.from_scene(scene), order[0], max_travel=0.01)
-        assert a == b, i
+        free = check_path(body, torch.from_numpy(paths[0]), scene, max_travel=0.01).collision_free.numpy()
+        expect = next((int(k) for k in order[0] if free[k]), -1)
+        assert K.first_free(kb, paths[0], K.KernelScene(scene), order[0], max_travel=0.01) == expect, i
+        found += expect >= 0
+    assert found > 0
 
 
 def test_typed_errors():

@@ -1,6 +1,7 @@
 """Collision geometry for obstacle-aware planning: the arm's body as spheres, obstacle scenes of typed
 primitives (spheres, oriented boxes, cylinders, a floor; MoveIt scenes in and out), batched
-differentiable signed distances, dense path checks and a benchmark problem generator.
+differentiable signed distances, dense path checks and a benchmark problem generator. The compiled
+batch-1 kernels are :mod:`kinlearn.collision.kernel` (imported on its own: it loads numba).
 
 Imports only from the robot, kinematics, errors and io layers.
 """
@@ -16,7 +17,6 @@ from .distance import (
     sphere_plane_distance,
     sphere_sphere_distance,
 )
-from .fast import NumpyBody, NumpyScene, check_paths, first_free
 from .geometry import KINDS, Box, Cylinder, Plane, Primitive, Sphere
 from .scene import Scene
 
@@ -25,8 +25,6 @@ __all__ = [
     "BodySpheres",
     "Box",
     "Cylinder",
-    "NumpyBody",
-    "NumpyScene",
     "PathCheck",
     "Plane",
     "Primitive",
@@ -35,10 +33,8 @@ __all__ = [
     "body_obstacle_distance",
     "body_spheres",
     "check_path",
-    "check_paths",
     "clearances",
     "cover_cylinder",
-    "first_free",
     "in_collision",
     "segment_steps",
     "self_collision_distance",

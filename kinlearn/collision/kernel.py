@@ -28,6 +28,7 @@ over the evaluated configurations) needs ``exact=True``.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Sequence
 
 import numba
@@ -438,9 +439,19 @@ class KernelBody:
 
 class KernelScene:
     """One (unbatched) :class:`Scene` packed for the kernels: a float64 table per kind, padding dropped,
-    and ``floor = [has floor, height]``."""
+    and ``floor = [has floor, height]``. :meth:`of` packs a scene once and reuses it (scenes are
+    immutable)."""
 
-    __slots__ = ("boxes", "cylinders", "floor", "spheres")
+    __slots__ = ("__weakref__", "boxes", "cylinders", "floor", "spheres")
+
+    @classmethod
+    def of(cls, scene: Scene) -> KernelScene:
+        """The packed ``scene``, made on the first call for that scene object and kept while it lives."""
+        hit = _PACKED.get(scene) if isinstance(scene, Scene) else None
+        if hit is None:
+            hit = cls(scene)
+            _PACKED[scene] = hit
+        return hit
 
     def __init__(self, scene: Scene):
         if not isinstance(scene, Scene):
@@ -464,6 +475,10 @@ class KernelScene:
             f"KernelScene(spheres={len(self.spheres)}, boxes={len(self.boxes)}, cylinders={len(self.cylinders)}, "
             f"floor={'none' if not self.floor[0] else f'{self.floor[1]:.3f} m'})"
         )
+
+
+#: Scenes packed by :meth:`KernelScene.of`, dropped with their scene.
+_PACKED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def _joints(x, dof: int, what: str, ndim: int) -> np.ndarray:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -282,8 +283,9 @@ class Scene:
                 mask = None
             yield kind, rows, mask
 
-    @property
+    @cached_property
     def batch_shape(self) -> torch.Size:
+        """The shape the fields' batch dimensions broadcast to (computed once: a scene is immutable)."""
         shapes = [getattr(self, t).shape[:-2] for t, _, _ in _TABLES]
         shapes += [m.shape[:-1] for _, n, _ in _TABLES if (m := getattr(self, n)) is not None]
         if self.floor is not None:

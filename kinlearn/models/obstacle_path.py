@@ -19,6 +19,7 @@ Trained self-supervised (:mod:`kinlearn.training.obstacle_path`): no planner sho
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -101,6 +102,11 @@ def scene_primitives(
         raise ConfigError(
             f"the scene's batch shape {tuple(scene.batch_shape)} must be () or ({batch},) for {batch} problems"
         )
+    key = (batch, dtype)
+    if batch == 1 and scene.batch_shape == ():  # a batch-1 plan: the same rows on every call for this scene
+        hit = _ROWS.get(scene, {}).get(key)
+        if hit is not None:
+            return hit
     parts, masks = [], []
     for kind, table, m in scene.tables():
         t = table.to(dtype).expand(batch, *table.shape[-2:])
@@ -118,7 +124,13 @@ def scene_primitives(
     else:
         h = scene.floor.to(dtype).expand(batch)
         floor = torch.stack((torch.ones_like(h), h), dim=-1)
+    if batch == 1 and scene.batch_shape == ():
+        _ROWS.setdefault(scene, {})[key] = (rows, mask, floor)
     return rows, mask, floor
+
+
+#: The rows of unbatched scenes at batch 1, kept while their scene lives (scenes are immutable).
+_ROWS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 class ObstaclePathModel(nn.Module):
