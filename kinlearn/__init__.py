@@ -48,6 +48,7 @@ if TYPE_CHECKING:
     from .data.problem import Problem
     from .evaluation.metrics import plan_metrics, summarize, trajectory_metrics
     from .models.body import LearnedBody, load_body_model
+    from .models.chain import ChainFM
     from .models.forward_inverse import (
         AnalyticFM,
         AnalyticIM,
@@ -77,6 +78,7 @@ if TYPE_CHECKING:
     from .planning.planner import Planner, plan
     from .planning.timing import TimedTrajectory, time_parameterize
     from .training.forward_inverse import train_config, train_fm, train_im, validate_models
+    from .training.identify import identify
     from .training.joint_path import PathLossConfig, PathTrainConfig, train_path_model
     from .training.loop import OptimConfig, TrainConfig
     from .training.obstacle_path import ObstacleLossConfig, ObstacleTrainConfig, train_obstacle_model
@@ -92,6 +94,7 @@ __all__ = [
     "BabblingConfig",
     "BodySpheres",
     "CartesianDLS",
+    "ChainFM",
     "CheckpointError",
     "ConfigError",
     "DTypeError",
@@ -152,6 +155,7 @@ __all__ = [
     "cartesian_dls",
     "check_path",
     "dls_step",
+    "identify",
     "joint_interpolation",
     "judge",
     "kinematics",
