@@ -3,6 +3,7 @@
 import argparse
 import hashlib
 import json
+import shutil
 
 import pytest
 import torch
@@ -12,8 +13,9 @@ from kinlearn.cli.common import add_command, register_subcommand
 from kinlearn.cli.main import build_parser, main
 from kinlearn.data.babbling import BabblingConfig, load_transitions
 from kinlearn.data.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
+from kinlearn.models.chain import ChainFM
 from kinlearn.models.forward_inverse import LearnedFM, LearnedIM, load_fm, load_im
-from kinlearn.planning.planner import DEFAULT_CHECKPOINTS
+from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
 from kinlearn.training.tm import tm_preset, train_tm
 
 COMMANDS = ("babble", "train-fm", "train-im", "validate")
@@ -274,6 +276,13 @@ def test_export_never_overwrites_the_shipped_planner_by_default(runs, tmp_path, 
     }
     assert main(["export", "--model", str(root / "tm"), "--out", str(out)]) == 2
     assert main(["export", "--model", str(root / "tm"), "--out", str(out), "--overwrite"]) == 0
+    # An identified chain in the run folder travels with the export, unchanged, and solves position goals.
+    with_chain = tmp_path / "tm_chain"
+    shutil.copytree(root / "tm", with_chain)
+    shutil.copy(shipped / "chain.pt", with_chain / "chain.pt")
+    assert main(["export", "--model", str(with_chain), "--out", str(tmp_path / "p2")]) == 0
+    assert _sha(tmp_path / "p2" / "chain.pt") == _sha(shipped / "chain.pt")
+    assert isinstance(Planner.load(tmp_path / "p2").chain, ChainFM)
 
 
 def test_degenerate_endpoint_sets(tmp_path, capsys):

@@ -848,6 +848,9 @@ def _run_export(args: argparse.Namespace) -> int:
             state_dict=weights(payload["state_dict"]),
         )
     depends = {kind: out / f"{kind}.pt" for kind in sources}
+    if (args.model / "chain.pt").is_file():  # the identified chain goes as it is (float64 geometry)
+        load_checkpoint(args.model / "chain.pt", kind="fm", robot=planner.robot.name)
+        atomic_copy(args.model / "chain.pt", out / "chain.pt")
     if (args.model / "tm_obstacles.pt").is_file():  # before tm.pt, which records it
         from ..models.obstacle_path import export_obstacle_model
 

@@ -49,7 +49,7 @@ from ..errors import (
     NoObstacleModelWarning,
     ShapeError,
 )
-from ..io import load_checkpoint
+from ..io import load_checkpoint, resolve_dependency
 from ..models.chain import ChainFM, restart_fractions, solve_position
 from ..models.forward_inverse import ForwardModel, InverseModel, load_fm, load_im
 from ..models.joint_path import JointPathModel, load_path_model
@@ -256,10 +256,18 @@ class Planner:
             im = load_im(sources["im"], robot=tm.robot_name) if "im" in sources else None
             if "chain" not in options and (run_dir / CHAIN).is_file():
                 options["chain"] = load_fm(run_dir / CHAIN, robot=tm.robot_name)
-            if "obstacle_tm" not in options and (run_dir / OBSTACLE_TM).is_file():
-                options["obstacle_tm"] = load_obstacle_model(run_dir / OBSTACLE_TM, robot=tm.robot_name)
+            if "obstacle_tm" not in options:
+                # A folder whose tm.pt records its obstacle TM (an export) must hold that very file.
+                recorded = "obstacle_tm" in payload.get("depends", {})
+                source = resolve_dependency(run_dir / "tm.pt", payload, "obstacle_tm") if recorded else None
+                if source is None and (run_dir / OBSTACLE_TM).is_file():
+                    source = run_dir / OBSTACLE_TM
+                if source is not None:
+                    options["obstacle_tm"] = load_obstacle_model(source, robot=tm.robot_name)
             return cls(_robot(robot, tm.robot_name), tm, fm, im, **options)
         tm, fm, im = load_trajectory_model(run_dir / "tm.pt", robot=name)
+        if "chain" not in options and (run_dir / CHAIN).is_file():
+            options["chain"] = load_fm(run_dir / CHAIN, robot=tm.robot_name)
         return cls(_robot(robot, tm.robot_name), tm, fm, im, **options)
 
     @classmethod
