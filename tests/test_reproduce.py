@@ -53,6 +53,25 @@ def test_overwrite_knows_everything_reproduce_writes(smoke):
     assert written and written <= set(REPRODUCE_OUTPUTS), written - set(REPRODUCE_OUTPUTS)
 
 
+@pytest.mark.slow
+def test_the_main_job_records_domain_warnings_instead_of_printing_them(smoke):
+    """Held-out pairs outside the training pairs' range are the experiment's, not its user's to mend."""
+    import warnings
+
+    from kinlearn.data.endpoints import load_endpoints
+    from kinlearn.errors import DomainWarning
+    from kinlearn.evaluation.reproduce import _evaluate_run
+
+    out, _ = smoke
+    heldout = load_endpoints(out / "endpoints_heldout.npz")
+    run_dir = next(p for p in sorted((out / "tm").iterdir()) if (p / "tm.pt").is_file())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = _evaluate_run(run_dir.name, run_dir, heldout, 0.0)
+    assert not [w for w in caught if issubclass(w.category, DomainWarning)]
+    assert isinstance(result["domain_notes"], list)
+
+
 def test_reproduce_config_errors():
     with pytest.raises(ConfigError, match="quick"):
         preset_config("huge")
