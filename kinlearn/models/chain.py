@@ -25,7 +25,6 @@ learned model, kept within the joint limits. Identification from data is
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import itertools
 import math
@@ -38,7 +37,7 @@ from torch import nn
 
 from ..body.robot import Robot
 from ..errors import ConfigError
-from .interface import ForwardModel, InverseModel
+from .interface import ForwardModel, InverseModel, config_from_dict, config_to_dict
 
 __all__ = [
     "ChainConfig",
@@ -73,20 +72,11 @@ class ChainConfig:
             raise ConfigError(f"residual must be a tuple of positive layer widths, got {self.residual!r}")
 
     def to_dict(self) -> dict:
-        d = dataclasses.asdict(self)
-        d["residual"] = list(self.residual)
-        return d
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> ChainConfig:
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(d) - names
-        if unknown:
-            raise ConfigError(f"unknown ChainConfig field(s): {', '.join(sorted(unknown))}")
-        d = dict(d)
-        if "residual" in d:
-            d["residual"] = tuple(d["residual"])
-        return cls(**d)
+        return config_from_dict(cls, d)
 
 
 def rotate_about(p: torch.Tensor, w: torch.Tensor, q: torch.Tensor, c: torch.Tensor, s: torch.Tensor):

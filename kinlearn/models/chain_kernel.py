@@ -71,6 +71,11 @@ def _fk_jac(w, q, tip, ref, theta, p, J, R, Ri, RR, t, axes, pts):
 
 
 @numba.njit(cache=True, fastmath=False)
+def _distance(a, b):
+    return np.sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
+
+
+@numba.njit(cache=True, fastmath=False)
 def _solve3(A, b, x):
     """x = A⁻¹ b for a symmetric positive definite 3 × 3 A (Cramer's rule)."""
     c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
@@ -109,10 +114,7 @@ def _solve(w, q, tip, ref, theta0, target, lo, hi, seeds, iterations, damping, t
             steps = iterations
             if r == 0:  # a start already at the target keeps its joints (a move of zero)
                 _fk_jac(w, q, tip, ref, th, p, J, R3, Ri, RR, t, axes, pts)
-                e0 = np.sqrt(
-                    (target[k, 0] - p[0]) ** 2 + (target[k, 1] - p[1]) ** 2 + (target[k, 2] - p[2]) ** 2
-                )
-                if e0 <= tolerance:
+                if _distance(target[k], p) <= tolerance:
                     steps = 0
             for _ in range(steps):
                 _fk_jac(w, q, tip, ref, th, p, J, R3, Ri, RR, t, axes, pts)
@@ -132,9 +134,7 @@ def _solve(w, q, tip, ref, theta0, target, lo, hi, seeds, iterations, damping, t
                 if moved < 1e-13:  # a fixed point: further steps change nothing
                     break
             _fk_jac(w, q, tip, ref, th, p, J, R3, Ri, RR, t, axes, pts)
-            err = np.sqrt(
-                (target[k, 0] - p[0]) ** 2 + (target[k, 1] - p[1]) ** 2 + (target[k, 2] - p[2]) ** 2
-            )
+            err = _distance(target[k], p)
             if err <= tolerance:
                 d = 0.0
                 for i in range(n):

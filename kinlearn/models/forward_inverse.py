@@ -30,7 +30,6 @@ the analytic robot on fresh babbling data.
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -45,7 +44,7 @@ from ..body.robot import Robot, load_robot
 from ..errors import CheckpointError, ConfigError
 from ..io import load_checkpoint, save_checkpoint
 from .chain import ChainConfig, ChainFM
-from .interface import ForwardModel, InverseModel, resolve_robot
+from .interface import ForwardModel, InverseModel, config_from_dict, config_to_dict, resolve_robot
 
 __all__ = [
     "ACTIVATIONS",
@@ -88,19 +87,6 @@ def _mlp(sizes: Sequence[int], activation: str, linear_out: int | None) -> nn.Se
 # --------------------------------------------------------------------------------------------------
 # Learned models
 # --------------------------------------------------------------------------------------------------
-
-
-def _config_to_dict(cfg) -> dict:
-    d = dataclasses.asdict(cfg)
-    return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
-
-
-def _config_from_dict(cls, d: dict):
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = set(d) - set(fields)
-    if unknown:
-        raise ConfigError(f"unknown {cls.__name__} field(s): {', '.join(sorted(unknown))}")
-    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
 @dataclass(frozen=True)
@@ -146,11 +132,11 @@ class FMConfig:
         _check_common(self)
 
     def to_dict(self) -> dict:
-        return _config_to_dict(self)
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> FMConfig:
-        return _config_from_dict(cls, d)
+        return config_from_dict(cls, d)
 
 
 @dataclass(frozen=True)
@@ -177,11 +163,11 @@ class IMConfig:
         _check_common(self)
 
     def to_dict(self) -> dict:
-        return _config_to_dict(self)
+        return config_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> IMConfig:
-        return _config_from_dict(cls, d)
+        return config_from_dict(cls, d)
 
 
 def _check_widths(widths, name: str, allow_empty: bool = True) -> None:
@@ -485,7 +471,9 @@ def _build(payload: dict, path, kind: str):
             cls, cfg_cls = (LearnedFM, FMConfig) if kind == "fm" else (LearnedIM, IMConfig)
             model = cls(cfg_cls.from_dict(config))
         else:
-            raise CheckpointError(f"{path}: unknown {kind.upper()} type {mtype!r} (expected 'learned', 'chain' or 'analytic')")
+            raise CheckpointError(
+                f"{path}: unknown {kind.upper()} type {mtype!r} (expected 'learned', 'chain' or 'analytic')"
+            )
         model.load_state_dict(payload["state_dict"], strict=True)
     except CheckpointError:
         raise

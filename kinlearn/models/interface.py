@@ -12,14 +12,17 @@ inputs' dtype.
 
 from __future__ import annotations
 
+import dataclasses
+
 import torch
 from torch import nn
 
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import check_finite, check_last_dim
+from ..errors import ConfigError
 
-__all__ = ["ForwardModel", "InverseModel", "resolve_robot"]
+__all__ = ["ForwardModel", "InverseModel", "config_from_dict", "config_to_dict", "resolve_robot"]
 
 
 def _is_compiling() -> bool:
@@ -108,3 +111,18 @@ def _broadcast_pair(x: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, tor
         return x, y
     batch = torch.broadcast_shapes(x.shape[:-1], y.shape[:-1])
     return x.expand(*batch, x.shape[-1]), y.expand(*batch, y.shape[-1])
+
+
+def config_to_dict(cfg) -> dict:
+    """A model config dataclass as a JSON-able dict (tuples as lists)."""
+    d = dataclasses.asdict(cfg)
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
+def config_from_dict(cls, d: dict):
+    """The config dataclass ``cls`` from :func:`config_to_dict`'s dict; an unknown field is a ConfigError."""
+    fields = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(d) - fields
+    if unknown:
+        raise ConfigError(f"unknown {cls.__name__} field(s): {', '.join(sorted(unknown))}")
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
