@@ -355,3 +355,19 @@ def test_half_precision_plans_stay_within_the_limits_they_are_judged_by(robot, d
     assert plan.joints.dtype == dtype
     joints = plan.joints.double()
     assert bool(((joints >= lo) & (joints <= hi)).all())
+
+
+def test_baseline_work_is_bounded(robot):
+    from kinlearn.planning.baselines import MAX_STEPS, cartesian_dls, rrt_connect
+    from kinlearn.planning.obstacle_baselines import trajectory_optimiser
+
+    with pytest.raises(ConfigError, match="steps"):
+        kinlearn.JointInterpolation(robot, steps=MAX_STEPS + 1)
+    problem = kinlearn.Problem.make(robot, START, GOAL)  # the function forms take states
+    with pytest.raises(ConfigError, match="iterations"):
+        cartesian_dls(robot, problem.start, problem.goal, iterations=10**9)
+    with pytest.raises(ConfigError, match="time_limit"):
+        rrt_connect(robot, problem.start, problem.goal, time_limit=1e9)
+    with pytest.raises(ConfigError, match="steps"):
+        trajectory_optimiser(START, GOAL, kinlearn.Scene(torch.tensor([[3.0, 3.0, 3.0, 0.1]])), steps=10**9)
+    assert kinlearn.JointInterpolation(robot, steps=np.int64(5)).steps == 5

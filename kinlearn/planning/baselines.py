@@ -31,7 +31,7 @@ import torch
 from ..body.kinematics import dls_step, kinematics
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout, straight_line
-from ..checks import as_int, check_finite, check_last_dim
+from ..checks import as_int, as_real, check_finite, check_last_dim
 from ..data.problem import LIMIT_TOLERANCE, Problem
 from ..errors import ConfigError, MissingDependencyError, PlanningError, ShapeError
 from .plan import Plan, judge
@@ -52,8 +52,10 @@ def _check_steps(steps) -> None:
     as_int(steps, "steps (at least one intermediate waypoint)", minimum=2, maximum=MAX_STEPS)
 
 
-#: The most steps a baseline's path may have (a bound on its work and memory).
+#: The most steps a baseline's path (or its DLS iterations) may have: a bound on its work and memory.
 MAX_STEPS = 10_000
+#: The longest search an RRT-Connect query may be given (s).
+MAX_TIME_LIMIT = 3600.0
 
 
 def as_robot(robot) -> Robot:
@@ -74,10 +76,8 @@ class _RobotPlanner:
 
 
 def _check_dls(iterations, damping) -> None:
-    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
-        raise ConfigError(f"iterations must be an integer >= 1, got {iterations!r}")
-    if not damping > 0.0:
-        raise ConfigError(f"damping must be > 0 (metres), got {damping!r}")
+    as_int(iterations, "iterations", minimum=1, maximum=MAX_STEPS)
+    as_real(damping, "damping (m)", minimum=0.0, open_minimum=True)
 
 
 def _endpoints(robot: Robot, start: torch.Tensor, goal: torch.Tensor, steps: int) -> StateLayout:
@@ -201,8 +201,7 @@ def rrt_connect_timed(
     ``solve``, the optional simplification, reading the path back and resampling it.
     """
     layout = _endpoints(robot, start, goal, steps)
-    if not time_limit > 0.0:
-        raise ConfigError(f"time_limit must be > 0 seconds, got {time_limit!r}")
+    as_real(time_limit, "time_limit (s)", minimum=0.0, open_minimum=True, maximum=MAX_TIME_LIMIT)
     ob, og, ou = _import_ompl()
     theta0, _ = layout.split(start)
     thetaT, _ = layout.split(goal)

@@ -43,11 +43,12 @@ import torch
 
 from ..body.kinematics import kinematics
 from ..body.robot import load_robot
+from ..checks import as_int
 from ..collision import BodySpheres, Scene, body_obstacle_distance, body_spheres, self_collision_distance
 from ..collision.problems import rrt_connect_solve
 from ..data.problem import Problem
 from ..errors import ConfigError, ShapeError
-from .baselines import _check_problem, as_robot, cartesian_dls, joint_interpolation
+from .baselines import MAX_STEPS, _check_problem, as_robot, cartesian_dls, joint_interpolation
 from .plan import Plan, judge
 
 __all__ = [
@@ -297,8 +298,7 @@ def trajectory_optimiser(
     got stuck).
     """
     t0 = time.perf_counter()
-    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
-        raise ConfigError(f"steps must be an integer >= 0, got {steps!r}")
+    steps = as_int(steps, "steps", minimum=0, maximum=MAX_STEPS)
     cfg = config or OptimiserConfig()
     start, goal, body = _inputs(start, goal, body)
     lo, hi = body.robot.limits(_F64)
