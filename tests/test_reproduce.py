@@ -36,6 +36,14 @@ def test_reproduce_smoke_writes_tables_and_figures(smoke):
     assert parity["heldout"]["endpoint_distance"]["mean"] == pytest.approx(pairs_distance, rel=1e-5)
     md = (out / "results.md").read_text()
     assert "Table 1" in md and "Table 2" in md and "paper #4" in md
+    # The FM × IM ablation: four FM kinds, three IM kinds; the exact pair reaches every position goal,
+    # an MLP FM has no Jacobian of positions to solve on, and every cell of the paper's task is filled.
+    fm_im = res["fm_im"]
+    assert len(fm_im) == 4 and all(set(row) == {"mlp", "analytic", "through"} for row in fm_im.values())
+    assert fm_im["analytic FK"]["through"]["position"]["success"] == 1.0
+    assert next(iter(fm_im.values()))["through"] == {"position": None, "task": None}
+    assert all(c["task"] is not None for row in list(fm_im.values())[1:] for c in row.values())
+    assert "FM × IM ablation" in md and (out / "models" / "chain.pt").is_file()
     pytest.importorskip("matplotlib")
     for fig in ("fig3_trajectories.png", "fig4_histograms.png"):
         assert (out / fig).stat().st_size > 10_000

@@ -394,6 +394,14 @@ class AnalyticFM(ForwardModel):
         """See :meth:`ForwardModel.ef_along`: the exact FK of the configurations (``ef0`` is FK(θ(0)))."""
         return self.kin.position(theta[:, ::every], validate=False)
 
+    def position(self, theta: torch.Tensor) -> torch.Tensor:
+        """The end effector ``(..., 3)`` of joint values ``theta (..., dof)`` (the FK)."""
+        return self.kin.position(theta, validate=False)
+
+    def position_and_jacobian(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The FK and its Jacobian ``(..., 3, dof)``: what solving through an FM needs (as for a chain)."""
+        return self.kin.position_and_jacobian(theta, validate=False)
+
 
 class AnalyticIM(InverseModel):
     """``iterations`` damped-least-squares steps from θ toward ``ef_target``; returns a = θ_new − θ.

@@ -59,7 +59,7 @@ from ..models.trajectory import TrajectoryModel, load_trajectory_model
 from .inference import NumpyFK, NumpyObstacleModel, NumpyPathModel
 from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance
 
-__all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan"]
+__all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position"]
 
 #: Planners shipped inside the package, one folder per robot (see ``kinlearn/checkpoints/README.md``).
 DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
@@ -754,11 +754,8 @@ class Planner:
         """Goal joints for end-effector positions: on the identified chain when the planner has one
         (:meth:`_solve_on_chain`), else found with the learned IM and FM alone.
 
-        The end effector is stepped along the straight line from ef(0) to the target in steps of at
-        most 2 cm, then held at the target for 10 more steps; each action is the IM's, corrected once
-        through the FM (â ← â + IM[FM[s, â], target]), bounded by the babbling step and kept within the
-        joint limits; the end effector of each new state is the FM's. The analytic FK is not used:
-        it only judges the result (``plan.goal_error``).
+        Without a chain: :func:`step_to_position`. The analytic FK is not used: it only judges the
+        result (``plan.goal_error``).
         """
         if self.chain is not None:
             return self._solve_on_chain(theta0, target)
@@ -767,23 +764,55 @@ class Planner:
                 "this planner has no chain and no FM and IM, which an end-effector position goal needs; give "
                 "joint goals or load a planner folder holding chain.pt (kinlearn identify) or fm.pt and im.pt"
             )
-        dtype = next(self.im.parameters(), torch.empty(0)).dtype
-        theta, e0, p = (torch.tensor(a, dtype=dtype) for a in (theta0, ef0, target))
-        lo, hi = self._lo.to(dtype), self._hi.to(dtype)
-        # Each plan's own number of line steps (at most 2 cm each), so a plan does not depend on its batch.
-        K = torch.ceil((p - e0).norm(dim=-1, keepdim=True) / 0.02).clamp_min(1)
-        e = e0
-        for k in range(1, int(K.max()) + 11 if K.numel() else 0):
-            aim = e0 + torch.clamp(k / K, max=1.0) * (p - e0)
-            s = self.layout.join(theta, e)
-            a = self.im(s, aim)
-            for _ in range(self.refine):
-                a = a + self.im(self.fm(s, a), aim)
-            a = a.clamp(-self.max_step, self.max_step)
-            nxt = torch.minimum(torch.maximum(theta + a, lo), hi)
-            e = self.fm(s, nxt - theta)[..., self.layout.ef]
-            theta = nxt
-        return theta.double().numpy()
+        return step_to_position(
+            self.fm,
+            self.im,
+            theta0,
+            ef0,
+            target,
+            self._lo,
+            self._hi,
+            refine=self.refine,
+            max_step=self.max_step,
+        )
+
+
+@torch.no_grad()
+def step_to_position(
+    fm: ForwardModel,
+    im: InverseModel,
+    theta0: np.ndarray,
+    ef0: np.ndarray,
+    target: np.ndarray,
+    lower: torch.Tensor,
+    upper: torch.Tensor,
+    *,
+    refine: int = 1,
+    max_step: float = MAX_STEP,
+) -> np.ndarray:
+    """Goal joints ``(N, dof)`` for end-effector positions ``target (N, 3)`` from ``theta0`` (whose end
+    effector is ``ef0``), with an IM and an FM alone: the end effector is stepped along the straight line
+    in steps of at most 2 cm, then held at the target for 10 more steps; each action is the IM's,
+    corrected ``refine`` times through the FM (â ← â + IM[FM[s, â], target]), bounded by ``max_step``
+    and kept within the limits; the end effector of each new state is the FM's."""
+    layout = fm.layout
+    dtype = next(im.parameters(), torch.empty(0)).dtype
+    theta, e0, p = (torch.tensor(a, dtype=dtype) for a in (theta0, ef0, target))
+    lo, hi = lower.to(dtype), upper.to(dtype)
+    # Each plan's own number of line steps (at most 2 cm each), so a plan does not depend on its batch.
+    K = torch.ceil((p - e0).norm(dim=-1, keepdim=True) / 0.02).clamp_min(1)
+    e = e0
+    for k in range(1, int(K.max()) + 11 if K.numel() else 0):
+        aim = e0 + torch.clamp(k / K, max=1.0) * (p - e0)
+        s = layout.join(theta, e)
+        a = im(s, aim)
+        for _ in range(refine):
+            a = a + im(fm(s, a), aim)
+        a = a.clamp(-max_step, max_step)
+        nxt = torch.minimum(torch.maximum(theta + a, lo), hi)
+        e = fm(s, nxt - theta)[..., layout.ef]
+        theta = nxt
+    return theta.double().numpy()
 
 
 def _inside(joints: torch.Tensor, lo: np.ndarray, hi: np.ndarray) -> torch.Tensor:

@@ -54,7 +54,7 @@ from ..errors import ConfigError, DatasetError
 from ..models.chain import ChainConfig, ChainFM, chain_parameter_jacobian, chain_position, chain_urdf
 from ..models.forward_inverse import save_model
 
-__all__ = ["Identification", "IdentifyConfig", "identify"]
+__all__ = ["Identification", "IdentifyConfig", "fit_residual", "identify"]
 
 
 @dataclass(frozen=True)
@@ -454,7 +454,7 @@ def _identify(
         unobservable.append(i)
     report["undetermined_axis_directions"] = sorted(unobservable)
     if cfg.residual:
-        _fit_residual(model, th_fit[keep], ef_fit[keep], cfg, gen)
+        fit_residual(model, th_fit[keep], ef_fit[keep], cfg, gen)
     with torch.no_grad():
         rv = _residuals(model, theta[val], ef[val]) if n_val else torch.zeros(1)
         rf = _residuals(model, th_fit, ef_fit)
@@ -466,8 +466,9 @@ def _identify(
     return Identification(model, report)
 
 
-def _fit_residual(model: ChainFM, theta, ef, cfg: IdentifyConfig, gen: torch.Generator) -> None:
-    """Add and train the residual MLP on what the rigid chain leaves (the chain held fixed)."""
+def fit_residual(model: ChainFM, theta, ef, cfg: IdentifyConfig, gen: torch.Generator) -> None:
+    """Add to ``model`` a residual MLP of ``cfg.residual`` widths and train it (``cfg.residual_steps``
+    Adam steps, Huber loss at 1 mm) on what the rigid chain leaves of ``ef``; the chain is held fixed."""
     torch.manual_seed(int(torch.randint(0, 2**31 - 1, (1,), generator=gen)))
     full = ChainFM(ChainConfig(model.config.robot, model.dof, tuple(cfg.residual)))
     full.load_state_dict(model.state_dict(), strict=False)
