@@ -149,3 +149,22 @@ def test_typed_errors():
     with pytest.raises(ObstacleError, match="KernelScene"):
         K.check_paths(kb, path, Scene())
     assert K.first_free(kb, path, ks, order=[]) == -1
+
+
+def test_rrt_checker_compiled_answers_as_torch():
+    from kinlearn.collision.problems import RrtChecker
+
+    robot = load_robot("iiwa14")
+    body = body_spheres(robot).double()
+    rng = np.random.default_rng(3)
+    scene = random_scene(rng, n=6)
+    fast, slow = RrtChecker(body, scene), RrtChecker(body, scene, compiled=False)
+    q = robot.sample(60, torch.Generator().manual_seed(2), dtype=torch.float64).numpy()
+    states = [fast.state_valid(x) for x in q]
+    assert states == [slow.state_valid(x) for x in q] and 0 < sum(states) < len(states)
+    far = q[1:]
+    near = q[:-1] + 0.2 * (far - q[:-1])  # short and long motions
+    ends = [*zip(q[:-1], near, strict=True), *zip(q[:-1], far, strict=True)]
+    motions = [fast.motion_valid(a, b) for a, b in ends]
+    ref = [slow.motion_valid(a, b) for a, b in ends]
+    assert motions == ref and 0 < sum(motions) < len(motions)

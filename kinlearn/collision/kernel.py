@@ -393,6 +393,16 @@ class KernelBody:
     ``F (dof, 4, 4)`` of its chain, each sphere's link and centre in its link's canonical frame, radii,
     the spheres the floor applies to, self-collision pairs and lever bounds."""
 
+    @classmethod
+    def of(cls, body: BodySpheres) -> KernelBody:
+        """The packed ``body``, made on the first call for that body object and kept while it lives
+        (a body's buffers are not changed after it is made)."""
+        hit = _BODIES.get(body) if isinstance(body, BodySpheres) else None
+        if hit is None:
+            hit = cls(body)
+            _BODIES[body] = hit
+        return hit
+
     def __init__(self, body: BodySpheres):
         if not isinstance(body, BodySpheres):
             raise ConfigError(f"KernelBody needs a BodySpheres, got {type(body).__name__}")
@@ -477,6 +487,8 @@ class KernelScene:
         )
 
 
+#: Bodies packed by :meth:`KernelBody.of`, dropped with their body.
+_BODIES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 #: Scenes packed by :meth:`KernelScene.of`, dropped with their scene.
 _PACKED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 

@@ -298,24 +298,44 @@ class RrtChecker:
 
     A state is valid when its body–scene clearance and self-clearance are both > 0; a motion is valid
     when :func:`~kinlearn.collision.check_path` finds the straight joint-space segment free
-    (``max_travel`` metres of sphere travel at most between checked configurations).
+    (``max_travel`` metres of sphere travel at most between checked configurations). ``compiled``
+    (default): answered by the compiled kernels (:mod:`kinlearn.collision.kernel`, the same verdicts);
+    ``False``: by torch, as before them (kept to measure one against the other).
     """
 
-    def __init__(self, body: BodySpheres, scene: Scene, max_travel: float = 0.01):
+    def __init__(self, body: BodySpheres, scene: Scene, max_travel: float = 0.01, compiled: bool = True):
         self.body, self.scene, self.max_travel = body, scene.to(_F64), max_travel
         self.dof = body.robot.dof
         self.states = 0
         self.motions = 0
+        self.compiled = bool(compiled)
+        if self.compiled:
+            from . import kernel
+
+            kb, ks = kernel.KernelBody.of(body), kernel.KernelScene.of(self.scene)
+            # The kernels themselves, their arguments bound once: OMPL calls these thousands of times.
+            self._clear, self._verdict = kernel._clearances, kernel._verdict
+            self._clear_args = (*kb.args(), *ks.args())
+            self._verdict_args = (*kb.args(), kb.lever, kb.pair_lever, *ks.args())
+            self._per = np.empty((1, kb.num_spheres))
+            self._travel = float(max_travel)
 
     def state_valid(self, q: np.ndarray) -> bool:
         self.states += 1
+        if self.compiled:
+            d, s = self._clear(np.ascontiguousarray(q, dtype=np.float64)[None], *self._clear_args, self._per)
+            return bool(d[0] > 0) and bool(s[0] > 0)
         d, s = clearances(self.body, torch.as_tensor(q, dtype=_F64), self.scene, validate=False)
         return bool(d > 0) and bool(s > 0)
 
     def motion_valid(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """The configurations :func:`check_path` checks on segment a → b, every 8th one first (a
-        colliding motion is usually rejected without computing the rest)."""
+        """The configurations :func:`check_path` checks on segment a → b (in torch: every 8th one first,
+        so that a colliding motion is usually rejected without computing the rest)."""
         self.motions += 1
+        if self.compiled:
+            path = np.stack([a, b]).astype(np.float64)
+            first, _ = self._verdict(path, self._travel, 0.0, *self._verdict_args)
+            return first < 0
         path = torch.as_tensor(np.stack([a, b]), dtype=_F64)
         n = int(segment_steps(self.body, path, self.max_travel)[0])
         q = straight_line(path[0], path[1], n)
@@ -340,8 +360,10 @@ def rrt_connect_solve(
     max_travel: float = 0.01,
     simplify: bool = False,
     simplify_time: float | None = None,
+    compiled: bool = True,
 ) -> tuple[np.ndarray | None, float]:
-    """OMPL RRT-Connect from ``start`` to ``goal`` (joints ``(dof,)``) around ``scene``, on :class:`RrtChecker`.
+    """OMPL RRT-Connect from ``start`` to ``goal`` (joints ``(dof,)``) around ``scene``, on :class:`RrtChecker`
+    (``compiled``: its compiled kernels, or torch).
 
     Returns ``(path (K, dof) or None if no exact path within time_limit, wall time in seconds)``. The
     path's vertices are joined by motions the checker found free. ``seed`` seeds OMPL's process-wide
@@ -361,7 +383,7 @@ def rrt_connect_solve(
         )
     ob, og, ou = _import_ompl()
     robot = body.robot
-    checker = RrtChecker(body, scene, max_travel)
+    checker = RrtChecker(body, scene, max_travel, compiled=compiled)
     dof = robot.dof
 
     def as_array(state) -> np.ndarray:
