@@ -63,14 +63,14 @@ def test_bounds_are_named():
 
 def test_plan_options_take_numpy_and_torch_scalars(robot):
     ball = [[0.58, -0.11, 1.03, 0.12]]
-    a = kinlearn.plan(START, GOAL, obstacles=ball, refine_steps=3)
-    for steps in (np.int64(3), torch.tensor(3)):
+    a = kinlearn.plan(START, GOAL, obstacles=ball, refine_steps=1)
+    for steps in (np.int64(1), torch.tensor(1)):
         b = kinlearn.plan(START, GOAL, obstacles=ball, refine_steps=steps)
         assert torch.equal(a.joints, b.joints)
     for bad in (-5, True, 2.0, torch.tensor(3.0), 10**9):  # refused with or without obstacles
         with pytest.raises(ConfigError, match="refine_steps"):
             kinlearn.plan(START, GOAL, refine_steps=bad)
-    path = a.joints
+    path = torch.stack((START, GOAL))
     t = time_parameterize(robot, path, velocity_scale=0.5)
     for scale in (np.float32(0.5), torch.tensor(0.5)):
         assert time_parameterize(robot, path, velocity_scale=scale).duration == pytest.approx(t.duration)
@@ -269,7 +269,7 @@ def test_joint_goal_and_obstacle_plans_do_not_depend_on_their_batch_mates(robot)
     for obstacles in (None, ball):
         big = kinlearn.plan(starts, goals, obstacles=obstacles)
         small = kinlearn.plan(starts[:8], goals[:8], obstacles=obstacles)
-        for i in range(0, 8, 3):
+        for i in (0, 5):
             alone = kinlearn.plan(starts[i], goals[i], obstacles=obstacles)
             for batch in (big, small):
                 assert torch.allclose(alone.joints, batch.joints[i], atol=1e-6, rtol=0)

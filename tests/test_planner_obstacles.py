@@ -237,18 +237,18 @@ def test_refinement_from_a_path_of_the_wrong_shape_raises():
         trajectory_optimiser(torch.zeros(7), torch.full((7,), 0.3), scene, steps=1, init=torch.zeros(5, 6))
 
 
-@pytest.mark.parametrize("n", [5, 20])  # the NumPy path (≤ 16 plans) and the torch one
+@pytest.mark.parametrize("n", [5, 17])  # the NumPy path (≤ 16 plans) and the torch one
 def test_refined_batches_keep_one_shape_and_agree_with_batch_one(planner, problems, n):
     """Refinement changes some plans of a batch and not others: every plan keeps the batch's one shape
     (2T + 1 configurations), and each is the plan of its problem planned alone."""
     sub = problems[torch.arange(n)]
-    batch = planner.plan(sub.start, sub.goal, obstacles=sub.scene, refine_steps=2)
+    batch = planner.plan(sub.start, sub.goal, obstacles=sub.scene, refine_steps=1)
     knots = planner.obstacle_tm.fractions.shape[0] + 2  # T + 1: the proposals' configurations
     assert batch.joints.shape == (n, 2 * knots - 1, 7)
     assert not batch.collision_free.all()  # some plans were refined (or tried), the test means something
-    for i in range(n):
+    for i in range(0, n, 2):
         start, goal, scene = sub.problem(i)
-        alone = planner.plan(start, goal, obstacles=scene, refine_steps=2)
+        alone = planner.plan(start, goal, obstacles=scene, refine_steps=1)
         assert alone.joints.shape == batch.joints.shape[1:]
         assert torch.allclose(alone.joints, batch.joints[i], atol=1e-6, rtol=0)
         assert bool(alone.collision_free) == bool(batch.collision_free[i])
