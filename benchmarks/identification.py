@@ -76,7 +76,7 @@ def main() -> None:
                 dt = time.perf_counter() - t0
                 out = folder / f"{name}_{prior}_{outliers}.urdf"
                 out.write_text(result.urdf())
-                err = _error_mm(load_robot(out, "ee"), true, q)
+                err = _error_mm(load_robot(out, result.ee_frame), true, q)
                 print(
                     f"| {name} | {'nominal URDF' if prior else 'none (joint count)'} | {outliers:.0%} "
                     f"| {err.median():.4f} / {err.quantile(0.99):.4f} / {err.max():.3f} "

@@ -47,7 +47,7 @@ def _fk_error(robot_a, robot_b, gen, n=5000):
 def _exported(result, tmp_path, name="ident"):
     path = tmp_path / f"{name}.urdf"
     path.write_text(result.urdf(name))
-    return load_robot(path, "ee")
+    return load_robot(path, result.ee_frame)
 
 
 def test_known_chain_recovered_with_a_prior(true_iiwa, gen, tmp_path):
@@ -69,7 +69,7 @@ def test_known_chain_recovered_without_any_urdf(true_iiwa, gen, tmp_path):
     data = _observe(true_iiwa, 8000, 1e-3, gen)
     result = identify(data, dof=7, config=QUICK)
     assert result.report["initialisation"].startswith("no prior")
-    assert result.model.robot_name == "chain"
+    assert result.model.robot_name == "chain" and result.ee_frame == "ee" and result.base_link == "base"
     err = _fk_error(_exported(result, tmp_path), true_iiwa, gen)
     assert float(err.median()) < 0.2e-3 and float(err.quantile(0.99)) < 0.6e-3
 
@@ -139,7 +139,9 @@ def test_cli_babble_identify_export(true_iiwa, tmp_path, gen, capsys):
     out = tmp_path / "calibrated.urdf"
     assert main(["export-urdf", str(tmp_path / "id"), "--out", str(out)]) == 0
     assert "Pinocchio FK against the chain" in capsys.readouterr().out
-    err = _fk_error(load_robot(out, "ee"), true_iiwa, gen)
+    exported = load_robot(out, "iiwa_link_ee")  # named as the robot names its frames and joints
+    assert exported.joint_names == true_iiwa.joint_names and exported.root_link == "iiwa_link_0"
+    err = _fk_error(exported, true_iiwa, gen)
     assert float(err.median()) < 0.2e-3
     # Refusals: exit 2, nothing written.
     assert (

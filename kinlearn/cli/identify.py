@@ -166,13 +166,17 @@ def _run_export_urdf(args: argparse.Namespace) -> int:
         raise CheckpointError(f"{path} holds a {type(model).__name__}, not an identified chain")
     if args.out.suffix.lower() != ".urdf":
         raise ConfigError(f"--out must name a .urdf file, got {args.out}")
-    names = tuple(payload["extra"].get("joint_names") or ()) or None
-    text = chain_urdf(model, name=args.name or model.robot_name, joint_names=names)
+    extra = payload["extra"]
+    names = tuple(extra.get("joint_names") or ()) or None
+    base, ee = extra.get("base_link", "base"), extra.get("ee_frame", "ee")
+    text = chain_urdf(
+        model, name=args.name or model.robot_name, joint_names=names, base_link=base, ee_frame=ee
+    )
     if model.residual is not None:
         print("note: the chain's residual MLP is not part of a URDF; the file holds the rigid chain")
     atomic_write(args.out, lambda p: p.write_text(text))
     # Check what was written: its forward kinematics through Pinocchio against the chain's.
-    robot = load_robot(args.out, "ee")
+    robot = load_robot(args.out, ee)
     q = torch.from_numpy(np.random.default_rng(0).uniform(robot.lower, robot.upper, size=(1000, robot.dof)))
     with torch.no_grad():
         rigid = model.position(q) - (model._residual(q) if model.residual is not None else 0.0)

@@ -483,7 +483,7 @@ def _calibrated(true_robot: Robot, believed: Robot, q0: torch.Tensor, p: torch.T
     from ..training.identify import identify
 
     result = identify(data, robot=believed)
-    calibrated = Robot(f"{believed.name}-calibrated", result.urdf().encode(), "ee")
+    calibrated = Robot(f"{believed.name}-calibrated", result.urdf().encode(), result.ee_frame)
     q = position_ik(calibrated, q0, p)
     kin_c = kinematics(calibrated)
     return {

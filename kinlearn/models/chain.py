@@ -537,9 +537,10 @@ def chain_urdf(
     joint_names: tuple[str, ...] | None = None,
     velocity: np.ndarray | None = None,
     effort: float = 100.0,
+    base_link: str = "base",
     ee_frame: str = "ee",
 ) -> str:
-    """The chain as a URDF document: ``base`` → revolute joints (axis z of their frames, limits from
+    """The chain as a URDF document: ``base_link`` → revolute joints (axis z of their frames, limits from
     ``model.lower``/``model.upper``) → a fixed joint to the link ``ee_frame`` at the end-effector point.
 
     Its forward kinematics equals the chain's (the residual MLP, if any, is not part of it). Each
@@ -558,10 +559,10 @@ def chain_urdf(
         '<?xml version="1.0"?>',
         f'<robot name="{name}">',
         "  <!-- A serial chain identified by kinlearn from observed end-effector positions. -->",
-        '  <link name="base"/>',
+        f'  <link name="{base_link}"/>',
     ]
     T_prev = np.eye(4)
-    parent = "base"
+    parent = base_link
     for i in range(n):
         z = axes[i] / np.linalg.norm(axes[i])
         o_prev = T_prev[:3, 3]

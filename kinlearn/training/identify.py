@@ -109,17 +109,30 @@ class Identification:
     model: ChainFM
     report: dict = field(default_factory=dict)
     joint_names: tuple[str, ...] | None = None
+    base_link: str = "base"
+    ee_frame: str = "ee"
 
     def save(self, path: str | Path, config: IdentifyConfig | None = None) -> Path:
         """Save the chain as an FM checkpoint (``kinlearn.load(path)`` / ``load_fm``) with its report."""
-        extra = {"report": self.report, "joint_names": list(self.joint_names or ())}
+        extra = {
+            "report": self.report,
+            "joint_names": list(self.joint_names or ()),
+            "base_link": self.base_link,
+            "ee_frame": self.ee_frame,
+        }
         if config is not None:
             extra["identify"] = config.to_dict()
         return save_model(self.model, path, extra=extra)
 
     def urdf(self, name: str | None = None) -> str:
         """The chain as a URDF document (see :func:`~kinlearn.models.chain.chain_urdf`)."""
-        return chain_urdf(self.model, name=name or self.model.robot_name, joint_names=self.joint_names)
+        return chain_urdf(
+            self.model,
+            name=name or self.model.robot_name,
+            joint_names=self.joint_names,
+            base_link=self.base_link,
+            ee_frame=self.ee_frame,
+        )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -304,7 +317,9 @@ def identify(
     ``prior``: ``True`` (the robot's URDF, if a robot is given), ``False`` (no URDF: only the joint
     count), or another robot / a URDF path whose model starts the fit (a user's rough model).
     ``dof``: the joint count when no robot is given. Returns the chain and a report (held-out residual
-    in metres, the noise's robust σ, outliers dropped, undetermined joint directions, seconds).
+    in metres, the noise's robust σ, outliers dropped, undetermined joint directions, seconds); its
+    URDF names the joints, the root link and the end-effector link as the robot (or prior) does, else
+    ``joint1`` …, ``base`` and ``ee``.
     """
     rob = load_robot(robot) if isinstance(robot, str) else robot
     if isinstance(prior, bool):
@@ -329,7 +344,13 @@ def identify(
         progress=progress,
     )
     result.report["data"] = source
-    result.joint_names = (rob or prior_robot).joint_names if (rob or prior_robot) is not None else None
+    named = rob or prior_robot  # the frames and joints the exported URDF names as the user's do
+    if named is not None:
+        result.joint_names, result.base_link, result.ee_frame = (
+            named.joint_names,
+            named.root_link,
+            named.ee_frame,
+        )
     return result
 
 
