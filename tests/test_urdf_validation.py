@@ -118,3 +118,17 @@ def test_a_registered_arm_never_plans_with_another_arms_planner(tmp_path):
             kinlearn.plan(q[0], q[1], robot=robot)
     finally:
         unregister_robot("iiwa-copy")
+
+
+def test_a_sphere_urdf_goes_through_the_same_validator(tmp_path):
+    from kinlearn.collision import body_spheres
+
+    path, spheres = tmp_path / "arm.urdf", tmp_path / "arm_spheres.urdf"
+    path.write_text(URDF)
+    spheres.write_text(BROKEN["duplicate link"][0])
+    robot = register_robot("arm", path, "tool", spheres=spheres)
+    try:
+        with pytest.raises(RobotDescriptionError, match="the sphere URDF: two links are named 'l3'"):
+            body_spheres(robot)
+    finally:
+        unregister_robot("arm")

@@ -323,15 +323,11 @@ def urdf_spheres(robot: Robot, urdf: str | Path | bytes, drop_links: tuple[str, 
     base (a stand). A sphere behind a moving joint that ``robot`` lacks is a
     :class:`~kinlearn.errors.RobotDescriptionError` naming it.
     """
-    import xml.etree.ElementTree as ET
 
-    from ..body.robot import _origin
+    from ..body.robot import _origin, validate_urdf
 
     data = urdf if isinstance(urdf, bytes) else Path(urdf).read_bytes()
-    try:
-        root = ET.fromstring(data)
-    except ET.ParseError as exc:
-        raise RobotDescriptionError(f"the sphere URDF is not valid XML: {exc}") from exc
+    root = validate_urdf(data, "the sphere URDF")  # a tree of declared, uniquely named links and joints
     by_child = {}
     for el in root.iter("joint"):
         child, parent = el.find("child"), el.find("parent")
