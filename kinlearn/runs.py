@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from .errors import RunDirectoryError
-from .io import _pid_alive, read_json, remove_stale_tmp, write_json
+from .io import _output_error, _pid_alive, check_output, read_json, remove_stale_tmp, write_json
 
 __all__ = [
     "CONFIG_FILE",
@@ -213,7 +213,10 @@ class Run:
     def begin(self) -> Path:
         """Create the folder, delete what ``overwrite`` replaces and stale temporary files, write
         ``config.json`` (unless the command keeps none); returns the folder."""
-        self.path.mkdir(parents=True, exist_ok=True)
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _output_error(self.path / CONFIG_FILE, exc) from exc
         _acquire(self.path, self.command)  # before anything is written
         if self.mode == "overwrite":
             # config.json first: a folder never holds a config.json beside another run's outputs
@@ -281,6 +284,7 @@ def open_run(
         raise RunDirectoryError(f"{path} is a file, not a run directory")
     if path.is_dir() and (holder := _live_holder(path)) is not None:
         raise _refuse_held(path, holder)
+    check_output(path / CONFIG_FILE)  # a file in the way, no permission: said now, before any work
     outputs = tuple(outputs)
     record = {"command": command, **_plain(dict(config)), **_plain(dict(meta or {}))}
     record = record if write_config else None

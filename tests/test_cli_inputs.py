@@ -98,3 +98,10 @@ def test_export_refuses_another_kind_of_run_and_a_partial_export_is_refused_on_l
     (out / "tm_obstacles.pt").unlink()  # as an export killed while writing it leaves the folder
     with pytest.raises(CheckpointError, match="obstacle_tm"):
         Planner.load(out)
+
+
+def test_a_run_directory_under_a_file_is_a_typed_error_before_any_work(tmp_path, capsys):
+    (tmp_path / "a_file").write_text("x")
+    run_dir = tmp_path / "a_file" / "run"
+    assert main(["babble", "--transitions", "100", "--walkers", "10", "--run-dir", str(run_dir)]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
