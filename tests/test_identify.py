@@ -5,6 +5,7 @@ recorded CSV log); the typed errors."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 
@@ -141,6 +142,7 @@ def test_cli_babble_identify_export(true_iiwa, tmp_path, gen, capsys):
     assert "Pinocchio FK against the chain" in capsys.readouterr().out
     exported = load_robot(out, "iiwa_link_ee")  # named as the robot names its frames and joints
     assert exported.joint_names == true_iiwa.joint_names and exported.root_link == "iiwa_link_0"
+    np.testing.assert_allclose(exported.velocity_limits, true_iiwa.velocity_limits)
     err = _fk_error(exported, true_iiwa, gen)
     assert float(err.median()) < 0.2e-3
     # Refusals: exit 2, nothing written.

@@ -170,7 +170,12 @@ def _run_export_urdf(args: argparse.Namespace) -> int:
     names = tuple(extra.get("joint_names") or ()) or None
     base, ee = extra.get("base_link", "base"), extra.get("ee_frame", "ee")
     text = chain_urdf(
-        model, name=args.name or model.robot_name, joint_names=names, base_link=base, ee_frame=ee
+        model,
+        name=args.name or model.robot_name,
+        joint_names=names,
+        velocity=extra.get("velocity"),
+        base_link=base,
+        ee_frame=ee,
     )
     if model.residual is not None:
         print("note: the chain's residual MLP is not part of a URDF; the file holds the rigid chain")

@@ -111,6 +111,7 @@ class Identification:
     joint_names: tuple[str, ...] | None = None
     base_link: str = "base"
     ee_frame: str = "ee"
+    velocity: tuple[float, ...] | None = None  # joint velocity limits for the URDF (rad/s)
 
     def save(self, path: str | Path, config: IdentifyConfig | None = None) -> Path:
         """Save the chain as an FM checkpoint (``kinlearn.load(path)`` / ``load_fm``) with its report."""
@@ -119,6 +120,7 @@ class Identification:
             "joint_names": list(self.joint_names or ()),
             "base_link": self.base_link,
             "ee_frame": self.ee_frame,
+            "velocity": None if self.velocity is None else list(self.velocity),
         }
         if config is not None:
             extra["identify"] = config.to_dict()
@@ -132,6 +134,7 @@ class Identification:
             joint_names=self.joint_names,
             base_link=self.base_link,
             ee_frame=self.ee_frame,
+            velocity=self.velocity,
         )
 
 
@@ -351,6 +354,8 @@ def identify(
             named.root_link,
             named.ee_frame,
         )
+        v = named.velocity_limits
+        result.velocity = tuple(float(x) if math.isfinite(x) and x > 0 else math.pi for x in v)
     return result
 
 
