@@ -371,3 +371,15 @@ def test_baseline_work_is_bounded(robot):
     with pytest.raises(ConfigError, match="steps"):
         trajectory_optimiser(START, GOAL, kinlearn.Scene(torch.tensor([[3.0, 3.0, 3.0, 0.1]])), steps=10**9)
     assert kinlearn.JointInterpolation(robot, steps=np.int64(5)).steps == 5
+
+
+def test_the_dense_check_refuses_work_beyond_its_budget(robot):
+    from kinlearn.collision import body_spheres, check_path
+    from kinlearn.collision.check import MAX_CHECKED
+
+    body = body_spheres(robot).double()
+    path = torch.stack((START, GOAL))
+    scene = kinlearn.Scene(torch.tensor([[3.0, 3.0, 3.0, 0.1]], dtype=torch.float64))
+    with pytest.raises(ConfigError, match="MAX_CHECKED"):
+        check_path(body, path, scene, max_travel=1e-9)  # 1e9 configurations and more
+    assert bool(check_path(body, path, scene).collision_free) and MAX_CHECKED >= 1_000_000

@@ -93,6 +93,10 @@ def segment_steps(body: BodySpheres, joints: torch.Tensor, max_travel: float = 0
     return torch.ceil(bound / max_travel).clamp_min(1).to(torch.int64)
 
 
+#: The most configurations one :func:`check_path` call looks at (about 1 GB of intermediate tensors).
+MAX_CHECKED = 10_000_000
+
+
 @torch.no_grad()
 def check_path(
     body: BodySpheres,
@@ -128,6 +132,13 @@ def check_path(
     # The configurations to check: sub-step starts of every segment, then each path's last waypoint.
     if n_wp > 1:
         steps = segment_steps(body, flat, max_travel).reshape(-1)  # (n_paths · T,)
+        total = int(steps.sum())
+        if total > MAX_CHECKED:  # refused before the configurations are made (tens of bytes each)
+            raise ConfigError(
+                f"checking these {n_paths} path(s) every {max_travel:g} m of sphere travel would take {total:,} "
+                f"configurations, more than the {MAX_CHECKED:,} a call checks (MAX_CHECKED); pass a larger "
+                "max_travel or fewer paths per call"
+            )
         seg = torch.repeat_interleave(torch.arange(steps.shape[0], device=dev), steps)
         first = torch.cumsum(steps, 0) - steps
         frac = (torch.arange(seg.shape[0], device=dev) - first[seg]).to(joints.dtype) / steps[seg].to(
