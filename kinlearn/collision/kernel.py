@@ -295,16 +295,14 @@ def _verdict(
     for k in range(T):
         offset[k + 1] = offset[k] + steps[k]
     end = offset[T] if T else 0.0  # the last knot's global index
-    # Over the whole path, how far each sphere can travel per joint (prefix sums over the joints): an
-    # item whose budget exceeds its whole-path bound needs no walk along the segments.
-    total = np.zeros(dof)
-    for k in range(T):
-        for j in range(dof):
-            total[j] += absd[k, j]
-    reach = np.zeros((M, dof + 1))
-    for m in range(M):
-        for j in range(dof):
-            reach[m, j + 1] = reach[m, j] + total[j] * lever[m, j]
+    # From each segment to the path's end, how far each sphere can travel (``rest[k, m, j]``: by joints
+    # before j, summed over segments k…T−1): an item whose budget exceeds what is left of its bound
+    # needs no walk along the segments.
+    rest = np.zeros((T + 1, M, dof + 1))
+    for k in range(T - 1, -1, -1):
+        for m in range(M):
+            for j in range(dof + 1):
+                rest[k, m, j] = rest[k + 1, m, j] + cj[k, m, j]
     lo_p = np.empty(P, dtype=np.int64)
     hi_p = np.empty(P, dtype=np.int64)
     far_p = np.empty(P, dtype=np.int64)
@@ -344,7 +342,7 @@ def _verdict(
                 if d <= margin:
                     return k, evaluated
                 budget = d - margin - _SLACK
-                if budget > reach[m, dof]:
+                if budget > rest[k, m, dof]:
                     due_m[m] = np.inf
                 else:
                     due_m[m] = _expiry(budget, k, i, cj, m, 0, dof, steps, offset)
@@ -358,7 +356,7 @@ def _verdict(
                 if d <= 0.0:
                     return k, evaluated
                 f = far_p[p]
-                if d - _SLACK > reach[f, hi_p[p]] - reach[f, lo_p[p]]:
+                if d - _SLACK > rest[k, f, hi_p[p]] - rest[k, f, lo_p[p]]:
                     due_p[p] = np.inf
                 else:
                     due_p[p] = _expiry(d - _SLACK, k, i, cj, f, lo_p[p], hi_p[p], steps, offset)
@@ -493,6 +491,25 @@ _BODIES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _PACKED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
+@_jit
+def _distinct_indices(idx, n):
+    """Every entry of ``idx`` in 0…n−1, none twice."""
+    seen = np.zeros(n, dtype=np.bool_)
+    for i in idx:
+        if i < 0 or i >= n or seen[i]:
+            return False
+        seen[i] = True
+    return True
+
+
+@_jit
+def _all_finite(a):
+    for v in a.flat:
+        if not math.isfinite(v):
+            return False
+    return True
+
+
 def _joints(x, dof: int, what: str, ndim: int) -> np.ndarray:
     if isinstance(x, torch.Tensor):
         x = x.detach().cpu().numpy()
@@ -502,7 +519,7 @@ def _joints(x, dof: int, what: str, ndim: int) -> np.ndarray:
     if a.ndim != ndim or a.shape[-1] != dof:
         raise ShapeError(f"{what} must have {ndim} dimensions, the last of size {dof}; got {a.shape}")
     a = np.ascontiguousarray(a, dtype=np.float64)
-    if not np.isfinite(a).all():
+    if not _all_finite(a):
         raise NonFiniteError(f"{what} holds {int((~np.isfinite(a)).sum())} NaN/inf value(s)")
     return a
 
@@ -596,9 +613,9 @@ def first_free(
         idx = np.asarray(order)
         if idx.ndim != 1 or (idx.size and idx.dtype.kind not in "iu"):
             raise ConfigError(f"order must be a 1-D sequence of path indices, got {order!r}")
-        if idx.size and ((idx < 0).any() or (idx >= P).any() or np.unique(idx).shape[0] != idx.shape[0]):
-            raise ConfigError(f"order must hold distinct path indices in 0…{P - 1}, got {idx.tolist()}")
         idx = np.ascontiguousarray(idx, dtype=np.int64)
+        if idx.size and not _distinct_indices(idx, P):
+            raise ConfigError(f"order must hold distinct path indices in 0…{P - 1}, got {idx.tolist()}")
     if idx.shape[0] == 0:
         return -1
     return int(

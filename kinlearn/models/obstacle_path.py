@@ -109,6 +109,8 @@ def scene_primitives(
             return hit
     parts, masks = [], []
     for kind, table, m in scene.tables():
+        if table.shape[-2] == 0:  # nothing of this kind: no rows (and no work)
+            continue
         t = table.to(dtype).expand(batch, *table.shape[-2:])
         flag = torch.ones_like(t[..., :1]) if kind is Sphere else torch.zeros_like(t[..., :1])
         parts.append(torch.cat((t[..., :3], aabb_half_extents(kind, t), flag), -1))
@@ -117,8 +119,11 @@ def scene_primitives(
             if m is None
             else m.expand(batch, t.shape[-2])
         )
-    rows = torch.cat(parts, dim=1)
-    mask = torch.cat(masks, dim=1)
+    if not parts:
+        parts.append(torch.zeros(batch, 0, 7, dtype=dtype, device=scene.device))
+        masks.append(torch.zeros(batch, 0, dtype=torch.bool, device=scene.device))
+    rows = torch.cat(parts, dim=1) if len(parts) > 1 else parts[0]
+    mask = torch.cat(masks, dim=1) if len(masks) > 1 else masks[0]
     if scene.floor is None:
         floor = torch.zeros(batch, 2, dtype=dtype, device=rows.device)
     else:
