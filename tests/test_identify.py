@@ -178,3 +178,15 @@ def load_babbling(path):
     from kinlearn.data.babbling import load_transitions
 
     return load_transitions(path)
+
+
+def test_a_user_urdf_prior_for_a_named_arm(true_iiwa, gen, tmp_path):
+    """A rough URDF of the arm as the prior (not the arm's own): the chain is the arm's by name."""
+    rough = load_robot(
+        write_perturbed_urdf("iiwa14", tmp_path / "rough.urdf", length_error=0.02, seed=3), "iiwa_link_ee"
+    )
+    data = _observe(true_iiwa, 6000, 1e-3, gen)
+    result = identify(data, robot="iiwa14", prior=rough, config=QUICK)
+    assert result.model.robot_name == "iiwa14" and result.model.config.robot == "iiwa14"
+    err = _fk_error(_exported(result, tmp_path), true_iiwa, gen)
+    assert float(err.median()) < 0.25e-3

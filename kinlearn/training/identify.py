@@ -36,6 +36,7 @@ and arbitrary about that joint's orientation.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import time
@@ -303,7 +304,7 @@ def identify(
     data,
     *,
     robot: Robot | str | None = None,
-    prior: bool | Robot | str | Path = True,
+    prior: bool | Robot = True,
     dof: int | None = None,
     config: IdentifyConfig | None = None,
     progress: bool = False,
@@ -318,7 +319,8 @@ def identify(
     ``robot``: the arm the chain is of (a name or a :class:`~kinlearn.Robot`): its joint names and
     limits, and — unless ``prior=False`` — its URDF as the starting guess (it may be wrong).
     ``prior``: ``True`` (the robot's URDF, if a robot is given), ``False`` (no URDF: only the joint
-    count), or another robot / a URDF path whose model starts the fit (a user's rough model).
+    count), or another :class:`~kinlearn.Robot` whose model starts the fit (a user's rough URDF:
+    ``load_robot(path, ee_frame)``).
     ``dof``: the joint count when no robot is given. Returns the chain and a report (held-out residual
     in metres, the noise's robust σ, outliers dropped, undetermined joint directions, seconds); its
     URDF names the joints, the root link and the end-effector link as the robot (or prior) does, else
@@ -401,7 +403,6 @@ def _identify(
     needed = 20 * (6 * n_joints + 3)
     if n < needed:
         raise DatasetError(f"identifying a {n_joints}-joint chain needs at least {needed} samples, got {n}")
-    name = robot_name
     if limits is not None:
         lo, hi = (torch.as_tensor(v, dtype=torch.float64) for v in limits)
     elif prior is not None:
@@ -420,10 +421,13 @@ def _identify(
     t_stage = time.perf_counter()
     if prior is not None:
         model = ChainFM.from_robot(prior)
+        model.config = dataclasses.replace(model.config, robot=robot_name)  # the arm's, not the prior's
+        model.robot_name = robot_name
         with torch.no_grad():
             model.lower.copy_(lo)
             model.upper.copy_(hi)
         report["initialisation"] = f"prior URDF {prior.name}"
+        stages["initialisation"] = 0.0
         _fit(model, th_fit, ef_fit, 1e-2, cfg.iterations)
     else:
         t0 = time.perf_counter()
@@ -442,7 +446,7 @@ def _identify(
         for _, ref, (axes, centres, radii, tip) in scored[: cfg.references]:
             for i in np.flatnonzero(radii < 1e-3):  # a joint that does not move the point here
                 centres[i] = tip
-            cand = _chain_from(axes, centres, tip, ref, name, lo, hi)
+            cand = _chain_from(axes, centres, tip, ref, robot_name, lo, hi)
             loss = _fit(cand, th_fit, ef_fit, 1e-2, max(3, cfg.iterations // 6))
             log(f"reference candidate: loss {loss:.4g}")
             if loss < best_loss:
@@ -461,7 +465,7 @@ def _identify(
     _fit(model, th_fit, ef_fit, max(3.0 * sigma, 1e-6), cfg.iterations)
     r = _residuals(model, th_fit, ef_fit).detach()
     sigma = _robust_scale(r)
-    keep = r <= cfg.outlier_sigma * max(sigma, 1e-7) * 1.5382
+    keep = r <= cfg.outlier_sigma * max(sigma, 1e-7)
     _fit(model, th_fit[keep], ef_fit[keep], max(3.0 * sigma, 1e-6), cfg.iterations)
     model.canonicalize()
     stages["fit"] = time.perf_counter() - t_stage
