@@ -268,15 +268,21 @@ def _expiry(b, k, i, cj, item, lo, hi, steps, offset):
 
 @_jit
 def _verdict(
-    path, max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs, lever, pair_lever,
+    path, max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs, lever,
+    base_sphere, base_start, base_members, base_ball,
     spheres, boxes, cylinders, floor,
 ):  # fmt: skip
     """One path ``(W, dof)``: (first colliding segment or −1, configurations evaluated), the verdict of
     checking every sub-step. Each sphere's clearance and each pair's distance, once computed, is a
     budget that the spheres' travel bounds use up along the path; a configuration is evaluated only
-    where some budget may be spent, and then only the spent items are recomputed."""
+    where some budget may be spent, and then only the spent items are recomputed. The pairs of a
+    moving sphere with the (fixed) base's spheres go as one item (``base_sphere[g]`` against
+    ``base_members[base_start[g]:base_start[g + 1]]``): its distance to the ball ``base_ball`` [centre,
+    radius] that holds the base's spheres, or where that is not positive the pairs' smallest distance;
+    ``pairs`` are the others."""
     W, dof = path.shape
     M, P, T = link.shape[0], pairs.shape[0], W - 1
+    G = base_sphere.shape[0]
     absd = np.empty((T, dof))
     cj = np.zeros((T, M, dof + 1))  # per segment and sphere: Σ_{j' < j} |Δθ_j'| lever_j'
     steps = np.ones(max(T, 1))
@@ -312,6 +318,8 @@ def _verdict(
         far_p[p] = pairs[p, 0] if la >= lb else pairs[p, 1]
     due_m = np.zeros(M)  # global sub-step index at which each item must be recomputed
     due_p = np.zeros(P)
+    due_g = np.zeros(G)
+    from_g = np.zeros(G)
     # Where each item was last computed: an evaluated configuration also refreshes the items that have
     # spent more than ``REFRESH`` of their budget's span, so that far items do not each call for one.
     from_m = np.zeros(M)
@@ -361,6 +369,25 @@ def _verdict(
                 else:
                     due_p[p] = _expiry(d - _SLACK, k, i, cj, f, lo_p[p], hi_p[p], steps, offset)
             nxt = min(nxt, due_p[p])
+        for g in range(G):
+            if due_g[g] <= pos or pos - from_g[g] >= _REFRESH * (due_g[g] - from_g[g]):
+                from_g[g] = pos
+                x = base_sphere[g]
+                dx, dy, dz = c[x, 0] - base_ball[0], c[x, 1] - base_ball[1], c[x, 2] - base_ball[2]
+                d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - base_ball[3] - radii[x]
+                if d <= 0.0:  # near the base: its spheres one by one
+                    d = np.inf
+                    for e in range(base_start[g], base_start[g + 1]):
+                        b = base_members[e]
+                        dx, dy, dz = c[x, 0] - c[b, 0], c[x, 1] - c[b, 1], c[x, 2] - c[b, 2]
+                        d = min(d, math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[x] - radii[b])
+                    if d <= 0.0:
+                        return k, evaluated
+                if d - _SLACK > rest[k, x, link[x]]:
+                    due_g[g] = np.inf
+                else:
+                    due_g[g] = _expiry(d - _SLACK, k, i, cj, x, 0, link[x], steps, offset)
+            nxt = min(nxt, due_g[g])
         if nxt > end:
             return -1, evaluated
         pos = nxt
@@ -368,13 +395,14 @@ def _verdict(
 
 @_jit
 def _first_free(
-    paths, order, max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs, lever, pair_lever,
+    paths, order, max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs, lever,
+    base_sphere, base_start, base_members, base_ball,
     spheres, boxes, cylinders, floor,
 ):  # fmt: skip
     for i in range(order.shape[0]):
         first, _ = _verdict(
             paths[order[i]], max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs,
-            lever, pair_lever, spheres, boxes, cylinders, floor,
+            lever, base_sphere, base_start, base_members, base_ball, spheres, boxes, cylinders, floor,
         )  # fmt: skip
         if first < 0:
             return order[i]
@@ -421,15 +449,27 @@ class KernelBody:
         self.on_floor = np.ascontiguousarray(body.floor_mask.cpu().numpy().astype(np.bool_))
         self.pairs = np.ascontiguousarray(body.pairs.cpu().numpy().astype(np.int64).reshape(-1, 2))
         self.lever = np.ascontiguousarray(body.lever.detach().cpu().double().numpy())
-        # A pair's distance is unchanged by the joints that move both its spheres rigidly (those before
-        # the nearer link): only the joints between its links change it, by at most the farther
-        # sphere's lever on each.
-        a, b = self.pairs[:, 0], self.pairs[:, 1]
-        lo, hi = np.minimum(self.link[a], self.link[b]), np.maximum(self.link[a], self.link[b])
-        later = np.where(self.link[a] >= self.link[b], a, b)
-        j = np.arange(self.dof)
-        between = (j[None] >= lo[:, None]) & (j[None] < hi[:, None])
-        self.pair_lever = np.ascontiguousarray(self.lever[later] * between)
+        # For the verdict: a moving sphere's pairs with the base's spheres (which never move) as one
+        # item, bounded by a ball holding the base's spheres; the other pairs one by one.
+        base = np.flatnonzero(self.link == 0)
+        with_base = (
+            np.isin(self.pairs, base).any(axis=1) if len(base) > 1 else np.zeros(len(self.pairs), bool)
+        )
+        self.other_pairs = np.ascontiguousarray(self.pairs[~with_base])
+        grouped = self.pairs[with_base]
+        moving = np.where(np.isin(grouped[:, 0], base), grouped[:, 1], grouped[:, 0])
+        fixed = np.where(np.isin(grouped[:, 0], base), grouped[:, 0], grouped[:, 1])
+        order = np.argsort(moving, kind="stable")
+        self.base_sphere, counts = np.unique(moving[order], return_counts=True)
+        self.base_sphere = np.ascontiguousarray(self.base_sphere.astype(np.int64))
+        self.base_start = np.ascontiguousarray(np.concatenate([[0], np.cumsum(counts)]).astype(np.int64))
+        self.base_members = np.ascontiguousarray(fixed[order].astype(np.int64))
+        if len(base):
+            centre = local[base].mean(axis=0)
+            radius = float((np.linalg.norm(local[base] - centre, axis=1) + self.radii[base]).max())
+            self.base_ball = np.array([*centre, radius])
+        else:
+            self.base_ball = np.zeros(4)
 
     @property
     def num_spheres(self) -> int:
@@ -440,6 +480,13 @@ class KernelBody:
 
     def args(self) -> tuple:
         return self.F, self.prismatic, self.link, self.folded, self.radii, self.on_floor, self.pairs
+
+    def verdict_args(self) -> tuple:
+        """The body's arguments of the verdict kernels."""
+        return (
+            self.F, self.prismatic, self.link, self.folded, self.radii, self.on_floor, self.other_pairs,
+            self.lever, self.base_sphere, self.base_start, self.base_members, self.base_ball,
+        )  # fmt: skip
 
     def __repr__(self) -> str:
         return f"KernelBody(robot={self.robot.name!r}, set={self.name!r}, spheres={self.num_spheres}, pairs={len(self.pairs)})"
@@ -580,13 +627,7 @@ def check_paths(
             )
         else:
             first[i], _ = _verdict(
-                arr[i],
-                float(max_travel),
-                float(margin),
-                *body.args(),
-                body.lever,
-                body.pair_lever,
-                *scene.args(),
+                arr[i], float(max_travel), float(margin), *body.verdict_args(), *scene.args()
             )
             clear[i] = np.nan
         free[i] = first[i] < 0
@@ -618,18 +659,7 @@ def first_free(
             raise ConfigError(f"order must hold distinct path indices in 0…{P - 1}, got {idx.tolist()}")
     if idx.shape[0] == 0:
         return -1
-    return int(
-        _first_free(
-            arr,
-            idx,
-            float(max_travel),
-            float(margin),
-            *body.args(),
-            body.lever,
-            body.pair_lever,
-            *scene.args(),
-        )
-    )
+    return int(_first_free(arr, idx, float(max_travel), float(margin), *body.verdict_args(), *scene.args()))
 
 
 def warm_up() -> None:

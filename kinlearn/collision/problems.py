@@ -316,7 +316,7 @@ class RrtChecker:
             # The kernels themselves, their arguments bound once: OMPL calls these thousands of times.
             self._clear, self._verdict = kernel._clearances, kernel._verdict
             self._clear_args = (*kb.args(), *ks.args())
-            self._verdict_args = (*kb.args(), kb.lever, kb.pair_lever, *ks.args())
+            self._verdict_args = (*kb.verdict_args(), *ks.args())
             self._per = np.empty((1, kb.num_spheres))
             self._travel = float(max_travel)
 
