@@ -384,7 +384,7 @@ def solve_position(
     upper: torch.Tensor,
     *,
     iterations: int = 40,
-    restarts: int = 8,
+    restarts: int = 16,
     damping: float = 1e-3,
     tolerance: float = 2e-4,
     backend: Literal["auto", "torch", "compiled"] = "auto",

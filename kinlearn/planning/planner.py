@@ -96,7 +96,7 @@ CHAIN = "chain.pt"
 REACH_BOUND = 10.0
 #: The position solver's budget: damped least-squares steps from the start and from each restart.
 POSITION_ITERATIONS = 40
-POSITION_RESTARTS = 8
+POSITION_RESTARTS = 16
 #: The model error at which a position solution is taken as reaching its goal (m).
 POSITION_TOLERANCE = 2e-4
 #: The obstacle-aware TM's file in a planner folder.
