@@ -105,3 +105,14 @@ def test_a_run_directory_under_a_file_is_a_typed_error_before_any_work(tmp_path,
     run_dir = tmp_path / "a_file" / "run"
     assert main(["babble", "--transitions", "100", "--walkers", "10", "--run-dir", str(run_dir)]) == 2
     assert "is a file, not a folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option", ["--body-checkpoint", "--init-checkpoint"])
+def test_train_obstacle_planner_reads_its_models_before_writing(tmp_path, capsys, option):
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a checkpoint")
+    run_dir = tmp_path / "run"
+    argv = ["train-obstacle-planner", option, str(junk), "--iterations", "1", "--problems-per-family", "4"]
+    assert main([*argv, "--run-dir", str(run_dir)]) == 2
+    assert "not a readable kinlearn checkpoint" in capsys.readouterr().err
+    assert not run_dir.exists()  # no config.json, no generated problems/

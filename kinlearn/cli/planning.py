@@ -570,6 +570,15 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot)
     if args.planner is not None and not (args.planner / "tm.pt").is_file():
         raise ConfigError(f"--planner {args.planner} is not a planner folder (it holds no tm.pt)")
+    # The models named on the command line are read now: a bad one is refused before anything is written.
+    if args.body_checkpoint is not None:
+        from ..models.body import load_body_model
+
+        load_body_model(args.body_checkpoint, robot=robot.name)
+    if args.init_checkpoint is not None:
+        from ..models.obstacle_path import load_obstacle_model
+
+        load_obstacle_model(args.init_checkpoint, robot=robot.name)
     run = open_command_run(
         args,
         ("tm_obstacles.pt", "metrics.jsonl", "tensorboard", "problems"),
