@@ -67,10 +67,14 @@ def number_type(
     rejected with a message that says what is allowed."""
     noun = "an integer" if kind is int else "a finite number"
     parts = []
+
+    def num(v) -> str:  # integers in full (a seed's bound is 4294967295, not 4.29497e+09)
+        return str(v) if kind is int else f"{v:g}"
+
     if low is not None:
-        parts.append(f"{'>' if open_low else '≥'} {low:g}")
+        parts.append(f"{'>' if open_low else '≥'} {num(low)}")
     if high is not None:
-        parts.append(f"{'<' if open_high else '≤'} {high:g}")
+        parts.append(f"{'<' if open_high else '≤'} {num(high)}")
     allowed = f"{noun} {' and '.join(parts)}".strip()
 
     def parse(text: str):
