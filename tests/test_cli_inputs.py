@@ -29,7 +29,7 @@ def _refused_at_parse(argv, capsys, match):
         (["train-body", "--data", "{missing}"], "no such file"),
         (["train-body", "--problems", "{missing}"], "no such file"),
         (["train-fm", "--data", "{folder}"], "is a folder, not a file"),
-        (["train-fm", "--seed", str(2**70)], "argument --seed"),
+        (["train-fm", "--seed", str(2**70)], "argument --seed: expected an integer ≥ 0 and ≤ 4294967295"),
         (["train-fm", "--seed", "-1"], "argument --seed"),
         (["train-tm", "--endpoints", "{missing}"], "no such folder"),
         (["train-planner", "--fm-checkpoint", "{missing}"], "no such file"),
