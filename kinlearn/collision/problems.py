@@ -314,9 +314,9 @@ class RrtChecker:
 
             kb, ks = kernel.KernelBody.of(body), kernel.KernelScene.of(self.scene)
             # The kernels themselves, their arguments bound once: OMPL calls these thousands of times.
-            self._clear, self._verdict = kernel._clearances, kernel._verdict
+            self._clear, self._verdict = kernel._clearances, kernel._verdict_packed
             self._clear_args = (*kb.args(), *ks.args())
-            self._verdict_args = (*kb.verdict_args(), *ks.args())
+            self._verdict_args = (*kb.packed, ks.packed)
             self._per = np.empty((1, kb.num_spheres))
             self._travel = float(max_travel)
 
