@@ -252,3 +252,5 @@ def test_arm_without_an_obstacle_network_says_so_and_checks_densely(name, tmp_pa
         dense = check_path(body, plan.joints.double(), scene)
         assert bool(plan.collision_free) == bool(dense.collision_free)
     assert not bool(plan.collision_free)  # inside a ball that holds the whole arm: flagged, not silent
+    with pytest.warns(NoObstacleModelWarning, match=r"alone \(refine_steps=0\)"):
+        kinlearn.plan(start, goal, obstacles=scene, robot=name, refine_steps=0)

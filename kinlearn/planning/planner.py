@@ -438,8 +438,17 @@ class Planner:
         free = None
         if obstacles is not None:
             scene = self._scene(obstacles, batch, n)
-            if self.obstacle_tm is None and refine_steps is None:
-                steps = max(steps, NO_MODEL_REFINE_STEPS)
+            if self.obstacle_tm is None:
+                if refine_steps is None:
+                    steps = max(steps, NO_MODEL_REFINE_STEPS)
+                how = f"and {steps} steps of gradient refinement" if steps else "alone (refine_steps=0)"
+                warnings.warn(
+                    f"{self.robot.name} has no obstacle-trained network in this planner ({OBSTACLE_TM}): "
+                    f"planning with the straight joint line {how}, checked densely; plan.collision_free says "
+                    "whether it cleared the obstacles",
+                    NoObstacleModelWarning,
+                    stacklevel=3,
+                )
             joints, free = self._plan_around(theta0, ef0, thetaT, efT, scene, steps)
             ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(n, joints.shape[1], 3)
             waypoints = ef[:, 1:-1]
@@ -513,15 +522,6 @@ class Planner:
 
     def _scene(self, obstacles, batch: tuple, n: int) -> Scene:
         """``obstacles`` as a float64 scene of batch shape ``()`` or ``(n,)``."""
-        if self.obstacle_tm is None:
-            warnings.warn(
-                f"{self.robot.name} has no obstacle-trained network in this planner ({OBSTACLE_TM}): planning "
-                "with the straight joint line and bounded gradient refinement (refine_steps, default "
-                f"{NO_MODEL_REFINE_STEPS} here), checked densely; plan.collision_free says whether it cleared "
-                "the obstacles",
-                NoObstacleModelWarning,
-                stacklevel=4,
-            )
         scene = as_scene(obstacles, batch).to(dtype=torch.float64, device="cpu")
         return scene.reshape(n) if len(scene.batch_shape) > 1 else scene
 
