@@ -53,6 +53,9 @@ _TINY = float(np.finfo(np.float64).tiny)
 #: Metres of slack in the skipping bound (the float64 error of a distance is ~1e-15 m).
 _SLACK = 1e-9
 
+#: A lower link's spheres are grouped against each higher sphere from this many on (fewer: a looser
+#: ball bound costs more evaluations than the pairs it saves).
+_GROUP_MIN = 4
 #: Share of its budget's span after which an item is recomputed at a configuration evaluated anyway.
 _REFRESH = 0.5
 
@@ -109,10 +112,9 @@ def _sphere_scene(x, y, z, r, on_floor, spheres, boxes, cylinders, floor):
 
 
 @_jit
-def _fk(q, F, prismatic, link, folded, out, frames):
-    """Sphere centres ``out (M, 3)`` at joints ``q (dof,)``: frames T_i = T_{i−1} F_i Z(q_i), Z a rotation
-    about (or shift along) z, and each moving sphere at R_k · folded + p_k (base spheres: folded).
-    ``frames (dof + 1, 3, 4)``: work space."""
+def _chain(q, F, prismatic, frames):
+    """Frames ``(dof + 1, 3, 4)`` of joints ``q (dof,)``: T_0 = I, T_i = T_{i−1} F_i Z(q_i), Z a rotation
+    about (or a shift along) z."""
     dof = q.shape[0]
     for a in range(3):
         for b in range(4):
@@ -129,11 +131,24 @@ def _fk(q, F, prismatic, link, folded, out, frames):
             frames[i + 1, a, 1] = c * a1 - s * a0
             frames[i + 1, a, 2] = a2
             frames[i + 1, a, 3] = a3 + q[i] * a2 if prismatic[i] else a3
+
+
+@_jit
+def _place(frames, link, folded, out):
+    """Points ``out (M, 3)``, each at R_k · folded + p_k of its link k's frame."""
     for m in range(link.shape[0]):
         k = link[m]
         f0, f1, f2 = folded[m, 0], folded[m, 1], folded[m, 2]
         for a in range(3):
             out[m, a] = frames[k, a, 0] * f0 + frames[k, a, 1] * f1 + frames[k, a, 2] * f2 + frames[k, a, 3]
+
+
+@_jit
+def _fk(q, F, prismatic, link, folded, out, frames):
+    """Sphere centres ``out (M, 3)`` at joints ``q (dof,)`` (``frames (dof + 1, 3, 4)``: work space); each
+    ``folded`` centre is in its link's frame turned so that the joint axis is z (base spheres: as is)."""
+    _chain(q, F, prismatic, frames)
+    _place(frames, link, folded, out)
 
 
 @_jit
@@ -269,20 +284,21 @@ def _expiry(b, k, i, cj, item, lo, hi, steps, offset):
 @_jit
 def _verdict(
     path, max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs, lever,
-    base_sphere, base_start, base_members, base_ball,
+    g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius,
     spheres, boxes, cylinders, floor,
 ):  # fmt: skip
     """One path ``(W, dof)``: (first colliding segment or −1, configurations evaluated), the verdict of
     checking every sub-step. Each sphere's clearance and each pair's distance, once computed, is a
     budget that the spheres' travel bounds use up along the path; a configuration is evaluated only
     where some budget may be spent, and then only the spent items are recomputed. The pairs of a
-    moving sphere with the (fixed) base's spheres go as one item (``base_sphere[g]`` against
-    ``base_members[base_start[g]:base_start[g + 1]]``): its distance to the ball ``base_ball`` [centre,
-    radius] that holds the base's spheres, or where that is not positive the pairs' smallest distance;
-    ``pairs`` are the others."""
+    sphere with the spheres of one lower link go as one item, group g: sphere ``g_sphere[g]`` against
+    ``g_members[g_start[g]:g_start[g + 1]]``, whose link's ball ``g_ball[g]`` (a sphere of radius
+    ``b_radius`` around ``b_folded`` in link ``b_link``'s frame) holds them: its distance to that ball,
+    or where that is not positive the pairs' smallest distance. ``pairs`` are the pairs not grouped."""
     W, dof = path.shape
     M, P, T = link.shape[0], pairs.shape[0], W - 1
-    G = base_sphere.shape[0]
+    G, L = g_sphere.shape[0], b_link.shape[0]
+    cb = np.empty((L, 3))
     absd = np.empty((T, dof))
     cj = np.zeros((T, M, dof + 1))  # per segment and sphere: Σ_{j' < j} |Δθ_j'| lever_j'
     steps = np.ones(max(T, 1))
@@ -338,7 +354,9 @@ def _verdict(
         else:
             for j in range(dof):
                 q[j] = path[T, j]
-        _fk(q, F, prismatic, link, folded, c, frames)
+        _chain(q, F, prismatic, frames)
+        _place(frames, link, folded, c)
+        _place(frames, b_link, b_folded, cb)
         evaluated += 1
         nxt = np.inf
         for m in range(M):
@@ -372,21 +390,22 @@ def _verdict(
         for g in range(G):
             if due_g[g] <= pos or pos - from_g[g] >= _REFRESH * (due_g[g] - from_g[g]):
                 from_g[g] = pos
-                x = base_sphere[g]
-                dx, dy, dz = c[x, 0] - base_ball[0], c[x, 1] - base_ball[1], c[x, 2] - base_ball[2]
-                d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - base_ball[3] - radii[x]
-                if d <= 0.0:  # near the base: its spheres one by one
+                x, u = g_sphere[g], g_ball[g]
+                dx, dy, dz = c[x, 0] - cb[u, 0], c[x, 1] - cb[u, 1], c[x, 2] - cb[u, 2]
+                d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - b_radius[u] - radii[x]
+                if d <= 0.0:  # near that link: its spheres one by one
                     d = np.inf
-                    for e in range(base_start[g], base_start[g + 1]):
-                        b = base_members[e]
+                    for e in range(g_start[g], g_start[g + 1]):
+                        b = g_members[e]
                         dx, dy, dz = c[x, 0] - c[b, 0], c[x, 1] - c[b, 1], c[x, 2] - c[b, 2]
                         d = min(d, math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[x] - radii[b])
                     if d <= 0.0:
                         return k, evaluated
-                if d - _SLACK > rest[k, x, link[x]]:
+                lo, hi = b_link[u], link[x]
+                if d - _SLACK > rest[k, x, hi] - rest[k, x, lo]:
                     due_g[g] = np.inf
                 else:
-                    due_g[g] = _expiry(d - _SLACK, k, i, cj, x, 0, link[x], steps, offset)
+                    due_g[g] = _expiry(d - _SLACK, k, i, cj, x, lo, hi, steps, offset)
             nxt = min(nxt, due_g[g])
         if nxt > end:
             return -1, evaluated
@@ -396,13 +415,14 @@ def _verdict(
 @_jit
 def _first_free(
     paths, order, max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs, lever,
-    base_sphere, base_start, base_members, base_ball,
+    g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius,
     spheres, boxes, cylinders, floor,
 ):  # fmt: skip
     for i in range(order.shape[0]):
         first, _ = _verdict(
             paths[order[i]], max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs,
-            lever, base_sphere, base_start, base_members, base_ball, spheres, boxes, cylinders, floor,
+            lever, g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius,
+            spheres, boxes, cylinders, floor,
         )  # fmt: skip
         if first < 0:
             return order[i]
@@ -425,7 +445,7 @@ def _unpack_scene(buf):
 @_jit
 def _unpack_body(f, n):
     """A body packed by :attr:`KernelBody.packed` (floats ``f``, integers ``n``) → the verdict's arrays."""
-    dof, M, P, G, E = n[0], n[1], n[2], n[3], n[4]
+    dof, M, P, G, E, L = n[0], n[1], n[2], n[3], n[4], n[5]
     o = 0
     F = f[o : o + 16 * dof].reshape(dof, 4, 4)
     o += 16 * dof
@@ -435,8 +455,10 @@ def _unpack_body(f, n):
     o += M
     lever = f[o : o + M * dof].reshape(M, dof)
     o += M * dof
-    ball = f[o : o + 4]
-    i = 5
+    b_folded = f[o : o + 3 * L].reshape(L, 3)
+    o += 3 * L
+    b_radius = f[o : o + L]
+    i = 6
     prismatic = n[i : i + dof] != 0
     i += dof
     link = n[i : i + M]
@@ -445,34 +467,28 @@ def _unpack_body(f, n):
     i += M
     pairs = n[i : i + 2 * P].reshape(P, 2)
     i += 2 * P
-    base_sphere = n[i : i + G]
+    g_sphere = n[i : i + G]
     i += G
-    base_start = n[i : i + G + 1]
+    g_ball = n[i : i + G]
+    i += G
+    g_start = n[i : i + G + 1]
     i += G + 1
-    base_members = n[i : i + E]
+    g_members = n[i : i + E]
+    i += E
+    b_link = n[i : i + L]
     return (
-        F,
-        prismatic,
-        link,
-        folded,
-        radii,
-        on_floor,
-        pairs,
-        lever,
-        base_sphere,
-        base_start,
-        base_members,
-        ball,
-    )
+        F, prismatic, link, folded, radii, on_floor, pairs, lever,
+        g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius,
+    )  # fmt: skip
 
 
 @_jit
 def _verdict_packed(path, max_travel, margin, f, n, s):
     """:func:`_verdict` on a packed body and scene (few arguments: each costs a call about 0.25 µs)."""
-    F, pr, link, folded, radii, fl, pairs, lever, bs, bst, bm, ball = _unpack_body(f, n)
+    F, pr, link, folded, radii, fl, pairs, lever, gs, gb, gst, gm, bl, bf, br = _unpack_body(f, n)
     spheres, boxes, cylinders, floor = _unpack_scene(s)
     return _verdict(
-        path, max_travel, margin, F, pr, link, folded, radii, fl, pairs, lever, bs, bst, bm, ball,
+        path, max_travel, margin, F, pr, link, folded, radii, fl, pairs, lever, gs, gb, gst, gm, bl, bf, br,
         spheres, boxes, cylinders, floor,
     )  # fmt: skip
 
@@ -480,10 +496,10 @@ def _verdict_packed(path, max_travel, margin, f, n, s):
 @_jit
 def _first_free_packed(paths, order, max_travel, margin, f, n, s):
     """:func:`_first_free` on a packed body and scene."""
-    F, pr, link, folded, radii, fl, pairs, lever, bs, bst, bm, ball = _unpack_body(f, n)
+    F, pr, link, folded, radii, fl, pairs, lever, gs, gb, gst, gm, bl, bf, br = _unpack_body(f, n)
     spheres, boxes, cylinders, floor = _unpack_scene(s)
     return _first_free(
-        paths, order, max_travel, margin, F, pr, link, folded, radii, fl, pairs, lever, bs, bst, bm, ball,
+        paths, order, max_travel, margin, F, pr, link, folded, radii, fl, pairs, lever, gs, gb, gst, gm, bl, bf, br,
         spheres, boxes, cylinders, floor,
     )  # fmt: skip
 
@@ -528,28 +544,44 @@ class KernelBody:
         self.on_floor = np.ascontiguousarray(body.floor_mask.cpu().numpy().astype(np.bool_))
         self.pairs = np.ascontiguousarray(body.pairs.cpu().numpy().astype(np.int64).reshape(-1, 2))
         self.lever = np.ascontiguousarray(body.lever.detach().cpu().double().numpy())
-        # For the verdict: a moving sphere's pairs with the base's spheres (which never move) as one
-        # item, bounded by a ball holding the base's spheres; the other pairs one by one.
-        base = np.flatnonzero(self.link == 0)
-        with_base = (
-            np.isin(self.pairs, base).any(axis=1) if len(base) > 1 else np.zeros(len(self.pairs), bool)
-        )
-        self.other_pairs = np.ascontiguousarray(self.pairs[~with_base])
-        grouped = self.pairs[with_base]
-        moving = np.where(np.isin(grouped[:, 0], base), grouped[:, 1], grouped[:, 0])
-        fixed = np.where(np.isin(grouped[:, 0], base), grouped[:, 0], grouped[:, 1])
-        order = np.argsort(moving, kind="stable")
+        # For the verdict: a sphere's pairs with the spheres of one lower link (one that has at least
+        # _GROUP_MIN) go as one item, bounded by a ball around that link's spheres (centre: their mean, in
+        # its frame); the other pairs one by one.
         self._packed = None
-        self.base_sphere, counts = np.unique(moving[order], return_counts=True)
-        self.base_sphere = np.ascontiguousarray(self.base_sphere.astype(np.int64))
-        self.base_start = np.ascontiguousarray(np.concatenate([[0], np.cumsum(counts)]).astype(np.int64))
-        self.base_members = np.ascontiguousarray(fixed[order].astype(np.int64))
-        if len(base):
-            centre = local[base].mean(axis=0)
-            radius = float((np.linalg.norm(local[base] - centre, axis=1) + self.radii[base]).max())
-            self.base_ball = np.array([*centre, radius])
-        else:
-            self.base_ball = np.zeros(4)
+        la, lb = self.link[self.pairs[:, 0]], self.link[self.pairs[:, 1]]
+        upper = np.where(la > lb, self.pairs[:, 0], self.pairs[:, 1])  # the sphere on the higher link
+        lower = np.where(la > lb, self.pairs[:, 1], self.pairs[:, 0])
+        counts = np.bincount(self.link, minlength=self.dof + 1)
+        grouped = counts[self.link[lower]] >= _GROUP_MIN
+        self.other_pairs = np.ascontiguousarray(self.pairs[~grouped])
+        ball_links = np.unique(self.link[lower[grouped]])
+        index = {int(l): b for b, l in enumerate(ball_links)}
+        self.b_link = np.ascontiguousarray(ball_links.astype(np.int64))
+        b_local = np.array([local[self.link == l].mean(axis=0) for l in ball_links]).reshape(-1, 3)
+        self.b_radius = np.array(
+            [
+                float(
+                    (
+                        np.linalg.norm(local[self.link == l] - b_local[b], axis=1)
+                        + self.radii[self.link == l]
+                    ).max()
+                )
+                for b, l in enumerate(ball_links)
+            ]
+        )
+        b_folded = b_local.copy()
+        for b, l in enumerate(ball_links):
+            if l > 0:
+                b_folded[b] = _z_to_axis(robot.joints[l - 1].axis).T @ b_local[b]
+        self.b_folded = np.ascontiguousarray(b_folded)
+        up, low = upper[grouped], lower[grouped]
+        key = up * (self.dof + 1) + self.link[low]
+        order = np.argsort(key, kind="stable")
+        keys, starts = np.unique(key[order], return_index=True)
+        self.g_sphere = np.ascontiguousarray((keys // (self.dof + 1)).astype(np.int64))
+        self.g_ball = np.array([index[int(l)] for l in keys % (self.dof + 1)], dtype=np.int64)
+        self.g_start = np.ascontiguousarray(np.append(starts, len(order)).astype(np.int64))
+        self.g_members = np.ascontiguousarray(low[order].astype(np.int64))
 
     @property
     def num_spheres(self) -> int:
@@ -565,20 +597,30 @@ class KernelBody:
     def packed(self) -> tuple[np.ndarray, np.ndarray]:
         """The verdict's arrays in two buffers (floats, integers), for the packed entry points."""
         if self._packed is None:
-            M, P, G, E = len(self.radii), len(self.other_pairs), len(self.base_sphere), len(self.base_members)
+            M, P, G = len(self.radii), len(self.other_pairs), len(self.g_sphere)
+            E, L = len(self.g_members), len(self.b_link)
             f = np.concatenate(
-                [self.F.ravel(), self.folded.ravel(), self.radii, self.lever.ravel(), self.base_ball]
+                [
+                    self.F.ravel(),
+                    self.folded.ravel(),
+                    self.radii,
+                    self.lever.ravel(),
+                    self.b_folded.ravel(),
+                    self.b_radius,
+                ]
             )
             n = np.concatenate(
                 [
-                    [self.dof, M, P, G, E],
+                    [self.dof, M, P, G, E, L],
                     self.prismatic.astype(np.int64),
                     self.link,
                     self.on_floor.astype(np.int64),
                     self.other_pairs.ravel(),
-                    self.base_sphere,
-                    self.base_start,
-                    self.base_members,
+                    self.g_sphere,
+                    self.g_ball,
+                    self.g_start,
+                    self.g_members,
+                    self.b_link,
                 ]
             ).astype(np.int64)
             self._packed = (np.ascontiguousarray(f), np.ascontiguousarray(n))
@@ -588,7 +630,8 @@ class KernelBody:
         """The body's arguments of the verdict kernels."""
         return (
             self.F, self.prismatic, self.link, self.folded, self.radii, self.on_floor, self.other_pairs,
-            self.lever, self.base_sphere, self.base_start, self.base_members, self.base_ball,
+            self.lever, self.g_sphere, self.g_ball, self.g_start, self.g_members, self.b_link, self.b_folded,
+            self.b_radius,
         )  # fmt: skip
 
     def __repr__(self) -> str:
