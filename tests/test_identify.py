@@ -190,3 +190,12 @@ def test_a_user_urdf_prior_for_a_named_arm(true_iiwa, gen, tmp_path):
     assert result.model.robot_name == "iiwa14" and result.model.config.robot == "iiwa14"
     err = _fk_error(_exported(result, tmp_path), true_iiwa, gen)
     assert float(err.median()) < 0.25e-3
+
+
+def test_work_is_bounded_by_max_samples(true_iiwa, gen):
+    data = _observe(true_iiwa, 4000, 1e-3, gen)
+    cfg = IdentifyConfig(max_samples=1500, iterations=5)
+    result = identify(data, robot="iiwa14", config=cfg)
+    assert result.report["subsampled_from"] > 4000 and result.report["samples"] == 1500
+    with pytest.raises(ConfigError):
+        IdentifyConfig(max_samples=0)
