@@ -1,11 +1,12 @@
 """The batch-1 dense path check: the compiled kernel (kinlearn.collision.kernel) against the NumPy check
 (benchmarks/_numpy_check.py) that the planner used before, timed in the same run on one thread.
 
-    python benchmarks/dense_check_speed.py [--paths 200] [--repeats 20] [--threads 1]
+    python benchmarks/dense_check_speed.py [--robot iiwa14] [--paths 200] [--repeats 20] [--threads 1]
 
-Each path is a 12-knot iiwa14 joint path (the straight joint line between two configurations drawn
-within ±60% of the limits, seeded), checked against one scene of 10 primitives at a time with the
-planner's body (18 spheres) and floor, ≤ 1 cm of sphere travel between checked configurations:
+Each path is a 12-knot joint path (iiwa14 by default; panda and ur5 have bodies too) (the straight joint
+line between two configurations drawn within ±60% of the limits, seeded), checked against one scene of 10
+primitives at a time with the planner's body (18 spheres) and floor, ≤ 1 cm of sphere travel between
+checked configurations:
 
 - the verdict (``first_free`` of one path: collision-free or not), what a planner needs per candidate;
 - the verdict and clearance (``check_paths``, every sub-step evaluated).
@@ -82,11 +83,12 @@ def main() -> None:
     ap.add_argument("--paths", type=int, default=200)
     ap.add_argument("--repeats", type=int, default=20)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--robot", default="iiwa14", help="iiwa14, panda or ur5")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     import numba
 
-    print(header("batch-1 dense path check (iiwa14)", args.threads))
+    print(header(f"batch-1 dense path check ({args.robot})", args.threads))
     print(f"numba {numba.__version__}")
     t0 = time.perf_counter()
     from kinlearn.collision import kernel
@@ -96,7 +98,7 @@ def main() -> None:
         f"kernel import + first calls (compile, or load from numba's cache): {time.perf_counter() - t0:.2f} s"
     )
 
-    robot = load_robot("iiwa14")
+    robot = load_robot(args.robot)
     body = body_spheres(robot).double()
     kb, nb = kernel.KernelBody(body), numpy_check.NumpyBody(body)
     aligned, mixed = scenes()
