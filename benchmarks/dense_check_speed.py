@@ -5,7 +5,7 @@
 
 Each path is a 12-knot joint path (iiwa14 by default; panda and ur5 have bodies too) (the straight joint
 line between two configurations drawn within ±60% of the limits, seeded), checked against one scene of 10
-primitives at a time with the planner's body (18 spheres) and floor, ≤ 1 cm of sphere travel between
+primitives at a time with the robot's body (iiwa14: 18 spheres) and floor, ≤ 1 cm of sphere travel between
 checked configurations:
 
 - the verdict (``first_free`` of one path: collision-free or not), what a planner needs per candidate;
