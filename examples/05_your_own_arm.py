@@ -14,25 +14,28 @@ from kinlearn.models.chain import solve_position
 from kinlearn.training.identify import IdentifyConfig
 
 URDF = """<?xml version="1.0"?>
-<robot name="toy4">
-  <link name="base"/><link name="l1"/><link name="l2"/><link name="l3"/><link name="l4"/><link name="tool"/>
-  <joint name="yaw" type="revolute"><parent link="base"/><child link="l1"/>
-    <origin xyz="0 0 0.1"/><axis xyz="0 0 1"/><limit lower="-2.5" upper="2.5" velocity="2.0" effort="10"/></joint>
-  <joint name="shoulder" type="revolute"><parent link="l1"/><child link="l2"/>
-    <origin xyz="0 0 0.30"/><axis xyz="0 1 0"/><limit lower="-1.8" upper="1.8" velocity="2.0" effort="10"/></joint>
-  <joint name="elbow" type="revolute"><parent link="l2"/><child link="l3"/>
-    <origin xyz="0 0 0.25"/><axis xyz="0 1 0"/><limit lower="-2.2" upper="2.2" velocity="2.5" effort="10"/></joint>
-  <joint name="wrist" type="revolute"><parent link="l3"/><child link="l4"/>
-    <origin xyz="0.02 0 0.20"/><axis xyz="0 1 0"/><limit lower="-2.0" upper="2.0" velocity="3.0" effort="10"/></joint>
-  <joint name="flange" type="fixed"><parent link="l4"/><child link="tool"/><origin xyz="0 0 0.10"/></joint>
+<robot name="myarm">
+  <link name="mount"/><link name="turret"/><link name="upper"/><link name="fore"/><link name="wrist"/>
+  <link name="hand"/><link name="tcp"/>
+  <joint name="j_turret" type="revolute"><parent link="mount"/><child link="turret"/>
+    <origin xyz="0 0 0.12"/><axis xyz="0 0 1"/><limit lower="-2.8" upper="2.8" velocity="1.5" effort="40"/></joint>
+  <joint name="j_shoulder" type="revolute"><parent link="turret"/><child link="upper"/>
+    <origin xyz="0.05 0 0.20" rpy="0 0 0.1"/><axis xyz="0 1 0"/><limit lower="-1.6" upper="1.9" velocity="1.5" effort="40"/></joint>
+  <joint name="j_elbow" type="revolute"><parent link="upper"/><child link="fore"/>
+    <origin xyz="0 0.03 0.35"/><axis xyz="0 1 0"/><limit lower="-2.4" upper="2.4" velocity="2.0" effort="20"/></joint>
+  <joint name="j_roll" type="revolute"><parent link="fore"/><child link="wrist"/>
+    <origin xyz="0 0 0.28"/><axis xyz="0 0 1"/><limit lower="-3.0" upper="3.0" velocity="3.0" effort="10"/></joint>
+  <joint name="j_pitch" type="revolute"><parent link="wrist"/><child link="hand"/>
+    <origin xyz="0 0 0.06"/><axis xyz="1 0 0"/><limit lower="-2.0" upper="2.0" velocity="3.0" effort="10"/></joint>
+  <joint name="j_tcp" type="fixed"><parent link="hand"/><child link="tcp"/><origin xyz="0 0.02 0.12"/></joint>
 </robot>
 """
-path = Path(tempfile.mkdtemp()) / "toy4.urdf"
+path = Path(tempfile.mkdtemp()) / "myarm.urdf"
 path.write_text(URDF)
-robot = kinlearn.register_robot("toy4", path, ee_frame="tool")
+robot = kinlearn.register_robot("myarm", path, ee_frame="tcp")
 
-data = kinlearn.babble(kinlearn.BabblingConfig(robot="toy4", walkers=100, steps=60, ef_noise=5e-4))
-result = kinlearn.identify(data, robot="toy4", prior=False, config=IdentifyConfig(mlp_steps=400))
+data = kinlearn.babble(kinlearn.BabblingConfig(robot="myarm", walkers=100, steps=60, ef_noise=5e-4))
+result = kinlearn.identify(data, robot="myarm", prior=False, config=IdentifyConfig(mlp_steps=400))
 print(
     f"identified in {result.report['seconds']:.1f} s; held-out residual "
     f"{result.report['holdout_residual']['median'] * 1e3:.2f} mm"
