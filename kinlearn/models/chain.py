@@ -154,6 +154,26 @@ def chain_parameter_jacobian(
     return pts[0], J
 
 
+def moved_axes(
+    w: torch.Tensor, q: torch.Tensor, tip: torch.Tensor, phi: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Every joint's axis ``(..., 3, n)`` and axis point ``(..., 3, n)`` moved by the joints before it,
+    and the end effector ``(..., 3)``, at displacements ``phi (..., n)`` from the chain's reference: the
+    transforms of the joints accumulated from the base (R ← R Rᵢ, t ← R (qᵢ − Rᵢ qᵢ) + t)."""
+    c, s = torch.cos(phi), torch.sin(phi)
+    batch = phi.shape[:-1]
+    R = torch.eye(3, dtype=phi.dtype, device=phi.device).expand(*batch, 3, 3)
+    t = torch.zeros(*batch, 3, dtype=phi.dtype, device=phi.device)
+    axes, points = [], []
+    for i in range(w.shape[0]):
+        axes.append(R @ w[i])
+        points.append(R @ q[i] + t)
+        Ri = _rodrigues(w[i], c[..., i], s[..., i])
+        t = _mv(R, q[i] - Ri @ q[i]) + t
+        R = R @ Ri
+    return torch.stack(axes, -1), torch.stack(points, -1), R @ tip + t
+
+
 def _rodrigues(w: torch.Tensor, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
     """Rotation matrices ``(..., 3, 3)`` about the unit ``w (3,)`` by angles with cosine/sine ``c, s (...)``."""
     K = torch.zeros(3, 3, dtype=w.dtype, device=w.device)
@@ -261,20 +281,7 @@ class ChainFM(ForwardModel):
     def position_and_jacobian(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``p (..., 3)`` and ``∂p/∂θ (..., 3, dof)`` (the residual MLP's part by autograd)."""
         w, q, tip, ref = self._params(theta)
-        phi = theta - ref
-        c, s = torch.cos(phi), torch.sin(phi)
-        batch = theta.shape[:-1]
-        R = torch.eye(3, dtype=theta.dtype, device=theta.device).expand(*batch, 3, 3)
-        t = torch.zeros(*batch, 3, dtype=theta.dtype, device=theta.device)
-        axes, points = [], []
-        for i in range(self.dof):
-            axes.append(R @ w[i])
-            points.append((R @ q[i]) + t)
-            Ri = _rodrigues(w[i], c[..., i], s[..., i])
-            t = _mv(R, q[i] - Ri @ q[i]) + t
-            R = R @ Ri
-        p = R @ tip + t
-        wa, qa = torch.stack(axes, -1), torch.stack(points, -1)  # (..., 3, dof)
+        wa, qa, p = moved_axes(w, q, tip, theta - ref)  # (..., 3, dof) twice, (..., 3)
         J = torch.linalg.cross(wa, p.unsqueeze(-1) - qa, dim=-2)
         if self.residual is not None:
             with torch.enable_grad():
@@ -319,18 +326,10 @@ class ChainFM(ForwardModel):
     def at_zero(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The chain re-expressed about θ = 0: axes ``(n, 3)``, points ``(n, 3)`` and the end effector
         ``(3,)`` at θ = 0 (float64; the residual MLP is not part of it)."""
-        w = self.unit_axes().double()
-        q, ref = self.point.double(), self.reference.double()
-        axes, points = [], []
-        R, t = torch.eye(3, dtype=torch.float64), torch.zeros(3, dtype=torch.float64)
-        for i in range(self.dof):
-            axes.append(R @ w[i])
-            points.append(R @ q[i] + t)
-            Ri = _rodrigues(w[i], torch.cos(-ref[i]), torch.sin(-ref[i]))
-            t = R @ (q[i] - Ri @ q[i]) + t
-            R = R @ Ri
-        tip = R @ self.tip.double() + t
-        return torch.stack(axes).numpy(), torch.stack(points).numpy(), tip.numpy()
+        axes, points, tip = moved_axes(
+            self.unit_axes().double(), self.point.double(), self.tip.double(), -self.reference.double()
+        )
+        return axes.T.numpy(), points.T.numpy(), tip.numpy()
 
 
 # --------------------------------------------------------------------------------------------------
