@@ -49,6 +49,7 @@ __all__ = [
     "restart_fractions",
     "rotate_about",
     "solve_position",
+    "solve_position_arrays",
 ]
 
 
@@ -415,17 +416,14 @@ def solve_position(
     dt = theta0.dtype
     fractions = restart_fractions(restarts - 1, dof)
     if backend != "torch" and rigid_cpu:
-        from .chain_kernel import solve_position_numba
-
-        lo, hi = lower.double().numpy(), upper.double().numpy()
-        out, err = solve_position_numba(
-            *fm.kernel_arrays(),
+        out, err = solve_position_arrays(
+            fm,
             theta0.detach().double().numpy(),
             target.detach().double().numpy(),
-            lo,
-            hi,
-            lo + (hi - lo) * fractions.numpy() if restarts > 1 else np.zeros((0, dof)),
+            lower.double().numpy(),
+            upper.double().numpy(),
             iterations=iterations,
+            restarts=restarts,
             damping=damping,
             tolerance=tolerance,
         )
@@ -446,6 +444,36 @@ def solve_position(
     best = score.argmin(dim=1)
     idx = torch.arange(n, device=theta.device)
     return theta[idx, best], err[idx, best]
+
+
+def solve_position_arrays(
+    chain: ChainFM,
+    theta0: np.ndarray,
+    target: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    *,
+    iterations: int = 40,
+    restarts: int = 16,
+    damping: float = 1e-3,
+    tolerance: float = 2e-4,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`solve_position`'s compiled backend on float64 arrays (a rigid :class:`ChainFM`): the
+    planner's batch-1 path, without a tensor on the way."""
+    from .chain_kernel import solve_position_numba
+
+    seeds = lower + (upper - lower) * restart_fractions(restarts - 1, chain.dof).numpy()
+    return solve_position_numba(
+        *chain.kernel_arrays(),
+        theta0,
+        target,
+        lower,
+        upper,
+        seeds,
+        iterations=iterations,
+        damping=damping,
+        tolerance=tolerance,
+    )
 
 
 class ThroughFMIM(InverseModel):

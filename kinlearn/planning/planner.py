@@ -50,7 +50,7 @@ from ..errors import (
     ShapeError,
 )
 from ..io import load_checkpoint, resolve_dependency
-from ..models.chain import ChainFM, restart_fractions, solve_position
+from ..models.chain import ChainFM, solve_position, solve_position_arrays
 from ..models.forward_inverse import ForwardModel, InverseModel, load_fm, load_im
 from ..models.joint_path import JointPathModel, load_path_model
 from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model, scene_primitives
@@ -723,21 +723,14 @@ class Planner:
                 f"{REACH_BOUND:g}× that are refused (they cannot be reached)"
             )
         if chain.residual is None:
-            from ..models.chain_kernel import solve_position_numba
-
-            seeds = getattr(self, "_chain_seeds", None)
-            if seeds is None:
-                fractions = restart_fractions(POSITION_RESTARTS - 1, self.robot.dof).numpy()
-                seeds = self._chain_seeds = self._lo_np + (self._hi_np - self._lo_np) * fractions
-            thetaT, _ = solve_position_numba(
-                *chain.kernel_arrays(),
+            thetaT, _ = solve_position_arrays(
+                chain,
                 theta0,
                 target,
                 self._lo_np,
                 self._hi_np,
-                seeds,
                 iterations=POSITION_ITERATIONS,
-                damping=1e-3,
+                restarts=POSITION_RESTARTS,
                 tolerance=POSITION_TOLERANCE,
             )
         else:
