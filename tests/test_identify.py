@@ -199,3 +199,18 @@ def test_work_is_bounded_by_max_samples(true_iiwa, gen):
     assert result.report["subsampled_from"] > 4000 and result.report["samples"] == 1500
     with pytest.raises(ConfigError):
         IdentifyConfig(max_samples=0)
+
+
+def test_an_identification_saved_loads_with_its_names(true_iiwa, gen, tmp_path):
+    from kinlearn.errors import CheckpointError
+    from kinlearn.models.forward_inverse import AnalyticFM, save_model
+    from kinlearn.training.identify import Identification
+
+    result = identify(_observe(true_iiwa, 4000, 1e-3, gen), robot="iiwa14", config=QUICK)
+    back = Identification.load(result.save(tmp_path / "chain.pt"))
+    assert (back.joint_names, back.base_link, back.ee_frame, back.velocity) == (
+        result.joint_names, result.base_link, result.ee_frame, result.velocity,
+    )  # fmt: skip
+    assert back.urdf() == result.urdf() and back.report["samples"] == result.report["samples"]
+    with pytest.raises(CheckpointError, match="not an identified chain"):
+        Identification.load(save_model(AnalyticFM("iiwa14"), tmp_path / "analytic.pt"))

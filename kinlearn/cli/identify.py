@@ -16,10 +16,8 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import load_robot
 from ..errors import CheckpointError, ConfigError
-from ..io import atomic_write, load_checkpoint, write_json
-from ..models.chain import ChainFM, chain_urdf
-from ..models.forward_inverse import load_fm
-from ..training.identify import IdentifyConfig, identify
+from ..io import atomic_write, write_json
+from ..training.identify import Identification, IdentifyConfig, identify
 from .common import (
     POSITIVE_INT,
     add_command,
@@ -159,35 +157,23 @@ def _chain_path(source: Path) -> Path:
 
 
 def _run_export_urdf(args: argparse.Namespace) -> int:
-    path = _chain_path(args.source)
-    payload = load_checkpoint(path, kind="fm")
-    model = load_fm(path)
-    if not isinstance(model, ChainFM):
-        raise CheckpointError(f"{path} holds a {type(model).__name__}, not an identified chain")
     if args.out.suffix.lower() != ".urdf":
         raise ConfigError(f"--out must name a .urdf file, got {args.out}")
-    extra = payload["extra"]
-    names = tuple(extra.get("joint_names") or ()) or None
-    base, ee = extra.get("base_link", "base"), extra.get("ee_frame", "ee")
-    text = chain_urdf(
-        model,
-        name=args.name or model.robot_name,
-        joint_names=names,
-        velocity=extra.get("velocity"),
-        base_link=base,
-        ee_frame=ee,
-    )
+    result = Identification.load(_chain_path(args.source))
+    model = result.model
+    text = result.urdf(args.name)
     if model.residual is not None:
         print("note: the chain's residual MLP is not part of a URDF; the file holds the rigid chain")
     atomic_write(args.out, lambda p: p.write_text(text))
     # Check what was written: its forward kinematics through Pinocchio against the chain's.
-    robot = load_robot(args.out, ee)
+    robot = load_robot(args.out, result.ee_frame)
     q = torch.from_numpy(np.random.default_rng(0).uniform(robot.lower, robot.upper, size=(1000, robot.dof)))
     with torch.no_grad():
-        rigid = model.position(q) - (model._residual(q) if model.residual is not None else 0.0)
-    diff = float((kinematics(robot, "pinocchio").position(q) - rigid).norm(dim=-1).max())
+        diff = float(
+            (kinematics(robot, "pinocchio").position(q) - model.rigid_position(q)).norm(dim=-1).max()
+        )
     print(
-        f"wrote {args.out}: {model.dof} revolute joints, end effector link 'ee'; "
-        f"Pinocchio FK against the chain: max {diff:.2e} m over 1,000 configurations"
+        f"wrote {args.out}: {model.dof} revolute joints from {result.base_link!r} to the end-effector link "
+        f"{result.ee_frame!r}; Pinocchio FK against the chain: max {diff:.2e} m over 1,000 configurations"
     )
     return 0

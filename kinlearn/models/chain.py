@@ -273,11 +273,13 @@ class ChainFM(ForwardModel):
 
     def position(self, theta: torch.Tensor) -> torch.Tensor:
         """The end effector ``(..., 3)`` (m, base frame) of joint values ``theta (..., dof)``."""
+        p = self.rigid_position(theta)
+        return p if self.residual is None else p + self._residual(theta)
+
+    def rigid_position(self, theta: torch.Tensor) -> torch.Tensor:
+        """The rigid chain's end effector, without the residual MLP (what an exported URDF holds)."""
         w, q, tip, ref = self._params(theta)
-        p = chain_position(w, q, tip, theta - ref)
-        if self.residual is not None:
-            p = p + self._residual(theta)
-        return p
+        return chain_position(w, q, tip, theta - ref)
 
     def position_and_jacobian(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``p (..., 3)`` and ``∂p/∂θ (..., 3, dof)`` (the residual MLP's part by autograd)."""

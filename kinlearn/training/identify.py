@@ -52,9 +52,10 @@ from ..body.robot import Robot, load_robot
 from ..checks import check_finite
 from ..data.babbling import Transitions
 from ..data.recorded import Observations, load_observations
-from ..errors import ConfigError, DatasetError
+from ..errors import CheckpointError, ConfigError, DatasetError
+from ..io import load_checkpoint
 from ..models.chain import ChainConfig, ChainFM, chain_parameter_jacobian, chain_position, chain_urdf
-from ..models.forward_inverse import save_model
+from ..models.forward_inverse import load_fm, save_model
 
 __all__ = ["Identification", "IdentifyConfig", "fit_residual", "identify"]
 
@@ -119,7 +120,8 @@ class Identification:
     velocity: tuple[float, ...] | None = None  # joint velocity limits for the URDF (rad/s)
 
     def save(self, path: str | Path, config: IdentifyConfig | None = None) -> Path:
-        """Save the chain as an FM checkpoint (``kinlearn.load(path)`` / ``load_fm``) with its report."""
+        """Save the chain as an FM checkpoint (read by :meth:`load`, or ``load_fm`` for the model alone)
+        with its report and the names its URDF gives."""
         extra = {
             "report": self.report,
             "joint_names": list(self.joint_names or ()),
@@ -130,6 +132,25 @@ class Identification:
         if config is not None:
             extra["identify"] = config.to_dict()
         return save_model(self.model, path, extra=extra)
+
+    @classmethod
+    def load(cls, path: str | Path) -> Identification:
+        """An identification saved by :meth:`save`; :class:`~kinlearn.errors.CheckpointError` for a file
+        that holds no chain."""
+        payload = load_checkpoint(path, kind="fm")
+        model = load_fm(path)
+        if not isinstance(model, ChainFM):
+            raise CheckpointError(f"{path} holds a {type(model).__name__}, not an identified chain")
+        extra = payload["extra"]
+        velocity = extra.get("velocity")
+        return cls(
+            model,
+            extra.get("report", {}),
+            tuple(extra.get("joint_names") or ()) or None,
+            extra.get("base_link", "base"),
+            extra.get("ee_frame", "ee"),
+            None if velocity is None else tuple(velocity),
+        )
 
     def urdf(self, name: str | None = None) -> str:
         """The chain as a URDF document (see :func:`~kinlearn.models.chain.chain_urdf`)."""
