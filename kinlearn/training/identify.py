@@ -396,9 +396,9 @@ def _observations(data, robot: Robot | None, dof: int | None, drop_nan: bool):
         return obs.theta, obs.ef, {"transitions": len(data)}
     if isinstance(data, Observations):
         return data.theta, data.ef, data.record()
-    if isinstance(data, (tuple, list)) and len(data) == 2:
-        theta, ef = _check_observations(*data)
-        return theta, ef, {"rows": int(theta.shape[0])}
+    if isinstance(data, (tuple, list)) and len(data) == 2:  # checked with the rest by _identify
+        theta, ef = data
+        return theta, ef, {"rows": len(theta)}
     raise ConfigError(
         "data must be a file path, Observations, Transitions or a pair (theta, ef); "
         f"got {type(data).__name__}"
