@@ -54,7 +54,7 @@ def test_reproduce_smoke_writes_tables_and_figures(smoke):
 def test_overwrite_knows_everything_reproduce_writes(smoke):
     """`reproduce --overwrite` deletes the outputs it knows of: every one the run writes (workspace/ was
     left behind, and the new run then failed partway)."""
-    from kinlearn.cli.planning import REPRODUCE_OUTPUTS
+    from kinlearn.cli.evaluate import REPRODUCE_OUTPUTS
 
     out, _ = smoke
     written = {p.name for p in out.iterdir()} - {"config.json"}

@@ -39,6 +39,7 @@ __all__ = [
     "add_run_options",
     "data_record",
     "file_identity",
+    "int_list",
     "number_type",
     "open_command_run",
     "register_subcommand",
@@ -163,6 +164,21 @@ NONNEGATIVE_INT = number_type(int, low=0)
 POSITIVE_FLOAT = number_type(float, low=0, open_low=True)
 NONNEGATIVE_FLOAT = number_type(float, low=0)
 PROBABILITY = number_type(float, low=0, high=1)
+
+
+def int_list(low: int) -> Callable[[str], tuple[int, ...]]:
+    """An argparse ``type``: integers ≥ ``low`` separated by commas."""
+
+    def parse(text: str) -> tuple[int, ...]:
+        try:
+            values = tuple(int(v) for v in text.replace(",", " ").split())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected integers separated by commas, got {text!r}") from None
+        if not values or min(values) < low:
+            raise argparse.ArgumentTypeError(f"expected integers ≥ {low}, got {text!r}")
+        return values
+
+    return parse
 
 
 def add_command(

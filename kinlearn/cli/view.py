@@ -15,7 +15,7 @@ import argparse
 
 from ..errors import ConfigError
 from .common import OUTPUT_FILE, add_command, number_type
-from .planning import add_plan_inputs, plan_from_args
+from .plan import add_plan_inputs, plan_from_args
 
 __all__ = ["register"]
 

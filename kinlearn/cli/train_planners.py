@@ -1,0 +1,243 @@
+"""``kinlearn`` subcommands that train the planners of the joint range, self-supervised through frozen
+models: ``train-planner`` (the joint-path TM, through an FM) and ``train-obstacle-planner`` (the
+obstacle-aware TM, through a body model on generated scenes).
+
+Both write under the run-directory policy of :mod:`kinlearn.runs`.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..body.robot import load_robot
+from ..errors import ConfigError
+from ..io import atomic_copy
+from ..models.forward_inverse import load_fm, load_im
+from ..planning.planner import Planner
+from .common import (
+    EXISTING_FILE,
+    NONNEGATIVE_INT,
+    OUTPUT_DIR,
+    POSITIVE_FLOAT,
+    POSITIVE_INT,
+    add_command,
+    add_run_options,
+    file_identity,
+    int_list,
+    open_command_run,
+    register_subcommand,
+)
+
+# --------------------------------------------------------------------------------------------------
+# train-planner
+# --------------------------------------------------------------------------------------------------
+
+
+@register_subcommand
+def _add_train_planner(sub) -> None:
+    p = add_command(
+        sub,
+        "train-planner",
+        "Train a joint-path TM (plans anywhere in the joint range, ends at the goal state) through a frozen "
+        "FM, self-supervised; the run folder is a planner (tm.pt beside the fm.pt/im.pt it plans with).",
+        _run_train_planner,
+    )
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--fm-checkpoint", type=EXISTING_FILE, help="the learned FM to train through (fm.pt)")
+    src.add_argument(
+        "--analytic-fm", action="store_true", help="train through the analytic FK (the ablation)"
+    )
+    p.add_argument(
+        "--im-checkpoint",
+        type=EXISTING_FILE,
+        default=None,
+        help="a learned IM kept beside the TM for position goals (im.pt)",
+    )
+    p.add_argument(
+        "--iterations", type=POSITIVE_INT, default=6000, help="training iterations (default: 6000)"
+    )
+    p.add_argument(
+        "--batch-size", type=POSITIVE_INT, default=512, help="problems per iteration (default: 512)"
+    )
+    p.add_argument(
+        "--lr", type=POSITIVE_FLOAT, default=2e-3, help="Adam learning rate, cosine decay (default: 2e-3)"
+    )
+    p.add_argument(
+        "--hidden",
+        type=int_list(1),
+        default=(128, 128, 128),
+        help="MLP hidden widths, comma-separated (default: 128,128,128)",
+    )
+    p.add_argument(
+        "--modes", type=NONNEGATIVE_INT, default=6, help="sine modes of the joint correction (0: free)"
+    )
+    p.add_argument(
+        "--heldout",
+        type=NONNEGATIVE_INT,
+        default=500,
+        help="held-out workspace pairs judged at the end (0: none)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_run_options(p, resumable=True)
+
+
+def _run_train_planner(args: argparse.Namespace) -> int:
+    from ..evaluation.workspace import evaluate_workspace, heldout_pairs, workspace_table
+    from ..models.forward_inverse import AnalyticFM, save_model
+    from ..training.joint_path import PathTrainConfig, train_path_model
+
+    robot = load_robot(args.robot)
+    fm = AnalyticFM(robot) if args.analytic_fm else load_fm(args.fm_checkpoint, robot=robot.name)
+    if args.im_checkpoint is not None:
+        load_im(args.im_checkpoint, robot=robot.name)  # checked before anything is written
+    cfg = PathTrainConfig(
+        robot=robot.name,
+        fm="analytic" if args.analytic_fm else "learned",
+        fm_checkpoint="fm.pt" if not args.analytic_fm else None,
+        iterations=args.iterations,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        model={"hidden": list(args.hidden), "modes": args.modes},
+        seed=args.seed,
+    )
+    models = {"fm": "analytic" if args.analytic_fm else file_identity(args.fm_checkpoint)}
+    if args.im_checkpoint is not None:
+        models["im"] = file_identity(args.im_checkpoint)
+    run = open_command_run(
+        args,
+        ("tm.pt", "fm.pt", "im.pt", "metrics.jsonl", "tensorboard"),
+        resumable=True,
+        planner=cfg.to_dict(),
+        models=models,
+    )
+    run_dir = run.begin()
+    if args.analytic_fm:
+        save_model(fm, run_dir / "fm.pt")
+    else:
+        atomic_copy(args.fm_checkpoint, run_dir / "fm.pt")
+    if args.im_checkpoint is not None:
+        atomic_copy(args.im_checkpoint, run_dir / "im.pt")
+    train_path_model(
+        cfg, run_dir, fm=fm, resume=run.resumed, progress=not args.no_progress, write_config=False
+    )
+    if args.heldout:
+        planner = Planner.load(run_dir)
+        pairs = heldout_pairs(robot, n=args.heldout)
+        res = evaluate_workspace(robot, pairs, {"this planner": planner})
+        print(f"held-out workspace pairs ({args.heldout}, uniform within ±90% of the joint range):")
+        print(workspace_table(res))
+    print(f"trained planner in {run_dir}")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
+# train-obstacle-planner
+# --------------------------------------------------------------------------------------------------
+
+
+@register_subcommand
+def _add_train_obstacle_planner(sub) -> None:
+    p = add_command(
+        sub,
+        "train-obstacle-planner",
+        "Train the obstacle-aware TM self-supervised through a frozen body model on generated scenes "
+        "(tabletop, shelf, barrier; seeds apart from the benchmark's); writes tm_obstacles.pt. Copy it into "
+        "a planner folder (or pass --planner) and plan(..., obstacles=...) uses it.",
+        _run_train_obstacle_planner,
+    )
+    p.add_argument(
+        "--problems-per-family",
+        type=POSITIVE_INT,
+        default=1000,
+        help="training problems per scene family, generated once into --problems-dir (default: 1000)",
+    )
+    p.add_argument(
+        "--problems-dir",
+        type=OUTPUT_DIR,
+        default=None,
+        help="where training problems are generated or found (default: RUN_DIR/problems)",
+    )
+    p.add_argument(
+        "--body-checkpoint",
+        type=EXISTING_FILE,
+        default=None,
+        help="train through a learned body model (body.pt) instead of the analytic sphere body",
+    )
+    p.add_argument(
+        "--iterations", type=POSITIVE_INT, default=3000, help="training iterations (default: 3000)"
+    )
+    p.add_argument("--batch-size", type=POSITIVE_INT, default=64, help="problems per iteration (default: 64)")
+    p.add_argument(
+        "--lr", type=POSITIVE_FLOAT, default=2e-3, help="Adam learning rate, cosine decay (default: 2e-3)"
+    )
+    p.add_argument(
+        "--candidates", type=POSITIVE_INT, default=6, help="paths proposed per problem (default: 6)"
+    )
+    p.add_argument(
+        "--init-checkpoint",
+        type=EXISTING_FILE,
+        default=None,
+        help="fine-tune a trained tm_obstacles.pt (same architecture) instead of starting afresh",
+    )
+    p.add_argument(
+        "--planner",
+        type=OUTPUT_DIR,
+        default=None,
+        help="a planner folder to copy the trained model into (as tm_obstacles.pt), e.g. a train-planner run",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_run_options(p, resumable=True)
+
+
+def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
+    from ..models.obstacle_path import export_obstacle_model
+    from ..training.obstacle_path import ObstacleTrainConfig, make_training_problems, train_obstacle_model
+
+    robot = load_robot(args.robot)
+    if args.planner is not None and not (args.planner / "tm.pt").is_file():
+        raise ConfigError(f"--planner {args.planner} is not a planner folder (it holds no tm.pt)")
+    # The models named on the command line are read now: a bad one is refused before anything is written.
+    if args.body_checkpoint is not None:
+        from ..models.body import load_body_model
+
+        load_body_model(args.body_checkpoint, robot=robot.name)
+    if args.init_checkpoint is not None:
+        from ..models.obstacle_path import load_obstacle_model
+
+        load_obstacle_model(args.init_checkpoint, robot=robot.name)
+    run = open_command_run(
+        args,
+        ("tm_obstacles.pt", "metrics.jsonl", "tensorboard", "problems"),
+        resumable=True,
+        obstacle_planner={
+            "problems_per_family": args.problems_per_family,
+            "iterations": args.iterations,
+            "batch_size": args.batch_size,
+            "lr": args.lr,
+            "candidates": args.candidates,
+            "body": file_identity(args.body_checkpoint) if args.body_checkpoint else "analytic",
+            "init": file_identity(args.init_checkpoint) if args.init_checkpoint else None,
+        },
+    )
+    run_dir = run.begin()
+    problems_dir = args.problems_dir or run_dir / "problems"
+    print(f"training problems in {problems_dir} ({args.problems_per_family} per family; generated once)")
+    paths = make_training_problems(problems_dir, args.problems_per_family, robot=robot)
+    cfg = ObstacleTrainConfig(
+        robot=robot.name,
+        problems=tuple(sorted(str(p) for p in paths)),
+        body="learned" if args.body_checkpoint else "analytic",
+        body_checkpoint=str(args.body_checkpoint) if args.body_checkpoint else None,
+        iterations=args.iterations,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        model={"candidates": args.candidates},
+        init_checkpoint=str(args.init_checkpoint) if args.init_checkpoint else None,
+        seed=args.seed,
+    )
+    train_obstacle_model(cfg, run_dir, resume=run.resumed, progress=not args.no_progress, write_config=False)
+    if args.planner is not None:
+        export_obstacle_model(run_dir / "tm_obstacles.pt", args.planner / "tm_obstacles.pt")
+        print(f"copied the obstacle-aware TM into {args.planner}")
+    print(f"trained obstacle-aware TM in {run_dir / 'tm_obstacles.pt'}")
+    return 0
