@@ -11,20 +11,17 @@ import pytest
 import torch
 
 from kinlearn import kinematics, load_robot
+from kinlearn.body.ik import position_ik
+from kinlearn.body.perturb import believed_robot, draw_model_error, perturb_urdf, write_perturbed_urdf
 from kinlearn.body.robot import ROBOTS
 from kinlearn.errors import ConfigError, UnknownRobotError
 from kinlearn.evaluation.model_error import (
     PLANNERS,
-    believed_robot,
-    draw_model_error,
     evaluate_believed,
     model_error_sweep,
     model_error_table,
-    perturb_urdf,
     plot_model_error,
-    position_ik,
     true_goal_error,
-    write_perturbed_urdf,
 )
 from kinlearn.evaluation.workspace import heldout_pairs
 

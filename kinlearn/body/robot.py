@@ -25,6 +25,7 @@ from ..errors import (
     RobotDescriptionError,
     UnknownRobotError,
 )
+from .rotation import rpy_matrix
 
 __all__ = [
     "ROBOTS",
@@ -168,18 +169,6 @@ def _example_robot_data_dir() -> Path:
             if path.is_dir():
                 return path
     raise RobotDescriptionError(f"example-robot-data {dist.version} is installed but holds no {marker}")
-
-
-def _rpy_matrix(r: float, p: float, y: float) -> np.ndarray:
-    """URDF fixed-axis roll-pitch-yaw: R = Rz(y) Ry(p) Rx(r)."""
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
 
 
 def _floats(text: str | None, n: int, default: float, what: str) -> list[float]:
@@ -377,7 +366,7 @@ def _origin(el: ET.Element | None, what: str) -> np.ndarray:
         return T
     xyz = _floats(el.get("xyz"), 3, 0.0, f"{what} origin xyz")
     rpy = _floats(el.get("rpy"), 3, 0.0, f"{what} origin rpy")
-    T[:3, :3] = _rpy_matrix(*rpy)
+    T[:3, :3] = rpy_matrix(*rpy)
     T[:3, 3] = xyz
     return T
 
