@@ -14,7 +14,7 @@ from ..data.recorded import load_data
 from ..errors import ConfigError
 from ..io import load_checkpoint, write_json
 from ..models.body import BodyModelConfig, save_body_model
-from ..models.forward_inverse import ACTIVATIONS
+from ..models.layers import ACTIVATIONS
 from ..training.body import HELDOUT_PROBLEMS, train_body_model, validate_body_model
 from .common import (
     EXISTING_FILE,

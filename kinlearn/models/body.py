@@ -44,7 +44,7 @@ from ..checks import check_finite, check_last_dim, check_real_dtype
 from ..collision import BodySpheres, body_spheres
 from ..errors import CheckpointError, ConfigError
 from ..io import load_checkpoint, save_checkpoint
-from .forward_inverse import ACTIVATIONS
+from .layers import ACTIVATIONS
 
 __all__ = [
     "BODY_KIND",
