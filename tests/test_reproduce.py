@@ -7,7 +7,8 @@ import torch
 
 from kinlearn.cli.main import main
 from kinlearn.errors import ConfigError, MissingDependencyError
-from kinlearn.evaluation.reproduce import OPTIMIZER_SWEEP, _run_jobs, preset_config, reproduce
+from kinlearn.evaluation.jobs import run_jobs
+from kinlearn.evaluation.reproduce import OPTIMIZER_SWEEP, _job, preset_config, reproduce
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +85,7 @@ def test_reproduce_config_errors():
     with pytest.raises(ConfigError, match="quick"):
         preset_config("huge")
     with pytest.raises(ConfigError, match="local"):
-        _run_jobs([], 1, "slurm")
+        run_jobs(_job, [], 1, "slurm")
 
 
 @pytest.mark.slow
@@ -104,9 +105,9 @@ def test_ray_backend_runs_or_says_what_is_missing(smoke):
         import ray  # noqa: F401
     except ImportError:
         with pytest.raises(MissingDependencyError, match=r"kinlearn\[ray\]"):
-            _run_jobs([job], 1, "ray")
+            run_jobs(_job, [job], 1, "ray")
         return
-    (result,) = _run_jobs([job], 1, "ray")
+    (result,) = run_jobs(_job, [job], 1, "ray")
     assert result["name"] == "ray-job" and result["heldout"]["mean_angle"]["mean"] > 0
 
 

@@ -157,7 +157,8 @@ REPRODUCE_OUTPUTS = (
 
 
 def _run_reproduce(args: argparse.Namespace) -> int:
-    from ..evaluation.reproduce import default_workers, preset_config, reproduce
+    from ..evaluation.jobs import default_workers
+    from ..evaluation.reproduce import preset_config, reproduce
 
     cfg = preset_config(
         args.preset,

@@ -7,16 +7,15 @@ learned and the analytic FM, judged on held-out pairs across the joint range wit
 with end-effector position goals, beside the baselines) → ``results.md``, ``results.json`` and the
 figures.
 
-The sweep runs as independent jobs on local worker processes, or as Ray tasks (``backend="ray"``).
+The sweep runs as independent jobs (:func:`_job`) on local worker processes, or as Ray tasks
+(``backend="ray"``), through :func:`kinlearn.evaluation.jobs.run_jobs`.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import copy
 import dataclasses
 import json
-import os
 import shutil
 import time
 import warnings
@@ -25,7 +24,6 @@ from pathlib import Path
 from typing import Literal
 
 import torch
-from tqdm.auto import tqdm
 
 from ..body.robot import load_robot
 from ..data.babbling import BabblingConfig, babble
@@ -35,11 +33,11 @@ from ..io import write_json
 from ..models.forward_inverse import fm_config, im_config
 from ..planning.baselines import cartesian_dls, joint_interpolation
 from ..planning.planner import Planner
-from ..runs import die_with_parent
 from ..training.forward_inverse import train_config, train_fm, train_im, train_im_distal, validate_models
 from ..training.imitation import train_imitation
 from ..training.tm import TMTrainConfig, tm_preset, train_tm
 from ..training.tm_seeds import train_tm_seeds
+from .jobs import run_jobs
 from .metrics import METRICS, PAPER_TABLE2, TABLE2_COLUMNS, format_table, plan_metrics, summarize
 
 __all__ = ["OPTIMIZER_SWEEP", "REPRODUCE_PRESETS", "ReproduceConfig", "evaluate_plans", "reproduce"]
@@ -194,39 +192,6 @@ def _job(job: dict) -> list[dict]:
     except TrainingDivergedError as exc:
         return [{"name": job["name"], "diverged": str(exc), "train_seconds": time.perf_counter() - t0}]
     return [_evaluate_run(job["name"], run_dir, heldout, time.perf_counter() - t0)]
-
-
-def _run_jobs(jobs: list[dict], workers: int, backend: str, progress: bool = True) -> list[dict]:
-    if backend == "ray":
-        try:
-            import ray
-        except ImportError as exc:
-            raise MissingDependencyError(
-                "backend 'ray' needs the ray extra: pip install 'kinlearn[ray]'"
-            ) from exc
-        if not ray.is_initialized():
-            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
-        remote = ray.remote(num_cpus=1)(_job)
-        refs = [remote.remote(j) for j in jobs]
-        return [
-            r for ref in tqdm(refs, desc="training jobs (ray)", disable=not progress) for r in ray.get(ref)
-        ]
-    if backend != "local":
-        raise ConfigError(f"backend must be 'local' or 'ray', got {backend!r}")
-    if workers <= 1:
-        return [r for j in tqdm(jobs, desc="training jobs", disable=not progress) for r in _job(j)]
-    ctx = torch.multiprocessing.get_context("spawn")
-    # Workers end with this process, however it ends: orphans would race a resumed run.
-    pool_args = dict(
-        max_workers=workers, mp_context=ctx, initializer=die_with_parent, initargs=(os.getpid(),)
-    )
-    with cf.ProcessPoolExecutor(**pool_args) as pool:
-        futures = [pool.submit(_job, j) for j in jobs]
-        for _ in tqdm(
-            cf.as_completed(futures), total=len(futures), desc="training jobs", disable=not progress
-        ):
-            pass
-        return [r for f in futures for r in f.result()]
 
 
 def _mean_std(values: list[float]) -> dict:
@@ -393,7 +358,7 @@ def _reproduce(config: ReproduceConfig, out: str | Path, progress: bool, write_c
             )
     jobs = heavy + light
     t0 = time.perf_counter()
-    results = {r["name"]: r for r in _run_jobs(jobs, config.workers, config.backend, progress)}
+    results = {r["name"]: r for r in run_jobs(_job, jobs, config.workers, config.backend, progress)}
     timings["training jobs"] = time.perf_counter() - t0
 
     # 4. baselines on the same held-out pairs
@@ -697,7 +662,3 @@ def preset_config(name: str, **overrides) -> ReproduceConfig:
         raise ConfigError(f"unknown reproduce preset {name!r}; choose one of {', '.join(REPRODUCE_PRESETS)}")
     fields = {**REPRODUCE_PRESETS[name], **{k: v for k, v in overrides.items() if v is not None}}
     return dataclasses.replace(ReproduceConfig(), **fields)
-
-
-def default_workers() -> int:
-    return max(1, min(2, os.cpu_count() or 1))
