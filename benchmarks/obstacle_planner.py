@@ -51,10 +51,10 @@ from kinlearn.evaluation.obstacles import (
 from kinlearn.io import atomic_write, write_json
 from kinlearn.planning.obstacle_baselines import (
     OptimiserConfig,
-    cartesian_line,
+    cartesian_line_path,
     default_body,
-    joint_line,
-    rrt_connect,
+    joint_line_path,
+    scene_rrt_connect,
     trajectory_optimiser,
 )
 
@@ -98,12 +98,12 @@ def methods(
     """The rows of the benchmark, in table order. Add a planner with one entry."""
     body = default_body(ROBOT)
     rows: dict[str, Method] = {
-        "joint line": lambda s, g, sc: joint_line(s, g, sc, body=body)[0],
-        "Cartesian line + DLS": lambda s, g, sc: cartesian_line(s, g, sc, body=body)[0],
-        f"RRT-Connect ({rrt_time:g} s)": lambda s, g, sc: rrt_connect(
+        "joint line": lambda s, g, sc: joint_line_path(s, g, sc, body=body)[0],
+        "Cartesian line + DLS": lambda s, g, sc: cartesian_line_path(s, g, sc, body=body)[0],
+        f"RRT-Connect ({rrt_time:g} s)": lambda s, g, sc: scene_rrt_connect(
             s, g, sc, time_limit=rrt_time, simplify=False, body=body
         )[0],
-        f"RRT-Connect + simplify ({rrt_time:g} s)": lambda s, g, sc: rrt_connect(
+        f"RRT-Connect + simplify ({rrt_time:g} s)": lambda s, g, sc: scene_rrt_connect(
             s, g, sc, time_limit=rrt_time, simplify=True, body=body
         )[0],
     }

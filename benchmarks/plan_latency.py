@@ -30,10 +30,10 @@ import torch
 from _common import header, markdown_table
 
 from kinlearn import load_robot
+from kinlearn.baselines import joint_line, rrt_connect_timed
 from kinlearn.errors import MissingDependencyError
 from kinlearn.evaluation.workspace import heldout_pairs
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
-from kinlearn.planning.baselines import joint_interpolation, rrt_connect_timed
 from kinlearn.planning.planner import Planner
 
 
@@ -99,7 +99,7 @@ def main() -> None:
         states = [(pairs.start[i : i + 1], pairs.goal[i : i + 1]) for i in range(args.calls)]
         rows["paper-size TM forward alone (eager)"] = stats(per_call(paper_tm, states))
     full = [(pairs.start[i].double(), pairs.goal[i].double()) for i in range(args.calls)]
-    rows["joint interpolation (torch)"] = stats(per_call(lambda a, b: joint_interpolation(robot, a, b), full))
+    rows["joint interpolation (torch)"] = stats(per_call(lambda a, b: joint_line(robot, a, b), full))
     rrt_rate = None
     try:
         _, t = rrt_connect_timed(robot, pairs.start[: args.calls].double(), pairs.goal[: args.calls].double())

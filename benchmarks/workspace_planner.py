@@ -4,9 +4,9 @@
 
 Starts and goals uniform within ±90% of each joint's range (the ``workspace`` endpoint preset, a seed
 never used in training). Rows: the planner (default: the one shipped with kinlearn) with joint goals;
-joint interpolation; a straight Cartesian line with damped-least-squares IK (it ends at whatever
-configuration its IK reaches); OMPL RRT-Connect with its path simplification on the first ``--rrt``
-pairs; the planner with end-effector position goals (goal joints from its learned IM and FM).
+every free-space baseline of the registry (:mod:`kinlearn.baselines`: joint interpolation; a straight
+Cartesian line with damped-least-squares IK, which ends at whatever configuration its IK reaches; the
+searches, OMPL RRT-Connect with its path simplification, on the first ``--rrt`` pairs); the planner with end-effector position goals (goal joints from its learned IM and FM).
 Then the same planner on held-out pairs of the paper's task. Every path is judged by the analytic FK
 of its own joints; the columns are those of :func:`kinlearn.evaluation.workspace.evaluate_workspace`.
 """
@@ -14,16 +14,16 @@ of its own joints; the columns are those of :func:`kinlearn.evaluation.workspace
 from __future__ import annotations
 
 import argparse
+import inspect
 import time
 
 import torch
 from _common import header
 
-from kinlearn import load_robot
+from kinlearn import baselines, load_robot
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.errors import MissingDependencyError
 from kinlearn.evaluation.workspace import POSITION_COLUMNS, evaluate_workspace, heldout_pairs, workspace_table
-from kinlearn.planning.baselines import CartesianDLS, JointInterpolation, RRTConnect
 from kinlearn.planning.planner import Planner
 
 
@@ -41,19 +41,21 @@ def main() -> None:
     robot = load_robot(args.robot)
     planner = Planner.load(args.model) if args.model else Planner.default(args.robot)
     pairs = heldout_pairs(robot, n=args.n)
-    rows = {
-        "kinlearn (joint goals)": planner,
-        "joint interpolation": JointInterpolation(robot),
-        "Cartesian line + DLS IK": CartesianDLS(robot),
-    }
+    free = baselines.names(avoids_obstacles=False)
+    searches = [name for name in free if baselines.get(name).one_at_a_time]
+    rows = {"kinlearn (joint goals)": planner}
+    rows.update({baselines.get(n).label: baselines.make(n, robot) for n in free if n not in searches})
     joint = evaluate_workspace(robot, pairs, rows)
-    if args.rrt:
+    for name in searches if args.rrt else ():
+        label = baselines.get(name).label
         try:
             sub = pairs.split(min(args.rrt, len(pairs)))[0]
-            name = f"RRT-Connect + simplification ({len(sub)} pairs)"
-            joint[name] = evaluate_workspace(robot, sub, {name: RRTConnect(robot, simplify=True)})[name]
+            simplify = "simplify" in inspect.signature(baselines.get(name)).parameters
+            row = baselines.subset_label(f"{label}{' + simplification' if simplify else ''}", len(sub))
+            search = baselines.make(name, robot, **({"simplify": True} if simplify else {}))
+            joint[row] = evaluate_workspace(robot, sub, {row: search})[row]
         except MissingDependencyError as exc:
-            print(f"RRT-Connect skipped: {exc}")
+            print(f"{label} skipped: {exc}")
     print(f"\n## Joint goals: {len(pairs)} held-out workspace pairs (±90% of the joint range)\n")
     print(workspace_table(joint))
     if planner.fm is not None and planner.im is not None:

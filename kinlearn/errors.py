@@ -110,5 +110,10 @@ class UnverifiedCheckpointWarning(UserWarning):
     to refuse it."""
 
 
+class ObstaclesIgnoredWarning(UserWarning):
+    """A problem with obstacles given to a baseline that plans as in free space (its ``avoids_obstacles``
+    is False): the plan does not avoid them; it is checked among them and says whether it collides."""
+
+
 class DomainWarning(UserWarning):
     """A start or goal outside the domain the planner was trained on: its plan may be poor."""

@@ -21,8 +21,8 @@ from kinlearn.errors import (
 from kinlearn.evaluation.metrics import plan_metrics
 from kinlearn.planning.baselines import (
     _resample,
-    cartesian_dls,
-    joint_interpolation,
+    cartesian_line,
+    joint_line,
     rrt_connect,
     rrt_connect_timed,
 )
@@ -63,7 +63,7 @@ def check_plan(robot, plan, start, goal, steps):
 
 def test_joint_interpolation(robot):
     start, goal = pairs(robot, 32)
-    plan = joint_interpolation(robot, start, goal)
+    plan = joint_line(robot, start, goal)
     check_plan(robot, plan, start, goal, 11)
     layout = StateLayout(robot.dof)
     q0, qT = layout.split(start)[0], layout.split(goal)[0]
@@ -78,14 +78,14 @@ def test_joint_interpolation(robot):
 def test_joint_interpolation_batch_shape_dtype_and_steps(robot):
     start, goal = pairs(robot, 6, dtype=torch.float32)
     start, goal = start.reshape(2, 3, -1), goal.reshape(2, 3, -1)
-    plan = joint_interpolation(robot, start, goal, steps=5)
+    plan = joint_line(robot, start, goal, steps=5)
     assert plan.joints.shape == (2, 3, 6, robot.dof) and plan.ef.dtype == torch.float32
     assert plan.waypoints.shape == (2, 3, 4, 3)
 
 
 def test_cartesian_dls_follows_the_line_and_reaches_the_goal(robot):
     start, goal = pairs(robot, 64, seed=1)
-    plan = cartesian_dls(robot, start, goal)
+    plan = cartesian_line(robot, start, goal)
     check_plan(robot, plan, start, goal, 11)
     m = plan_metrics(plan, robot)
     # Waypoints on the straight line: evenly spaced, straight.
@@ -102,19 +102,19 @@ def test_cartesian_dls_follows_the_line_and_reaches_the_goal(robot):
 def test_baseline_validation(robot):
     start, goal = pairs(robot, 4)
     with pytest.raises(ShapeError):
-        joint_interpolation(robot, start, goal[:3])
+        joint_line(robot, start, goal[:3])
     with pytest.raises(ShapeError):
-        cartesian_dls(robot, start[:, :7], goal[:, :7])
+        cartesian_line(robot, start[:, :7], goal[:, :7])
     with pytest.raises(ConfigError):
-        joint_interpolation(robot, start, goal, steps=1)
+        joint_line(robot, start, goal, steps=1)
     with pytest.raises(ConfigError):
-        cartesian_dls(robot, start, goal, iterations=0)
+        cartesian_line(robot, start, goal, iterations=0)
     with pytest.raises(ConfigError):
-        cartesian_dls(robot, start, goal, damping=0.0)
+        cartesian_line(robot, start, goal, damping=0.0)
     bad = start.clone()
     bad[0, 0] = float("nan")
     with pytest.raises(NonFiniteError):
-        joint_interpolation(robot, bad, goal)
+        joint_line(robot, bad, goal)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -153,7 +153,7 @@ def test_rrt_connect_simplified_is_joint_interpolation(robot):
     pytest.importorskip("ompl")
     start, goal = pairs(robot, 8, seed=5)
     plan = rrt_connect(robot, start, goal, simplify=True)
-    assert torch.allclose(plan.joints, joint_interpolation(robot, start, goal).joints, atol=1e-9)
+    assert torch.allclose(plan.joints, joint_line(robot, start, goal).joints, atol=1e-9)
 
 
 def test_rrt_connect_rejects_joints_outside_the_limits(robot):

@@ -7,7 +7,7 @@ from kinlearn import ConfigError, load_robot
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.models.forward_inverse import AnalyticFM, AnalyticIM
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
-from kinlearn.planning.baselines import joint_interpolation
+from kinlearn.planning.baselines import joint_line
 from kinlearn.planning.planner import Planner
 from kinlearn.training.imitation import imitation_loss, imitation_targets, train_imitation
 from kinlearn.training.loop import OptimConfig
@@ -31,7 +31,7 @@ def test_targets_are_fk_of_joint_interpolation(pairs):
     robot = load_robot("iiwa14")
     targets = imitation_targets(pairs)
     assert targets.shape == (len(pairs), 10, 3)
-    expected = joint_interpolation(robot, pairs.start, pairs.goal, steps=11).waypoints
+    expected = joint_line(robot, pairs.start, pairs.goal, steps=11).waypoints
     assert torch.equal(targets, expected)
 
 

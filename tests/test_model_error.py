@@ -142,10 +142,10 @@ def test_unknown_robots_raise_unknown_robot_error(tmp_path):
 
 def test_evaluation_judges_with_the_true_robot():
     q0, p = _goals(12)
-    exact = evaluate_believed(TRUE, TRUE, q0, p, rrt=False)["joint_interpolation"]
+    exact = evaluate_believed(TRUE, TRUE, q0, p, rrt=False)["joint-line"]
     assert exact["error"].max() < 1e-3  # the true model reaches every goal
     wrong = believed_robot("iiwa14", length_error=0.05, angle_error_deg=2.0, seed=0)
-    judged = evaluate_believed(TRUE, wrong, q0, p, rrt=False)["joint_interpolation"]
+    judged = evaluate_believed(TRUE, wrong, q0, p, rrt=False)["joint-line"]
     assert judged["believed_error"].max() < 1e-3  # the planner's own model says it arrived ...
     assert judged["error"][0] > 1e-2 and judged["error"].median() > 1e-2  # ... the true robot did not
     # The judge is the true FK of the last configuration of the executed path.
@@ -163,9 +163,9 @@ def test_sweep_table_and_figure(tmp_path):
     first, last = (lv["planners"] for lv in results["levels"])
     assert set(first) == set(PLANNERS)
     assert first["kinlearn"] == last["kinlearn"] and first["kinlearn"]["same_at_every_level"]
-    assert first["joint_interpolation"]["success"] == 1.0
-    assert last["joint_interpolation"]["median"] > 1e-2
-    assert last["rrt_connect"]["median"] == pytest.approx(last["joint_interpolation"]["median"], abs=1e-9)
+    assert first["joint-line"]["success"] == 1.0
+    assert last["joint-line"]["median"] > 1e-2
+    assert last["rrt-connect"]["median"] == pytest.approx(last["joint-line"]["median"], abs=1e-9)
     # Calibrated from the true robot's noisy babbling, the wrong URDF is right again.
     assert last["calibrated_ik"]["success"] == 1.0 and last["calibrated_ik"]["median"] < 1e-3
     table = model_error_table(results)

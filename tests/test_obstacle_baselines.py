@@ -11,10 +11,10 @@ from kinlearn.errors import ConfigError, JointLimitError, ShapeError
 from kinlearn.evaluation.obstacles import obstacle_outcome
 from kinlearn.planning.obstacle_baselines import (
     OptimiserConfig,
-    cartesian_line,
+    cartesian_line_path,
     default_body,
-    joint_line,
-    rrt_connect,
+    joint_line_path,
+    scene_rrt_connect,
     trajectory_optimiser,
 )
 
@@ -49,8 +49,8 @@ def test_default_body_is_the_12_sphere_body_with_base(body):
 
 @pytest.mark.parametrize(
     "method",
-    [joint_line, cartesian_line, lambda s, g, sc: trajectory_optimiser(s, g, sc, steps=3)],
-    ids=["joint_line", "cartesian_line", "optimiser"],
+    [joint_line_path, cartesian_line_path, lambda s, g, sc: trajectory_optimiser(s, g, sc, steps=3)],
+    ids=["joint_line_path", "cartesian_line_path", "optimiser"],
 )
 def test_paths_start_and_end_at_the_given_joints(problem, method):
     start, goal, scene = problem
@@ -62,7 +62,7 @@ def test_paths_start_and_end_at_the_given_joints(problem, method):
 
 def test_obstacle_unaware_baselines_collide_where_the_line_does(body, problem):
     start, goal, scene = problem
-    line, _ = joint_line(start, goal, scene)
+    line, _ = joint_line_path(start, goal, scene)
     assert torch.allclose(line[5], start + 0.5 * (goal - start), atol=1e-12)
     out = obstacle_outcome(body, [line], (start, goal, scene))
     assert not bool(out["collision_free"][0]) and bool(out["goal_reached"][0])
@@ -84,7 +84,7 @@ def test_optimiser_gets_round_a_sphere_deterministically(body, problem):
 def test_bad_inputs_raise_typed_errors(problem):
     start, goal, scene = problem
     with pytest.raises(ShapeError):
-        joint_line(start[:6], goal, scene)
+        joint_line_path(start[:6], goal, scene)
     beyond = goal.clone()
     beyond[1] = 2.5
     with pytest.raises(JointLimitError):
@@ -102,7 +102,7 @@ def test_bad_inputs_raise_typed_errors(problem):
 def test_rrt_connect_with_simplification_returns_a_valid_path(body, problem):
     pytest.importorskip("ompl")
     start, goal, scene = problem
-    path, seconds = rrt_connect(start, goal, scene, time_limit=1.0, simplify=True, seed=0)
+    path, seconds = scene_rrt_connect(start, goal, scene, time_limit=1.0, simplify=True, seed=0)
     assert path is not None and 0 < seconds < 5.0
     assert torch.equal(path[0], start) and torch.equal(path[-1], goal)
     assert bool(obstacle_outcome(body, [path], (start, goal, scene))["success"][0])

@@ -13,7 +13,7 @@ from kinlearn.body.robot import load_robot
 from kinlearn.body.state import StateLayout
 from kinlearn.errors import ConfigError, MissingDependencyError, ShapeError
 from kinlearn.evaluation.metrics import PAPER_TABLE2, plan_metrics, trajectory_metrics
-from kinlearn.planning.baselines import joint_interpolation
+from kinlearn.planning.baselines import joint_line
 
 pytest.importorskip("matplotlib")
 
@@ -46,7 +46,7 @@ def plan(robot):
     qT = robot.sample(8, generator=g, margin=0.3)
     fk = kinematics(robot).position
     layout = StateLayout(robot.dof)
-    return joint_interpolation(robot, layout.join(q0, fk(q0)), layout.join(qT, fk(qT)))
+    return joint_line(robot, layout.join(q0, fk(q0)), layout.join(qT, fk(qT)))
 
 
 def test_plot_trajectories(tmp_path, plan, robot):

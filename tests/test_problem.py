@@ -7,6 +7,8 @@ from pathlib import Path
 import pytest
 import torch
 
+from kinlearn import baselines
+from kinlearn.baselines import CartesianLine, JointLine, TrajectoryOptimiser
 from kinlearn.body.kinematics import kinematics
 from kinlearn.body.robot import load_robot
 from kinlearn.collision.body import body_spheres
@@ -18,17 +20,11 @@ from kinlearn.errors import (
     JointLimitError,
     NonFiniteError,
     ObstacleError,
+    ObstaclesIgnoredWarning,
     ShapeError,
     StateError,
 )
-from kinlearn.planning.baselines import CartesianDLS, JointInterpolation, RRTConnect
-from kinlearn.planning.obstacle_baselines import (
-    CartesianLine,
-    JointLine,
-    SceneRRTConnect,
-    TrajectoryOptimiser,
-)
-from kinlearn.planning.plan import PlannerLike, judge
+from kinlearn.planning.plan import Plan, PlannerLike, judge
 from kinlearn.planning.planner import Planner
 
 
@@ -107,43 +103,65 @@ def test_bad_problems_raise_typed_errors(robot, joints):
         Problem(robot, start, goal, "pose")
 
 
-def test_every_planner_satisfies_the_protocol(robot):
-    body = body_spheres(robot).double()
-    planners = [
-        Planner.default("iiwa14"),
-        JointInterpolation(robot),
-        CartesianDLS(robot),
-        RRTConnect(robot),
-        JointLine(body),
-        CartesianLine(body),
-        SceneRRTConnect(body),
-        TrajectoryOptimiser(body, steps=5),
-    ]
-    for planner in planners:
-        assert isinstance(planner, PlannerLike), type(planner).__name__
+#: Small settings for the registered baselines that search or optimise (the rest take their defaults).
+TINY = {"trajectory-optimiser": {"steps": 2}, "scene-rrt-connect": {"time_limit": 0.5}}
+
+
+def test_every_planner_plans_a_problem_by_the_protocol(robot):
+    """Each registered baseline (and the learned planner) takes a Problem and returns a judged Plan of
+    its batch that starts at the problem's start, and says whether it avoids obstacles."""
+    start = torch.tensor([[0.1, 0.3, 0.0, -1.0, 0.0, 0.8, 0.0], [-0.2, 0.5, 0.1, -1.2, 0.1, 0.6, 0.2]])
+    goal = start + torch.tensor([0.3, -0.1, 0.2, 0.2, -0.1, 0.1, 0.3])
+    p = Problem.make(robot, start.double(), goal.double())
+    planners = {"learned": Planner.default("iiwa14")}
+    for name in baselines.names(only_available=True):
+        planners[name] = baselines.make(name, robot, **TINY.get(name, {}))
+        assert isinstance(type(planners[name]).avoids_obstacles, bool), name
+    assert {"joint-line", "cartesian-line", "trajectory-optimiser"} <= set(planners)
+    for name, planner in planners.items():
+        assert isinstance(planner, PlannerLike), name
+        assert planner.robot is robot or planner.robot.name == robot.name, name
+        plan = planner.plan(p)
+        assert isinstance(plan, Plan) and plan.joints.shape[:-2] == (2,), name
+        assert torch.allclose(plan.joints[:, 0].double(), p.start_joints, atol=1e-6), name
+        assert plan.success.shape == (2,) and plan.collision_free is None, name  # free space: not checked
+        assert bool((plan.goal_error >= 0).all()), name
+
+
+def test_a_baseline_that_ignores_obstacles_says_so(robot, joints):
+    start, goal = joints[0, :1], joints[1, :1]
+    mid = kinematics(robot).position((start + goal) / 2)
+    scene = Scene(spheres=torch.cat((mid, torch.full((1, 1), 0.12, dtype=torch.float64)), -1).unsqueeze(1))
+    p = Problem.make(robot, start, goal, obstacles=scene)
+    for name in baselines.names(avoids_obstacles=False, only_available=True):
+        with pytest.warns(ObstaclesIgnoredWarning, match="ignores obstacles"):
+            plan = baselines.make(name, robot).plan(p)
+        assert plan.collision_free is not None, name  # still checked among them
+        assert bool((plan.success <= plan.collision_free).all()), name
+    assert "trajectory-optimiser" in baselines.names(avoids_obstacles=True)
 
 
 def test_baselines_plan_problems_and_say_how_it_went(robot, joints):
     p = Problem.make(robot, joints[0], joints[1])
-    plan = JointInterpolation(robot).plan(p)
+    plan = JointLine(robot).plan(p)
     assert plan.joints.shape == (4, 12, robot.dof)
     assert bool(plan.success.all()) and plan.collision_free is None
     assert torch.allclose(plan.joints[:, -1], p.goal_joints)
     # The Cartesian line reaches the position but not the goal's joints: judged against the state...
-    dls = CartesianDLS(robot).plan(p)
+    dls = CartesianLine(robot).plan(p)
     assert bool((dls.joint_error > 0.05).any()) and not bool(dls.success.all())
     # ...and against the position alone it may succeed.
-    pos = CartesianDLS(robot).plan(p.position_goals())
+    pos = CartesianLine(robot).plan(p.position_goals())
     assert torch.isnan(pos.joint_error).all()
     assert bool((pos.success == (pos.goal_error <= 0.01) & ~torch.isnan(pos.goal_error)).all())
     with pytest.raises(ConfigError, match="state goals"):
-        JointInterpolation(robot).plan(p.position_goals())
+        JointLine(robot).plan(p.position_goals())
     with pytest.raises(ConfigError, match="panda"):
-        JointInterpolation(load_robot("panda")).plan(p)
+        JointLine(load_robot("panda")).plan(p)
     with pytest.raises(ConfigError, match="Problem"):
-        JointInterpolation(robot).plan((joints[0], joints[1]))
+        JointLine(robot).plan((joints[0], joints[1]))
     with pytest.raises(ConfigError, match="steps"):
-        JointInterpolation(robot, steps=1)
+        JointLine(robot, steps=1)
 
 
 def test_the_learned_planner_plans_a_problem_as_its_arguments(robot, joints):
@@ -164,7 +182,8 @@ def test_obstacles_are_checked_for_every_planner(robot, joints):
     mid = kinematics(robot).position((start + goal) / 2)  # a sphere on the straight line's middle
     scene = Scene(spheres=torch.cat((mid, torch.full((2, 1), 0.12, dtype=torch.float64)), -1).unsqueeze(1))
     p = Problem.make(robot, start, goal, obstacles=scene)
-    line = JointInterpolation(robot).plan(p)
+    with pytest.warns(ObstaclesIgnoredWarning):
+        line = JointLine(robot).plan(p)
     assert line.collision_free is not None and not bool(line.collision_free.any())
     assert not bool(line.success.any())
     opt = TrajectoryOptimiser(body_spheres(robot).double(), steps=3).plan(p)
@@ -198,7 +217,7 @@ def test_problems_from_endpoint_pairs_and_obstacle_sets(robot):
     assert torch.equal(q.start_joints, sets.start)
     # The learned planner and a baseline plan the same obstacle problems; both say whether they collide.
     a = Planner.default("iiwa14").plan(q)
-    b = JointInterpolation(robot).plan(q)
+    b = JointLine(robot).plan(q)
     assert a.collision_free.shape == b.collision_free.shape == (4,)
     assert bool((b.collision_free == ~sets.hard).all())  # "hard": the straight joint line collides
 
@@ -208,13 +227,13 @@ def test_evaluate_workspace_takes_planners_and_says_what_it_wants(robot):
     from kinlearn.evaluation.workspace import evaluate_workspace
 
     pairs = make_endpoints(EndpointConfig(robot="iiwa14", n=16, seed=4, preset="workspace"))
-    res = evaluate_workspace(robot, pairs, {"line": JointInterpolation(robot), "dls": CartesianDLS(robot)})
+    res = evaluate_workspace(robot, pairs, {"line": JointLine(robot), "dls": CartesianLine(robot)})
     assert res["line"]["state_success"] == 1.0
     # The Cartesian line ends at an IK solution: it misses the goal joints, but with position goals
     # only the end effector counts.
-    pos = evaluate_workspace(robot, pairs, {"dls": CartesianDLS(robot)}, goal_kind="position")
+    pos = evaluate_workspace(robot, pairs, {"dls": CartesianLine(robot)}, goal_kind="position")
     assert res["dls"]["state_success"] < pos["dls"]["state_success"] == pos["dls"]["ef_success"]
     with pytest.raises(ConfigError, match="plan\\(problem\\)"):
         evaluate_workspace(robot, pairs, {"lambda": lambda a, b: None})
     with pytest.raises(ConfigError, match="goal_kind"):
-        evaluate_workspace(robot, pairs, {"line": JointInterpolation(robot)}, goal_kind="pose")
+        evaluate_workspace(robot, pairs, {"line": JointLine(robot)}, goal_kind="pose")

@@ -39,9 +39,10 @@ from ..body.perturb import (
 )
 from ..body.robot import Robot, load_robot
 from ..checks import check_last_dim
+from ..data.problem import Problem
 from ..errors import ConfigError, MissingDependencyError
 from ..io import atomic_write
-from ..planning.baselines import cartesian_dls, joint_interpolation, rrt_connect
+from ..planning import registry
 
 __all__ = [
     "DEFAULT_LEVELS",
@@ -69,16 +70,25 @@ DEFAULT_LEVELS: tuple[tuple[float, float], ...] = (
     (0.10, 5.0),
 )
 
-#: Planners of the comparison, in table order: key → label. The first two are kinlearn's (they never
-#: see the believed model), the others are given the believed model.
-PLANNERS: dict[str, str] = {
-    "kinlearn": "kinlearn planner (learned from babbling)",
-    "kinlearn_ik": "kinlearn goal joints (learned models alone)",
-    "calibrated_ik": "DLS IK on the believed URDF calibrated from the same babbling",
-    "cartesian_dls": "Cartesian line + DLS IK (believed model)",
-    "joint_interpolation": "joint interpolation to DLS IK (believed model)",
-    "rrt_connect": "RRT-Connect to DLS IK (believed model)",
-}
+
+def planner_labels() -> dict[str, str]:
+    """Planners of the comparison, in table order: key → label. The first two are kinlearn's (they never
+    see the believed model), the others are given the believed model: the calibrated IK, then every
+    free-space baseline of the registry (:func:`kinlearn.baselines.names`), by its registry name; one
+    that takes state goals only goes to the goal joints of DLS IK on the believed model."""
+    labels = {
+        "kinlearn": "kinlearn planner (learned from babbling)",
+        "kinlearn_ik": "kinlearn goal joints (learned models alone)",
+        "calibrated_ik": "DLS IK on the believed URDF calibrated from the same babbling",
+    }
+    for name in registry.names(avoids_obstacles=False):
+        cls = registry.get(name)
+        labels[name] = f"{cls.label}{'' if 'position' in cls.goals else ' to DLS IK'} (believed model)"
+    return labels
+
+
+#: :func:`planner_labels` of the built-in baselines.
+PLANNERS: dict[str, str] = planner_labels()
 _LEARNED = ("kinlearn", "kinlearn_ik")
 
 #: A goal counts as reached when the true end effector ends within this distance of it (m).
@@ -113,10 +123,12 @@ def evaluate_believed(
 ) -> dict[str, dict[str, torch.Tensor]]:
     """Run the model-based planners with the ``believed`` robot and judge them with the true one.
 
-    ``start_joints (N, dof)``, ``goal_positions (N, 3)`` (float64 advised). The planners get start
-    states built with the believed FK and the goal position as the goal's end effector. Returns, per
-    planner key of :data:`PLANNERS` (``rrt_connect`` only with ``rrt`` and OMPL installed): ``error``,
-    the true goal error ``(N,)`` (m), and ``believed_error``, what the planner's own model says ``(N,)``.
+    ``start_joints (N, dof)``, ``goal_positions (N, 3)`` (float64 advised). The planners are the
+    registry's free-space baselines (:func:`kinlearn.baselines.names`; the searches, RRT-Connect, only
+    with ``rrt`` and their optional dependency installed), given the problems on the believed robot:
+    the goal position where a baseline takes position goals, else the goal joints of DLS IK on the
+    believed model. Returns, per baseline's registry name (:func:`planner_labels`): ``error``, the true
+    goal error ``(N,)`` (m), and ``believed_error``, what the planner's own model says ``(N,)``.
     """
     if believed.dof != true_robot.dof or believed.joint_names != true_robot.joint_names:
         raise ConfigError(
@@ -126,16 +138,17 @@ def evaluate_believed(
     check_last_dim(goal_positions, 3, "goal positions")
     q0, p = start_joints, goal_positions.to(start_joints.dtype)
     kin_b = kinematics(believed)
-    start = torch.cat((q0, kin_b.position(q0)), dim=-1)
     q_ik = position_ik(believed, q0, p, seed=seed)
-    goal = torch.cat((q_ik, p), dim=-1)
-    plans = {
-        "cartesian_dls": cartesian_dls(believed, start, goal),
-        "joint_interpolation": joint_interpolation(believed, start, goal),
-    }
-    if rrt:
+    to_position = Problem.make(believed, q0, goal_position=p)
+    to_joints = Problem.make(believed, q0, q_ik)
+    plans = {}
+    for name in registry.names(avoids_obstacles=False):
+        cls = registry.get(name)
+        if cls.one_at_a_time and not rrt:
+            continue
+        problem = to_position if "position" in cls.goals else to_joints
         try:
-            plans["rrt_connect"] = rrt_connect(believed, start, goal, seed=seed)
+            plans[name] = registry.make(name, believed, seed=seed).plan(problem)
         except MissingDependencyError:
             pass
     out = {}
@@ -279,7 +292,7 @@ def model_error_sweep(
     for le, ae in levels:
         runs = runs_of[(le, ae)]
         planners: dict[str, dict] = {}
-        for key in PLANNERS:
+        for key in planner_labels():
             if key in _LEARNED:
                 planners[key] = {**_summary(learned[key]), "per_seed": None, "same_at_every_level": True}
                 continue
@@ -303,7 +316,7 @@ def model_error_sweep(
         "heldout_seed": pairs.config.seed,
         "seeds": list(seeds),
         "success_radius_m": SUCCESS_RADIUS,
-        "planner_labels": {k: v for k, v in PLANNERS.items() if k in results_levels[0]["planners"]},
+        "planner_labels": {k: v for k, v in planner_labels().items() if k in results_levels[0]["planners"]},
         "kinlearn_tm": type(planner.tm).__name__,
         "kinlearn_domain_warnings": [str(w.message) for w in caught],
         "levels": results_levels,
@@ -367,7 +380,7 @@ def plot_model_error(results: Mapping, path: str | Path, dpi: int = 130) -> Path
         p95 = np.array([lv["planners"][key]["p95"] * 1000 for lv in levels])
         succ = np.array([lv["planners"][key]["success"] * 100 for lv in levels])
         kw = {"color": color, "marker": marker, "ls": ls, "label": label}
-        if key == "rrt_connect":  # coincides with joint interpolation: hollow markers show both
+        if key == "rrt-connect":  # coincides with joint interpolation: hollow markers show both
             kw.update(mfc="none", ms=11)
         axes[0].plot(x, np.maximum(med, floor), **kw)
         axes[1].plot(x, np.maximum(p95, floor), **kw)

@@ -28,10 +28,11 @@ import torch
 from ..body.robot import load_robot
 from ..data.babbling import BabblingConfig, babble
 from ..data.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
+from ..data.problem import Problem
 from ..errors import ConfigError, DomainWarning, MissingDependencyError, TrainingDivergedError
 from ..io import write_json
 from ..models.forward_inverse import fm_config, im_config
-from ..planning.baselines import cartesian_dls, joint_interpolation
+from ..planning import registry
 from ..planning.planner import Planner
 from ..training.forward_inverse import train_config, train_fm, train_im, train_im_distal, validate_models
 from ..training.imitation import train_imitation
@@ -361,11 +362,15 @@ def _reproduce(config: ReproduceConfig, out: str | Path, progress: bool, write_c
     results = {r["name"]: r for r in run_jobs(_job, jobs, config.workers, config.backend, progress)}
     timings["training jobs"] = time.perf_counter() - t0
 
-    # 4. baselines on the same held-out pairs
+    # 4. the registry's free-space baselines on the same held-out pairs (the searches on the first 500)
     t0 = time.perf_counter()
+    free = registry.names(avoids_obstacles=False)
     baselines = {
-        "joint interpolation": evaluate_plans(joint_interpolation(robot, heldout.start, heldout.goal), robot),
-        "Cartesian line + DLS IK": evaluate_plans(cartesian_dls(robot, heldout.start, heldout.goal), robot),
+        registry.get(name).label: evaluate_plans(
+            registry.make(name, robot).plan(Problem.make(robot, heldout.start, heldout.goal)), robot
+        )
+        for name in free
+        if not registry.get(name).one_at_a_time
     }
     imitation = train_imitation(
         train, epochs=config.tm_epochs, batch_size=config.tm_batch_size, seed=config.seed, progress=progress
@@ -375,14 +380,14 @@ def _reproduce(config: ReproduceConfig, out: str | Path, progress: bool, write_c
     baselines["imitation TM (supervised, learned FM/IM)"] = evaluate_plans(
         imitator.plan(heldout.start, heldout.goal), robot
     )
-    try:
-        from ..planning.baselines import rrt_connect
-
-        n_rrt = min(len(heldout), 500)
-        plan = rrt_connect(robot, heldout.start[:n_rrt], heldout.goal[:n_rrt], seed=config.seed)
-        baselines[f"RRT-Connect (OMPL, {n_rrt} pairs)"] = evaluate_plans(plan, robot)
-    except MissingDependencyError as exc:
-        baselines["RRT-Connect (OMPL)"] = {"skipped": str(exc)}
+    for name in (name for name in free if registry.get(name).one_at_a_time):
+        n, label = min(len(heldout), 500), registry.get(name).label
+        try:
+            planner = registry.make(name, robot, seed=config.seed)
+            plan = planner.plan(Problem.make(robot, heldout.start[:n], heldout.goal[:n]))
+            baselines[registry.subset_label(label, n)] = evaluate_plans(plan, robot)
+        except MissingDependencyError as exc:
+            baselines[label] = {"skipped": str(exc)}
     timings["baselines"] = time.perf_counter() - t0
 
     # 5. the workspace task
@@ -489,7 +494,6 @@ def _workspace(config: ReproduceConfig, robot, models: Path, out: Path) -> dict:
     """The joint-path TMs (trained by the jobs) judged on held-out workspace pairs."""
     from ..models.forward_inverse import AnalyticFM, AnalyticIM, load_fm, load_im
     from ..models.joint_path import load_path_model
-    from ..planning.baselines import CartesianDLS, JointInterpolation, RRTConnect
     from .workspace import evaluate_workspace, heldout_pairs
 
     fm, im = load_fm(models / "fm.pt", robot=robot.name), load_im(models / "im.pt", robot=robot.name)
@@ -502,18 +506,19 @@ def _workspace(config: ReproduceConfig, robot, models: Path, out: Path) -> dict:
     rows = {
         "kinlearn joint-path TM, trained through the learned FM": Planner(robot, tms["learned"]),
         "kinlearn joint-path TM, trained through the analytic FM": Planner(robot, tms["analytic"]),
-        "joint interpolation": JointInterpolation(robot),
-        "Cartesian line + DLS IK (analytic robot)": CartesianDLS(robot),
     }
+    free = registry.names(avoids_obstacles=False)
+    searches = [name for name in free if registry.get(name).one_at_a_time]  # on the first 500 pairs
+    rows.update({registry.get(n).label: registry.make(n, robot) for n in free if n not in searches})
     joint = evaluate_workspace(robot, pairs, rows)
-    try:
-        n_rrt = min(len(pairs), 500)
+    for name in searches:
+        n_rrt, label = min(len(pairs), 500), registry.get(name).label
         sub = pairs.split(n_rrt)[0]
-        joint[f"RRT-Connect (OMPL, {n_rrt} pairs)"] = evaluate_workspace(
-            robot, sub, {"rrt": RRTConnect(robot, seed=config.seed)}
-        )["rrt"]
-    except MissingDependencyError as exc:
-        joint["RRT-Connect (OMPL)"] = {"skipped": str(exc)}
+        try:
+            row = evaluate_workspace(robot, sub, {"row": registry.make(name, robot, seed=config.seed)})["row"]
+            joint[registry.subset_label(label, n_rrt)] = row
+        except MissingDependencyError as exc:
+            joint[label] = {"skipped": str(exc)}
     position = {}
     for fm_kind, f in (("learned", fm), ("analytic", afm)):
         for im_kind, i in (("learned", im), ("analytic", aim)):

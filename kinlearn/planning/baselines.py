@@ -1,12 +1,12 @@
 """Planners that learn nothing, for comparison with the learned trajectory model.
 
-Each takes a batch of start and goal states ``(..., dof + 3)`` (s = [θ, ef], see
+Each function takes a batch of start and goal states ``(..., dof + 3)`` (s = [θ, ef], see
 :class:`~kinlearn.body.state.StateLayout`) and returns a :class:`~kinlearn.planning.plan.Plan` of ``steps`` steps,
 so the same metrics (:mod:`kinlearn.evaluation.metrics`) apply to all of them:
 
-- :func:`joint_interpolation`: θ moves on a straight line in joint space. Fixed time, always within
-  the limits, ends exactly at θ(T); the end effector follows a curve.
-- :func:`cartesian_dls`: the end effector is sent along the straight line from ef(s(0)) to ef(s(T))
+- :func:`joint_line`: θ moves on a straight line in joint space (joint interpolation). Fixed time,
+  always within the limits, ends exactly at θ(T); the end effector follows a curve.
+- :func:`cartesian_line`: the end effector is sent along the straight line from ef(s(0)) to ef(s(T))
   by damped-least-squares IK on the robot's exact kinematics. Perfect on the paper's geometric
   metrics by construction (its waypoints *are* the line); what it reveals is whether the joints can
   follow, through the executed path and the goal error. It ends at *an* IK solution for the goal
@@ -14,16 +14,24 @@ so the same metrics (:mod:`kinlearn.evaluation.metrics`) apply to all of them:
 - :func:`rrt_connect`: OMPL's RRT-Connect in joint space (optional dependency ``ompl``).
 
 None of them knows about obstacles (for those see :mod:`kinlearn.planning.obstacle_baselines`). Each also
-comes as a planner of the planner protocol (:class:`~kinlearn.planning.plan.PlannerLike`):
-:class:`JointInterpolation`, :class:`CartesianDLS` and :class:`RRTConnect` take a
-:class:`~kinlearn.data.problem.Problem` and return a :class:`~kinlearn.planning.plan.Plan` judged by
-:func:`~kinlearn.planning.plan.judge` (among obstacles, a plan says whether it collides).
+comes as a planner of the planner protocol (:class:`~kinlearn.planning.plan.PlannerLike`), listed in the
+baseline registry (:mod:`kinlearn.baselines`): :class:`JointLine`, :class:`CartesianLine` and
+:class:`RRTConnect` take a :class:`~kinlearn.data.problem.Problem` and return a
+:class:`~kinlearn.planning.plan.Plan` judged by :func:`~kinlearn.planning.plan.judge`; given obstacles,
+they say so (``avoids_obstacles = False`` and an :class:`~kinlearn.errors.ObstaclesIgnoredWarning`) and
+their plan says whether it collides.
+
+Old names, kept for one release with a :class:`DeprecationWarning`: ``joint_interpolation``
+(:func:`joint_line`), ``cartesian_dls`` (:func:`cartesian_line`), ``JointInterpolation``
+(:class:`JointLine`), ``CartesianDLS`` (:class:`CartesianLine`).
 """
 
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -32,20 +40,43 @@ from ..body.kinematics import dls_step, kinematics
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout, straight_line
 from ..checks import as_int, as_real, check_finite, check_last_dim
+from ..collision.body import BodySpheres
 from ..data.problem import LIMIT_TOLERANCE, Problem
-from ..errors import ConfigError, MissingDependencyError, PlanningError, ShapeError
+from ..errors import ConfigError, MissingDependencyError, ObstaclesIgnoredWarning, PlanningError, ShapeError
 from .plan import Plan, judge
 
 __all__ = [
-    "CartesianDLS",
-    "JointInterpolation",
+    "Baseline",
+    "CartesianLine",
+    "JointLine",
     "PlanningError",
     "RRTConnect",
-    "cartesian_dls",
-    "joint_interpolation",
+    "cartesian_line",
+    "joint_line",
     "rrt_connect",
     "rrt_connect_timed",
 ]
+
+#: Old names → new ones, kept for one release (module ``__getattr__`` warns).
+_RENAMED = {
+    "joint_interpolation": "joint_line",
+    "cartesian_dls": "cartesian_line",
+    "JointInterpolation": "JointLine",
+    "CartesianDLS": "CartesianLine",
+}
+
+
+def __getattr__(name: str):
+    if name in _RENAMED:
+        new = _RENAMED[name]
+        warnings.warn(
+            f"kinlearn.planning.baselines.{name} is now {new} (kinlearn.baselines.{new}); the old name goes "
+            "in the next release",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[new]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _check_steps(steps) -> None:
@@ -68,11 +99,52 @@ def as_robot(robot) -> Robot:
     raise ConfigError(f"robot must be a kinlearn.Robot or a robot's name, got {type(robot).__name__}")
 
 
-class _RobotPlanner:
-    """A baseline planner of a frozen dataclass whose ``robot`` field may be given as a name."""
+class Baseline:
+    """What every baseline of the registry (:mod:`kinlearn.baselines`) is: a frozen dataclass planner of
+    the protocol (:class:`~kinlearn.planning.plan.PlannerLike`) whose first field ``robot`` is a
+    :class:`Robot` or a robot's name (or a :class:`~kinlearn.collision.BodySpheres`: its robot, and the
+    spheres its plans are checked with), whose last field ``body`` (``None``: the robot's default
+    spheres) checks its plans among obstacles, and which says, in class attributes, what it does:
+
+    - ``label``: its name in tables and messages;
+    - ``avoids_obstacles``: True where it plans around a problem's obstacles; False where it plans as in
+      free space: given obstacles, it warns (:class:`~kinlearn.errors.ObstaclesIgnoredWarning`) and its plan
+      is still checked among them (``collision_free`` says which collide, and ``success`` requires it);
+    - ``goals``: the goal kinds it plans for (``"state"``, ``"position"``);
+    - ``requires``: the optional modules it needs (``("ompl",)``): without them it is not available;
+    - ``one_at_a_time``: it solves one problem after another (a search), so evaluations may give it a
+      subset.
+    """
+
+    label: ClassVar[str] = "baseline"
+    avoids_obstacles: ClassVar[bool] = False
+    goals: ClassVar[tuple[str, ...]] = ("state",)
+    requires: ClassVar[tuple[str, ...]] = ()
+    one_at_a_time: ClassVar[bool] = False
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "robot", as_robot(self.robot))
+        robot = self.robot
+        if isinstance(robot, BodySpheres):
+            if self.body is None:
+                object.__setattr__(self, "body", robot)
+            robot = robot.robot
+        object.__setattr__(self, "robot", as_robot(robot))
+        if self.body is not None and not isinstance(self.body, BodySpheres):
+            raise ConfigError(f"body must be a kinlearn BodySpheres or None, got {type(self.body).__name__}")
+
+    def _check(self, problem: Problem) -> None:
+        """Refuse a problem this baseline cannot plan; warn where it would ignore the problem's obstacles."""
+        _check_problem(self, problem, self.label)
+        if problem.goal_kind not in self.goals:
+            problem.require(self.goals[0], self.label)
+        if problem.obstacles is not None and not self.avoids_obstacles:
+            warnings.warn(
+                f"{self.label} ignores obstacles: it plans as in free space, and its plan is checked among "
+                "them (plan.collision_free says which collide); for a baseline that avoids them see "
+                "kinlearn.baselines.names(avoids_obstacles=True)",
+                ObstaclesIgnoredWarning,
+                stacklevel=3,
+            )
 
 
 def _check_dls(iterations, damping) -> None:
@@ -103,7 +175,7 @@ def _plan_from_joints(robot: Robot, start, goal, joints: torch.Tensor, waypoints
 
 
 @torch.no_grad()
-def joint_interpolation(robot: Robot, start: torch.Tensor, goal: torch.Tensor, steps: int = 11) -> Plan:
+def joint_line(robot: Robot, start: torch.Tensor, goal: torch.Tensor, steps: int = 11) -> Plan:
     """Joint-space linear interpolation: θ(k) = θ(0) + (k/T)(θ(T) − θ(0)), k = 0 … T.
 
     Waypoints are the end-effector positions (exact FK) of the interior configurations, so the
@@ -117,7 +189,7 @@ def joint_interpolation(robot: Robot, start: torch.Tensor, goal: torch.Tensor, s
 
 
 @torch.no_grad()
-def cartesian_dls(
+def cartesian_line(
     robot: Robot,
     start: torch.Tensor,
     goal: torch.Tensor,
@@ -283,7 +355,7 @@ def rrt_connect(
     resampled to ``steps + 1`` configurations evenly spaced by joint-space arc length, so the corners
     at the tree vertices may be cut; it starts at θ(0) and ends at θ(T) exactly. With ``simplify`` OMPL
     shortens the path first, which without obstacles gives the straight segment, i.e.
-    :func:`joint_interpolation`. Waypoints are the FK of the interior configurations.
+    :func:`joint_line`. Waypoints are the FK of the interior configurations.
 
     Honest caveat: **without obstacles RRT-Connect is trivial**: the two trees connect after one or two
     extensions, a query takes tens of microseconds, and its path is a random detour of joint
@@ -315,51 +387,75 @@ def _check_problem(planner, problem: Problem, who: str) -> None:
 
 
 @dataclass(frozen=True)
-class JointInterpolation(_RobotPlanner):
-    """:func:`joint_interpolation` as a planner (:class:`~kinlearn.planning.plan.PlannerLike`): goal states
-    only; obstacles are not avoided, but a plan among them is checked and says whether it collides."""
+class JointLine(Baseline):
+    """:func:`joint_line` (joint interpolation) as a planner (:class:`~kinlearn.planning.plan.PlannerLike`):
+    goal states only; obstacles are not avoided (a plan among them is checked and says whether it
+    collides)."""
 
     robot: Robot | str
     steps: int = 11
+    body: BodySpheres | None = None
+
+    label: ClassVar[str] = "joint interpolation"
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _check_steps(self.steps)
 
-    @torch.no_grad()
     def plan(self, problem: Problem) -> Plan:
-        _check_problem(self, problem, "joint interpolation")
-        problem.require("state", "joint interpolation")
-        return judge(problem, straight_line(problem.start_joints, problem.goal_joints, self.steps))
+        self._check(problem)
+        with torch.no_grad():
+            joints = straight_line(problem.start_joints, problem.goal_joints, self.steps)
+            return judge(problem, joints, body=self.body)
 
 
 @dataclass(frozen=True)
-class CartesianDLS(_RobotPlanner):
-    """:func:`cartesian_dls` as a planner: the end effector on a straight line to the goal (a state's end
-    effector or a position), followed by DLS IK; ignores obstacles (a plan among them is checked)."""
+class CartesianLine(Baseline):
+    """:func:`cartesian_line` as a planner: the end effector on a straight line to the goal (a state's end
+    effector or a position), followed by DLS IK; ignores obstacles (a plan among them is checked). With
+    ``to_goal_joints`` (state goals) a last straight joint-space segment goes from the IK's last
+    configuration to the goal's joints, so the path ends there (long where the IK's redundancy
+    resolution differs from the goal's)."""
 
     robot: Robot | str
     steps: int = 11
     iterations: int = 20
     damping: float = 1e-2
+    to_goal_joints: bool = False
+    body: BodySpheres | None = None
+
+    label: ClassVar[str] = "Cartesian line + DLS IK"
+    goals: ClassVar[tuple[str, ...]] = ("state", "position")
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _check_steps(self.steps)
         _check_dls(self.iterations, self.damping)
 
-    @torch.no_grad()
     def plan(self, problem: Problem) -> Plan:
-        _check_problem(self, problem, "Cartesian DLS")
+        self._check(problem)
+        if self.to_goal_joints:
+            problem.require("state", f"{self.label} with to_goal_joints")
         ef0 = problem.start[..., self.robot.dof :]
-        joints, line = _dls_path(
-            self.robot, problem.start_joints, ef0, problem.target, self.steps, self.iterations, self.damping
-        )
-        return judge(problem, joints, waypoints=line[..., 1:-1, :])
+        with torch.no_grad():
+            joints, line = _dls_path(
+                self.robot,
+                problem.start_joints,
+                ef0,
+                problem.target,
+                self.steps,
+                self.iterations,
+                self.damping,
+            )
+            waypoints = line[..., 1:-1, :]
+            if self.to_goal_joints:
+                joints = torch.cat((joints, problem.goal_joints.unsqueeze(-2).to(joints.dtype)), dim=-2)
+                waypoints = None
+            return judge(problem, joints, waypoints=waypoints, body=self.body)
 
 
 @dataclass(frozen=True)
-class RRTConnect(_RobotPlanner):
+class RRTConnect(Baseline):
     """:func:`rrt_connect` (free space: every state valid) as a planner; goal states only. For planning
     around obstacles use :class:`kinlearn.planning.obstacle_baselines.SceneRRTConnect`."""
 
@@ -368,11 +464,15 @@ class RRTConnect(_RobotPlanner):
     time_limit: float = 1.0
     seed: int | None = 0
     simplify: bool = False
+    body: BodySpheres | None = None
+
+    label: ClassVar[str] = "RRT-Connect (OMPL)"
+    requires: ClassVar[tuple[str, ...]] = ("ompl",)
+    one_at_a_time: ClassVar[bool] = True
 
     def plan(self, problem: Problem) -> Plan:
-        _check_problem(self, problem, "RRT-Connect")
-        problem.require("state", "RRT-Connect")
+        self._check(problem)
         joints = rrt_connect(
             self.robot, problem.start, problem.goal, self.steps, self.time_limit, self.seed, self.simplify
         ).joints
-        return judge(problem, joints)
+        return judge(problem, joints, body=self.body)

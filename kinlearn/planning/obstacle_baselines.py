@@ -7,62 +7,107 @@ means moving linearly in joint space between consecutive rows; ``path[0]`` is th
 The body is the robot's 12-sphere model with the base (:func:`~kinlearn.collision.body_spheres`)
 unless one is passed; its robot is the robot planned for.
 
-======================  ==========================================================================
-:func:`joint_line`      the straight joint-space line (wraps :func:`kinlearn.planning.baselines.joint_interpolation`);
-                        obstacle-unaware.
-:func:`cartesian_line`  the end effector along a straight line by damped-least-squares IK (wraps
-                        :func:`kinlearn.planning.baselines.cartesian_dls`), then a straight joint-space move
-                        from the IK's last configuration to the goal joints; obstacle-unaware.
-:func:`rrt_connect`     OMPL's RRT-Connect on :class:`~kinlearn.collision.problems.RrtChecker` (the
-                        dense 1 cm check), optionally with OMPL's path simplification, within a
-                        time limit that covers both.
-:func:`trajectory_optimiser`  a fixed number of Adam steps on a knot path initialised on the straight
-                        joint line: smoothness + hinge penalties on the body's clearance to the scene
-                        and to itself at the knots and points between them, joint limits by clamping.
-======================  ==========================================================================
+===============================  =================================================================
+:func:`joint_line_path`          the straight joint-space line (:func:`kinlearn.planning.baselines.joint_line`
+                                 for one problem); obstacle-unaware.
+:func:`cartesian_line_path`      the end effector along a straight line by damped-least-squares IK
+                                 (:func:`kinlearn.planning.baselines.cartesian_line`), then a straight
+                                 joint-space move from the IK's last configuration to the goal joints;
+                                 obstacle-unaware.
+:func:`scene_rrt_connect`        OMPL's RRT-Connect on :class:`~kinlearn.collision.problems.RrtChecker`
+                                 (the dense 1 cm check), optionally with OMPL's path simplification,
+                                 within a time limit that covers both.
+:func:`trajectory_optimiser`     a fixed number of Adam steps on a knot path initialised on the straight
+                                 joint line: smoothness + hinge penalties on the body's clearance to the
+                                 scene and to itself at the knots and points between them, joint limits
+                                 by clamping.
+===============================  =================================================================
 
 None of them is a guarantee: judge their paths with :func:`kinlearn.evaluation.obstacles.obstacle_outcome`.
 
-Each also comes as a planner of the planner protocol (:class:`~kinlearn.planning.plan.PlannerLike`):
-:class:`JointLine`, :class:`CartesianLine`, :class:`SceneRRTConnect` and :class:`TrajectoryOptimiser`
-take a :class:`~kinlearn.data.problem.Problem` batch (goal states; its obstacles, or free space) and
-return one :class:`~kinlearn.planning.plan.Plan`, judged by :func:`~kinlearn.planning.plan.judge`. Paths
-of different lengths are padded by repeating their last configuration (zero-length segments: the
-same motion); a search that found nothing gives the straight line with ``success`` False.
+The planners of the protocol (:class:`~kinlearn.planning.plan.PlannerLike`) that avoid obstacles,
+:class:`SceneRRTConnect` and :class:`TrajectoryOptimiser`, take a :class:`~kinlearn.data.problem.Problem`
+batch (goal states; its obstacles, or free space) and return one :class:`~kinlearn.planning.plan.Plan`,
+judged by :func:`~kinlearn.planning.plan.judge`. Paths of different lengths are padded by repeating
+their last configuration (zero-length segments: the same motion); a search that found nothing gives
+the straight line with ``success`` False. The obstacle-unaware lines as planners are
+:class:`kinlearn.planning.baselines.JointLine` and :class:`~kinlearn.planning.baselines.CartesianLine`
+(``to_goal_joints=True``); every one is listed in the baseline registry (:mod:`kinlearn.baselines`).
+
+Old names, kept for one release with a :class:`DeprecationWarning`: ``joint_line`` (:func:`joint_line_path`),
+``cartesian_line`` (:func:`cartesian_line_path`), ``rrt_connect`` (:func:`scene_rrt_connect`), and the
+classes ``JointLine(body, steps=10)`` and ``CartesianLine(body, steps=10, ...)``, which now make
+:class:`kinlearn.planning.baselines.JointLine` and :class:`~kinlearn.planning.baselines.CartesianLine`
+(``to_goal_joints=True``) with those defaults.
 """
 
 from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import asdict, dataclass
 from functools import cache
+from typing import ClassVar
 
 import numpy as np
 import torch
 
 from ..body.kinematics import kinematics
-from ..body.robot import load_robot
+from ..body.robot import Robot, load_robot
 from ..checks import as_int
 from ..collision import BodySpheres, Scene, body_obstacle_distance, body_spheres, self_collision_distance
 from ..collision.problems import rrt_connect_solve
 from ..data.problem import Problem
-from ..errors import ConfigError, ShapeError
-from .baselines import MAX_STEPS, _check_problem, as_robot, cartesian_dls, joint_interpolation
+from ..errors import ConfigError, ShapeError, UnknownRobotError
+from . import baselines as _free
+from .baselines import MAX_STEPS, Baseline, cartesian_line, joint_line
 from .plan import Plan, judge
 
 __all__ = [
-    "CartesianLine",
-    "JointLine",
     "OptimiserConfig",
     "SceneRRTConnect",
     "TrajectoryOptimiser",
-    "cartesian_line",
+    "cartesian_line_path",
     "default_body",
-    "joint_line",
-    "rrt_connect",
+    "joint_line_path",
+    "scene_rrt_connect",
     "trajectory_optimiser",
 ]
+
+
+def _old_joint_line(body, steps: int = 10):
+    return _free.JointLine(body, steps=steps)
+
+
+def _old_cartesian_line(body, steps: int = 10, iterations: int = 20, damping: float = 1e-2):
+    return _free.CartesianLine(body, steps, iterations, damping, to_goal_joints=True)
+
+
+#: Old names → (their new home, what they are now), kept for one release (module ``__getattr__`` warns).
+_RENAMED = {
+    "joint_line": ("kinlearn.planning.obstacle_baselines.joint_line_path", "joint_line_path"),
+    "cartesian_line": ("kinlearn.planning.obstacle_baselines.cartesian_line_path", "cartesian_line_path"),
+    "rrt_connect": ("kinlearn.planning.obstacle_baselines.scene_rrt_connect", "scene_rrt_connect"),
+    "JointLine": ("kinlearn.baselines.JointLine (steps=11 by default)", _old_joint_line),
+    "CartesianLine": (
+        "kinlearn.baselines.CartesianLine(..., to_goal_joints=True) (steps=11 by default)",
+        _old_cartesian_line,
+    ),
+}
+
+
+def __getattr__(name: str):
+    if name in _RENAMED:
+        home, value = _RENAMED[name]
+        warnings.warn(
+            f"kinlearn.planning.obstacle_baselines.{name} is now {home}; the old name goes in the next release",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return globals()[value] if isinstance(value, str) else value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 _F64 = torch.float64
 
@@ -119,18 +164,18 @@ def _pin(path: torch.Tensor, start: torch.Tensor, goal: torch.Tensor) -> torch.T
     return path
 
 
-def joint_line(
+def joint_line_path(
     start, goal, scene: Scene | None = None, *, steps: int = 10, body: BodySpheres | None = None
 ) -> tuple[torch.Tensor, float]:
     """The straight joint-space line from ``start`` to ``goal`` in ``steps`` equal steps; ignores ``scene``."""
     t0 = time.perf_counter()
     start, goal, body = _inputs(start, goal, body)
     s0, sT = _states(body, start, goal)
-    path = joint_interpolation(body.robot, s0, sT, steps=steps).joints
+    path = joint_line(body.robot, s0, sT, steps=steps).joints
     return _pin(path, start, goal), time.perf_counter() - t0
 
 
-def cartesian_line(
+def cartesian_line_path(
     start,
     goal,
     scene: Scene | None = None,
@@ -142,19 +187,19 @@ def cartesian_line(
 ) -> tuple[torch.Tensor, float]:
     """The end effector on a straight line from the start's to the goal's, followed by DLS IK; ignores ``scene``.
 
-    :func:`kinlearn.planning.baselines.cartesian_dls` gives ``steps + 1`` configurations ending at an IK solution
+    :func:`kinlearn.planning.baselines.cartesian_line` gives ``steps + 1`` configurations ending at an IK solution
     for the goal's end-effector position, not at the goal's joints; a last straight joint-space segment
     to the goal joints is appended (long where the IK's redundancy resolution differs from the goal's).
     """
     t0 = time.perf_counter()
     start, goal, body = _inputs(start, goal, body)
     s0, sT = _states(body, start, goal)
-    ik = cartesian_dls(body.robot, s0, sT, steps=steps, iterations=iterations, damping=damping).joints
+    ik = cartesian_line(body.robot, s0, sT, steps=steps, iterations=iterations, damping=damping).joints
     path = torch.cat((ik, goal.unsqueeze(0)))
     return _pin(path, start, goal), time.perf_counter() - t0
 
 
-def rrt_connect(
+def scene_rrt_connect(
     start,
     goal,
     scene: Scene,
@@ -335,28 +380,30 @@ def trajectory_optimiser(
 # --------------------------------------------------------------------------------------------------
 
 
-class _PathPlanner:
-    """A one-problem-at-a-time path function as a planner of problem batches (see the module docstring)."""
+class _PathPlanner(Baseline):
+    """A one-problem-at-a-time path function as a planner of problem batches (see the module docstring).
+    ``robot``: a :class:`~kinlearn.body.robot.Robot`, its name or its :class:`~kinlearn.collision.BodySpheres`
+    (the spheres it plans around; by default the robot's 12-sphere body with the base, float64)."""
 
-    name = "planner"
-    body: BodySpheres
+    avoids_obstacles: ClassVar[bool] = True
+    one_at_a_time: ClassVar[bool] = True
+    body: BodySpheres | None
 
-    def __post_init__(self) -> None:  # a robot or its name: its sphere body
-        if isinstance(self.body, str):
-            object.__setattr__(self, "body", default_body(as_robot(self.body).name))
-        elif not isinstance(self.body, BodySpheres):
-            object.__setattr__(self, "body", body_spheres(as_robot(self.body)).double())
-
-    @property
-    def robot(self):
-        return self.body.robot
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.body is None:  # the robot's default sphere body, built once per bundled robot
+            try:
+                bundled = load_robot(self.robot.name) is self.robot
+            except UnknownRobotError:  # a Robot made from a URDF, under no registered name
+                bundled = False
+            body = default_body(self.robot.name) if bundled else body_spheres(self.robot).double()
+            object.__setattr__(self, "body", body)
 
     def _path(self, start: torch.Tensor, goal: torch.Tensor, scene: Scene) -> torch.Tensor | None:
         raise NotImplementedError
 
     def plan(self, problem: Problem) -> Plan:
-        _check_problem(self, problem, self.name)
-        problem.require("state", self.name)
+        self._check(problem)
         flat_shape = (-1, self.robot.dof)
         starts = problem.start_joints.reshape(flat_shape)
         goals = problem.goal_joints.reshape(flat_shape)
@@ -375,52 +422,21 @@ class _PathPlanner:
 
 
 @dataclass(frozen=True)
-class JointLine(_PathPlanner):
-    """:func:`joint_line` as a planner."""
-
-    body: BodySpheres
-    steps: int = 10
-    name = "the joint line"
-
-    def _path(self, start, goal, scene):
-        return joint_line(start, goal, scene, steps=self.steps, body=self.body)[0]
-
-
-@dataclass(frozen=True)
-class CartesianLine(_PathPlanner):
-    """:func:`cartesian_line` as a planner."""
-
-    body: BodySpheres
-    steps: int = 10
-    iterations: int = 20
-    damping: float = 1e-2
-    name = "the Cartesian line"
-
-    def _path(self, start, goal, scene):
-        return cartesian_line(
-            start,
-            goal,
-            scene,
-            steps=self.steps,
-            iterations=self.iterations,
-            damping=self.damping,
-            body=self.body,
-        )[0]
-
-
-@dataclass(frozen=True)
 class SceneRRTConnect(_PathPlanner):
-    """:func:`rrt_connect` (around the problem's obstacles, on the dense checker) as a planner."""
+    """:func:`scene_rrt_connect` (around the problem's obstacles, on the dense checker) as a planner."""
 
-    body: BodySpheres
+    robot: Robot | str | BodySpheres
     time_limit: float = 1.0
     simplify: bool = True
     seed: int | None = 0
     max_travel: float = 0.01
-    name = "RRT-Connect"
+    body: BodySpheres | None = None
+
+    label: ClassVar[str] = "RRT-Connect around obstacles (OMPL)"
+    requires: ClassVar[tuple[str, ...]] = ("ompl",)
 
     def _path(self, start, goal, scene):
-        return rrt_connect(
+        return scene_rrt_connect(
             start,
             goal,
             scene,
@@ -436,10 +452,12 @@ class SceneRRTConnect(_PathPlanner):
 class TrajectoryOptimiser(_PathPlanner):
     """:func:`trajectory_optimiser` as a planner."""
 
-    body: BodySpheres
+    robot: Robot | str | BodySpheres
     steps: int = 100
     config: OptimiserConfig | None = None
-    name = "the trajectory optimiser"
+    body: BodySpheres | None = None
+
+    label: ClassVar[str] = "trajectory optimiser"
 
     def _path(self, start, goal, scene):
         return trajectory_optimiser(start, goal, scene, steps=self.steps, config=self.config, body=self.body)[
