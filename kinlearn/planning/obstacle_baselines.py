@@ -61,7 +61,7 @@ from ..collision.problems import rrt_connect_solve
 from ..data.problem import Problem
 from ..errors import ConfigError, ShapeError, UnknownRobotError
 from . import baselines as _free
-from .baselines import MAX_STEPS, Baseline, cartesian_line, joint_line
+from .baselines import MAX_STEPS, Baseline
 from .plan import Plan, judge
 
 __all__ = [
@@ -171,7 +171,7 @@ def joint_line_path(
     t0 = time.perf_counter()
     start, goal, body = _inputs(start, goal, body)
     s0, sT = _states(body, start, goal)
-    path = joint_line(body.robot, s0, sT, steps=steps).joints
+    path = _free.joint_line(body.robot, s0, sT, steps=steps).joints
     return _pin(path, start, goal), time.perf_counter() - t0
 
 
@@ -194,7 +194,7 @@ def cartesian_line_path(
     t0 = time.perf_counter()
     start, goal, body = _inputs(start, goal, body)
     s0, sT = _states(body, start, goal)
-    ik = cartesian_line(body.robot, s0, sT, steps=steps, iterations=iterations, damping=damping).joints
+    ik = _free.cartesian_line(body.robot, s0, sT, steps=steps, iterations=iterations, damping=damping).joints
     path = torch.cat((ik, goal.unsqueeze(0)))
     return _pin(path, start, goal), time.perf_counter() - t0
 
