@@ -1,0 +1,88 @@
+"""A plan's stages around obstacles, and the deadline that bounds them.
+
+An obstacle plan is made in up to three stages, each run only when the earlier ones cleared nothing:
+
+=============  ====================================================================================
+``learned``    the learned proposals (the obstacle-aware network's paths and the straight joint
+               line), the shortest free one by the compiled dense check. Fixed time.
+``refine``     bounded gradient refinement of the least colliding proposal (``refine_steps``).
+``rrt``        RRT-Connect with shortcutting (OMPL) on the compiled checker, for what the deadline
+               leaves. Only with a deadline: its time is the clock's, so it is not bit-reproducible.
+=============  ====================================================================================
+
+``plan.stage`` names the stage a plan came from; ``"none"`` marks a plan none of them cleared (it is
+flagged: ``collision_free`` False, ``success`` False). Without a deadline the stages are the first two,
+and a plan is deterministic; with ``deadline=seconds`` each stage starts only while time is left and
+the sampling stage stops by the deadline (:class:`Deadline`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from ..errors import ConfigError
+
+__all__ = ["STAGES", "Deadline", "densify"]
+
+#: The stages a plan can come from, in the order they run; "none" when none cleared the obstacles.
+STAGES: tuple[str, ...] = ("learned", "refine", "rrt", "none")
+#: Time (s) kept back from a deadline for the work after a stage: judging, packing the plan.
+DEADLINE_RESERVE = 0.002
+
+
+class Deadline:
+    """A time budget that started when it was made: ``left()`` seconds remain (never below 0),
+    ``expired()`` when none do. ``seconds=None`` never expires. ``clock`` (default
+    ``time.perf_counter``) is read for every answer."""
+
+    def __init__(self, seconds: float | None, clock: Callable[[], float] = time.perf_counter):
+        if seconds is not None and (
+            isinstance(seconds, bool)
+            or not isinstance(seconds, (int, float))
+            or not math.isfinite(seconds)
+            or seconds <= 0
+        ):
+            raise ConfigError(f"deadline must be a number of seconds > 0 (or None), got {seconds!r}")
+        self.seconds = None if seconds is None else float(seconds)
+        self._clock = clock
+        self._start = clock()
+
+    def elapsed(self) -> float:
+        return self._clock() - self._start
+
+    def left(self) -> float:
+        """Seconds left (``inf`` without a deadline)."""
+        if self.seconds is None:
+            return math.inf
+        return max(0.0, self.seconds - self.elapsed())
+
+    def expired(self, reserve: float = 0.0) -> bool:
+        """Whether no more than ``reserve`` seconds are left."""
+        return self.left() <= reserve
+
+    def __repr__(self) -> str:
+        return f"Deadline({self.seconds!r}, left={self.left():.4g} s)"
+
+
+def densify(vertices: np.ndarray, count: int) -> np.ndarray:
+    """The polyline ``vertices (V, dof)`` as ``count >= V`` knots: every vertex kept, the longest
+    segments split evenly (the path traced is the same, so its collision verdict is too)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    if v.ndim != 2 or v.shape[0] < 2:
+        raise ConfigError(f"densify needs a polyline of at least 2 vertices (V, dof), got shape {v.shape}")
+    if count < v.shape[0]:
+        raise ConfigError(f"densify cannot make {count} knots from {v.shape[0]} vertices (it keeps them all)")
+    length = np.linalg.norm(np.diff(v, axis=0), axis=1)
+    pieces = np.ones(len(length), dtype=np.int64)
+    for _ in range(count - v.shape[0]):  # one more piece for the segment whose pieces are longest
+        pieces[int(np.argmax(length / pieces))] += 1
+    out = [v[:1]]
+    for a, b, k in zip(v[:-1], v[1:], pieces, strict=True):
+        f = np.arange(1, k, dtype=np.float64)[:, None] / k
+        out.append(a + f * (b - a))
+        out.append(b[None])  # the vertex itself, not a rounded a + 1 · (b − a)
+    return np.concatenate(out)
