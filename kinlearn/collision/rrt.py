@@ -1,0 +1,239 @@
+"""RRT-Connect compiled with its collision checker: the sampling stage of a plan under a deadline.
+
+The algorithm is RRT-Connect (Kuffner and LaValle, ICRA 2000): two trees, rooted at the start and the
+goal, take turns; one extends a step of at most ``step`` radians towards a uniform random
+configuration, the other then greedily connects towards the new node, until they meet. The joined
+path is shortened by random vertex shortcuts (any two vertices whose straight segment is free join).
+Every state and motion is checked by the compiled dense check of :mod:`kinlearn.collision.kernel`
+(≤ ``max_travel`` of sphere travel between checked configurations, self-collision and the floor
+included), so a path found is free by the same rule every plan is judged by.
+
+Why compiled here and not OMPL's RRT-Connect: OMPL's Python bindings call back into Python for every
+state and motion check, which dominates on these problems (measured on one core, the same checker,
+``benchmarks/rrt_checker_speed.py``); here the planner's loop, its random numbers and the checks run
+in one compiled call. OMPL stays kinlearn's reference sampling baseline and the verifier of generated
+problems (:mod:`kinlearn.collision.problems`).
+
+Work is done in rounds of ``iterations`` (:class:`RrtConnect` keeps the trees between rounds), so a
+caller can stop at a deadline between rounds; the same seed and the same total number of iterations
+give the same path, whatever the rounds (random numbers come from a counter-based generator kept in
+the state, not from a global one).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..errors import ConfigError, ShapeError
+from . import kernel
+
+__all__ = ["RrtConnect"]
+
+_jit = numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+
+_TRAPPED, _ADVANCED, _REACHED = 0, 1, 2
+#: State slots: the sizes of the two trees (0 rooted at the start, 1 at the goal), the generator's
+#: counter, the connection (its node in tree 0, in tree 1), status (0 growing, 1 found, −1 a tree full),
+#: rounds done (the tree extended alternates with it).
+_N0, _N1, _RNG, _CA, _CB, _STATUS, _ROUND = range(7)
+
+
+@_jit
+def _uniform(state) -> float:
+    """A number in [0, 1) from a splitmix64 step of the counter in ``state[_RNG]``."""
+    state[_RNG] += 1
+    z = np.uint64(state[_RNG]) * np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@_jit
+def _free(a, b, seg, max_travel, f, n, s) -> bool:
+    for j in range(a.shape[0]):
+        seg[0, j], seg[1, j] = a[j], b[j]
+    first, _ = kernel._verdict_packed(seg, max_travel, 0.0, f, n, s)
+    return first < 0
+
+
+@_jit
+def _extend(nodes, parent, count, t, q, step, seg, max_travel, f, n, s, out):
+    """Extend tree ``t`` (nodes ``nodes[t, :count[t]]``) towards ``q``: (status, new node or −1)."""
+    m = count[t]
+    if m >= nodes.shape[1]:
+        return _TRAPPED, -1
+    dof = q.shape[0]
+    best, near = np.inf, 0
+    for i in range(m):
+        d = 0.0
+        for j in range(dof):
+            e = nodes[t, i, j] - q[j]
+            d += e * e
+        if d < best:
+            best, near = d, i
+    dist = math.sqrt(best)
+    reached = dist <= step
+    scale = 1.0 if reached else step / dist
+    for j in range(dof):
+        out[j] = nodes[t, near, j] + scale * (q[j] - nodes[t, near, j])
+    if not _free(nodes[t, near], out, seg, max_travel, f, n, s):
+        return _TRAPPED, -1
+    nodes[t, m] = out
+    parent[t, m] = near
+    count[t] = m + 1
+    return (_REACHED if reached else _ADVANCED), m
+
+
+@_jit
+def _grow(nodes, parent, state, lo, hi, step, iterations, max_travel, f, n, s):
+    """Up to ``iterations`` rounds of RRT-Connect on the trees in ``nodes``/``parent``."""
+    dof = lo.shape[0]
+    count = state[_N0 : _N1 + 1]
+    seg, q, new, conn = np.empty((2, dof)), np.empty(dof), np.empty(dof), np.empty(dof)
+    for _ in range(iterations):
+        if state[_STATUS] != 0:
+            return
+        for j in range(dof):
+            q[j] = lo[j] + _uniform(state) * (hi[j] - lo[j])
+        a = int(state[_ROUND] % 2)
+        state[_ROUND] += 1
+        st, i = _extend(nodes, parent, count, a, q, step, seg, max_travel, f, n, s, new)
+        if st == _TRAPPED:
+            if count[a] >= nodes.shape[1]:
+                state[_STATUS] = -1
+            continue
+        b = 1 - a
+        while True:
+            st2, k = _extend(nodes, parent, count, b, new, step, seg, max_travel, f, n, s, conn)
+            if st2 != _ADVANCED:
+                break
+        if st2 == _REACHED:
+            state[_CA], state[_CB] = (i, k) if a == 0 else (k, i)
+            state[_STATUS] = 1
+            return
+        if count[b] >= nodes.shape[1]:
+            state[_STATUS] = -1
+            return
+
+
+@_jit
+def _shortcut(path, attempts, state, max_travel, f, n, s):
+    """Random vertex shortcuts of ``path (V, dof)``: the vertices kept (a boolean mask)."""
+    V, dof = path.shape
+    keep = np.ones(V, dtype=np.bool_)
+    seg = np.empty((2, dof))
+    for _ in range(attempts):
+        idx = np.flatnonzero(keep)
+        m = idx.shape[0]
+        if m < 3:
+            break
+        x = int(_uniform(state) * m)
+        y = int(_uniform(state) * m)
+        i, k = min(x, y), max(x, y)
+        if k - i < 2:
+            continue
+        if _free(path[idx[i]], path[idx[k]], seg, max_travel, f, n, s):
+            keep[idx[i + 1 : k]] = False
+    return keep
+
+
+class RrtConnect:
+    """One RRT-Connect query on a compiled body and scene (:class:`~kinlearn.collision.kernel.KernelBody`,
+    :class:`~kinlearn.collision.kernel.KernelScene`), from ``start`` to ``goal`` (joints ``(dof,)``
+    inside ``[lower, upper]``). ``step``: the largest extension, rad (default: 0.2 of the joint box's
+    diagonal, OMPL's default range); ``max_nodes``: each tree's capacity; ``seed`` fixes the samples.
+
+    ``run(iterations)`` grows the trees for that many more rounds and returns the path ``(V, dof)``
+    once found (``None`` while not); ``valid_ends`` says whether start and goal are free at all.
+    """
+
+    def __init__(
+        self,
+        body,
+        scene,
+        start,
+        goal,
+        lower,
+        upper,
+        step: float | None = None,
+        max_nodes: int = 4096,
+        seed: int = 0,
+        max_travel: float = 0.01,
+    ):
+        lo, hi = np.ascontiguousarray(lower, np.float64), np.ascontiguousarray(upper, np.float64)
+        q0, q1 = np.ascontiguousarray(start, np.float64), np.ascontiguousarray(goal, np.float64)
+        dof = body.dof
+        for name, v in (("start", q0), ("goal", q1), ("lower", lo), ("upper", hi)):
+            if v.shape != (dof,):
+                raise ShapeError(f"RRT-Connect's {name} must have shape ({dof},), got {v.shape}")
+        if not (isinstance(max_nodes, int) and max_nodes >= 2):
+            raise ConfigError(f"max_nodes must be an integer >= 2, got {max_nodes!r}")
+        self.step = 0.2 * float(np.linalg.norm(hi - lo)) if step is None else float(step)
+        if not (math.isfinite(self.step) and self.step > 0):
+            raise ConfigError(f"step must be a number of radians > 0, got {step!r}")
+        self.lo, self.hi, self.max_travel = lo, hi, float(max_travel)
+        self._f, self._n = body.packed
+        self._s = scene.packed
+        self.nodes = np.empty((2, max_nodes, dof))
+        self.parent = np.full((2, max_nodes), -1, dtype=np.int64)
+        self.nodes[0, 0], self.nodes[1, 0] = q0, q1
+        self.state = np.zeros(7, dtype=np.int64)
+        self.state[_N0] = self.state[_N1] = 1
+        self.state[_RNG] = (int(seed) * 0x632BE59BD9B4E019) % (1 << 62)
+        self.iterations = 0
+        self.valid_ends = all(
+            kernel._verdict_packed(q[None], self.max_travel, 0.0, self._f, self._n, self._s)[0] < 0
+            for q in (q0, q1)
+        )
+        self._path = None
+
+    @property
+    def found(self) -> bool:
+        return self._path is not None or int(self.state[_STATUS]) == 1
+
+    @property
+    def exhausted(self) -> bool:
+        """No path can come from more rounds: an end collides, or a tree is full."""
+        return not self.valid_ends or int(self.state[_STATUS]) == -1
+
+    @property
+    def size(self) -> int:
+        """Nodes in both trees."""
+        return int(self.state[_N0] + self.state[_N1])
+
+    def run(self, iterations: int) -> np.ndarray | None:
+        if self._path is not None:
+            return self._path
+        if self.exhausted:
+            return None
+        if np.array_equal(self.nodes[0, 0], self.nodes[1, 0]):
+            self._path = self.nodes[:, 0].copy()
+            return self._path
+        _grow(
+            self.nodes, self.parent, self.state, self.lo, self.hi, self.step, int(iterations),
+            self.max_travel, self._f, self._n, self._s,
+        )  # fmt: skip
+        self.iterations += int(iterations)
+        if int(self.state[_STATUS]) != 1:
+            return None
+        half = []
+        for t, i in ((0, int(self.state[_CA])), (1, int(self.state[_CB]))):
+            chain = []
+            while i >= 0:
+                chain.append(self.nodes[t, i])
+                i = int(self.parent[t, i])
+            half.append(chain)
+        # start … meeting node … goal (the goal tree's copy of the meeting node left out)
+        self._path = np.array([*half[0][::-1], *half[1][1:]])
+        return self._path
+
+    def shortcut(self, path: np.ndarray, attempts: int | None = None) -> np.ndarray:
+        """``path`` shortened by ``attempts`` random vertex shortcuts (default ``4 · V``)."""
+        p = np.ascontiguousarray(path, np.float64)
+        k = 4 * p.shape[0] if attempts is None else int(attempts)
+        keep = _shortcut(p, k, self.state, self.max_travel, self._f, self._n, self._s)
+        return p[keep]

@@ -1,0 +1,93 @@
+"""The compiled RRT-Connect: paths free by the torch dense check (an independent implementation of the
+rule), from the start to the goal inside the limits; reproducible by seed whatever the rounds; ends
+that collide refused."""
+
+import numpy as np
+import pytest
+import torch
+
+from kinlearn import load_robot
+from kinlearn.collision import Scene, body_spheres, check_path
+from kinlearn.collision import kernel as K
+from kinlearn.collision.geometry import Box, Cylinder
+from kinlearn.collision.rrt import RrtConnect
+from kinlearn.errors import ConfigError, ShapeError
+
+
+@pytest.fixture(scope="module", params=["iiwa14", "panda"])
+def wall_problem(request):
+    """A wall across the arm's front between two configurations the straight joint line joins through it."""
+    robot = load_robot(request.param)
+    body = body_spheres(robot).double()
+    start = torch.as_tensor((robot.lower + robot.upper) / 2)
+    start[0], start[1] = -0.9, 0.6
+    goal = start.clone()
+    goal[0] = 0.9
+    line = torch.stack([start, goal])
+    kin = __import__("kinlearn").kinematics(robot, "fast")
+    mid = kin.position(((start + goal) / 2).clone(), validate=False)
+    c, s = np.cos(0.4), np.sin(0.4)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    scene = Scene.from_primitives(
+        [Box(tuple(mid.tolist()), (0.08, 0.08, 0.08), R), Cylinder((-0.5, -0.6, 0.9), 0.05, 0.2)],
+        floor=0.0,
+    )
+    assert not bool(check_path(body, line, scene).collision_free), "the straight joint line must be blocked"
+    assert bool(check_path(body, start[None], scene).collision_free)
+    assert bool(check_path(body, goal[None], scene).collision_free)
+    return robot, body, scene, start.numpy(), goal.numpy()
+
+
+def test_finds_a_path_free_by_the_torch_check_and_shortcuts_keep_it_free(wall_problem):
+    robot, body, scene, start, goal = wall_problem
+    kb, ks = K.KernelBody(body), K.KernelScene(scene)
+    rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=3)
+    path = None
+    for _ in range(400):
+        path = rrt.run(25)
+        if path is not None:
+            break
+    assert path is not None and rrt.found and rrt.size > 2
+    for p in (path, rrt.shortcut(path)):
+        assert np.array_equal(p[0], start) and np.array_equal(p[-1], goal)
+        assert (p >= robot.lower).all() and (p <= robot.upper).all()
+        assert bool(check_path(body, torch.from_numpy(p), scene).collision_free)
+    short = rrt.shortcut(path)
+    assert short.shape[0] <= path.shape[0]
+    assert (
+        np.linalg.norm(np.diff(short, axis=0), axis=1).sum()
+        <= np.linalg.norm(np.diff(path, axis=0), axis=1).sum()
+    )
+
+
+def test_same_seed_same_path_whatever_the_rounds(wall_problem):
+    robot, body, scene, start, goal = wall_problem
+    kb, ks = K.KernelBody(body), K.KernelScene(scene)
+
+    def solve(rounds, seed):
+        rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=seed)
+        for _ in range(10_000 // rounds):
+            path = rrt.run(rounds)
+            if path is not None:
+                return path, rrt.iterations
+        raise AssertionError("no path")
+
+    a, na = solve(1, 5)
+    b, nb = solve(1, 5)
+    c, _ = solve(7, 5)
+    assert np.array_equal(a, b) and np.array_equal(a, c) and na == nb
+    assert not np.array_equal(a, solve(1, 6)[0])
+
+
+def test_colliding_ends_and_bad_input_are_refused(wall_problem):
+    robot, body, scene, start, goal = wall_problem
+    kb = K.KernelBody(body)
+    inside = K.KernelScene(Scene.from_spheres([[0.0, 0.0, 0.3, 0.5]], floor=0.0))  # the base inside a ball
+    rrt = RrtConnect(kb, inside, start, goal, robot.lower, robot.upper)
+    assert not rrt.valid_ends and rrt.exhausted and rrt.run(100) is None
+    same = RrtConnect(kb, K.KernelScene(scene), start, start, robot.lower, robot.upper)
+    assert np.array_equal(same.run(1), np.stack([start, start]))
+    with pytest.raises(ShapeError, match="start"):
+        RrtConnect(kb, K.KernelScene(scene), start[:-1], goal, robot.lower, robot.upper)
+    with pytest.raises(ConfigError, match="step"):
+        RrtConnect(kb, K.KernelScene(scene), start, goal, robot.lower, robot.upper, step=-1.0)
