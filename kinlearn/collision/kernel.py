@@ -59,6 +59,12 @@ _GROUP_MIN = 4
 #: Share of its budget's span after which an item is recomputed at a configuration evaluated anyway.
 _REFRESH = 0.5
 
+#: Metres of slack when a primitive is culled by its bounding ball (far above a distance's rounding).
+_CULL = 1e-9
+#: The column of a packed box (15 columns of the Scene's table, then its bounding radius ‖h‖) and of a
+#: packed cylinder (14, then √(r² + h²)).
+_BOX_BOUND, _CYL_BOUND = 15, 14
+
 _jit = numba.njit(cache=True, nogil=True, fastmath=False)
 
 
@@ -96,15 +102,32 @@ def _sd_cylinder(x, y, z, t, i):
 
 
 @_jit
+def _beyond(x, y, z, t, i, bound, d):
+    """Whether primitive ``i`` of table ``t`` (centre in columns 0–2, held in a ball of radius ``bound``
+    about it) provably lies farther than ``d`` from the point: a convex set inside a ball has a signed
+    distance no smaller than the ball's, ‖p − c‖ − bound (compared squared, with :data:`_CULL` of slack
+    for rounding, so a culled primitive could never have lowered the minimum)."""
+    lim = d + bound + _CULL
+    if not lim > 0.0:  # also d = +inf: nothing to compare with yet
+        return False
+    dx, dy, dz = x - t[i, 0], y - t[i, 1], z - t[i, 2]
+    return dx * dx + dy * dy + dz * dz > lim * lim
+
+
+@_jit
 def _sphere_scene(x, y, z, r, on_floor, spheres, boxes, cylinders, floor):
-    """One sphere's signed distance to the scene (+inf when empty)."""
+    """One sphere's signed distance to the scene (+inf when empty). Boxes and cylinders carry their
+    bounding radius in their last column (:class:`KernelScene`): one whose bounding ball is already
+    farther than the nearest primitive so far is not evaluated (the minimum is the same, to the bit)."""
     d = np.inf
     for i in range(spheres.shape[0]):
         d = min(d, _sd_sphere(x, y, z, spheres, i))
     for i in range(boxes.shape[0]):
-        d = min(d, _sd_box(x, y, z, boxes, i))
+        if not _beyond(x, y, z, boxes, i, boxes[i, _BOX_BOUND], d):
+            d = min(d, _sd_box(x, y, z, boxes, i))
     for i in range(cylinders.shape[0]):
-        d = min(d, _sd_cylinder(x, y, z, cylinders, i))
+        if not _beyond(x, y, z, cylinders, i, cylinders[i, _CYL_BOUND], d):
+            d = min(d, _sd_cylinder(x, y, z, cylinders, i))
     d = d - r
     if floor[0] > 0.5 and on_floor:
         d = min(d, z - r - floor[1])
@@ -436,9 +459,9 @@ def _unpack_scene(buf):
     o = 5
     spheres = buf[o : o + 4 * K].reshape(K, 4)
     o += 4 * K
-    boxes = buf[o : o + 15 * B].reshape(B, 15)
-    o += 15 * B
-    cylinders = buf[o : o + 14 * C].reshape(C, 14)
+    boxes = buf[o : o + 16 * B].reshape(B, 16)
+    o += 16 * B
+    cylinders = buf[o : o + 15 * C].reshape(C, 15)
     return spheres, boxes, cylinders, buf[3:5]
 
 
@@ -495,7 +518,9 @@ def _verdict_packed(path, max_travel, margin, f, n, s):
 
 @_jit
 def _first_free_packed(paths, order, max_travel, margin, f, n, s):
-    """:func:`_first_free` on a packed body and scene."""
+    """:func:`_first_free` on a packed body and scene; −2 if ``paths`` hold NaN or infinity."""
+    if not _all_finite(paths):
+        return -2
     F, pr, link, folded, radii, fl, pairs, lever, gs, gb, gst, gm, bl, bf, br = _unpack_body(f, n)
     spheres, boxes, cylinders, floor = _unpack_scene(s)
     return _first_free(
@@ -665,7 +690,13 @@ class KernelScene:
             k.table: np.ascontiguousarray(t.detach().cpu().double().numpy())
             for k, t, _ in scene.tables(live=True)
         }
-        self.spheres, self.boxes, self.cylinders = tables["spheres"], tables["boxes"], tables["cylinders"]
+        boxes, cylinders = tables["boxes"], tables["cylinders"]
+        # Each box and cylinder with the radius of its bounding ball last (the kernels cull by it).
+        box_bound = np.linalg.norm(boxes[:, 3:6], axis=1)
+        cyl_bound = np.hypot(cylinders[:, 3], cylinders[:, 4])
+        self.spheres = tables["spheres"]
+        self.boxes = np.ascontiguousarray(np.concatenate((boxes, box_bound[:, None]), axis=1))
+        self.cylinders = np.ascontiguousarray(np.concatenate((cylinders, cyl_bound[:, None]), axis=1))
         self.floor = np.array([0.0, 0.0] if scene.floor is None else [1.0, float(scene.floor)])
         self._buf = None
 
@@ -714,7 +745,15 @@ def _all_finite(a):
     return True
 
 
-def _joints(x, dof: int, what: str, ndim: int) -> np.ndarray:
+def _joints(x, dof: int, what: str, ndim: int, finite: bool = True) -> np.ndarray:
+    """``x`` as a C-contiguous float64 array of ``ndim`` dimensions, the last of size ``dof``; its values
+    checked finite unless ``finite=False`` (the caller's kernel checks them)."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.ndim == ndim and x.flags.c_contiguous:
+        if x.shape[-1] != dof:  # the common case (a planner's own arrays): no conversion at all
+            raise ShapeError(f"{what} must have {ndim} dimensions, the last of size {dof}; got {x.shape}")
+        if finite and not _all_finite(x):
+            raise NonFiniteError(f"{what} holds {int((~np.isfinite(x)).sum())} NaN/inf value(s)")
+        return x
     if isinstance(x, torch.Tensor):
         x = x.detach().cpu().numpy()
     a = np.asarray(x)
@@ -729,6 +768,15 @@ def _joints(x, dof: int, what: str, ndim: int) -> np.ndarray:
 
 
 def _check_args(body, scene, max_travel, margin) -> None:
+    if (
+        type(body) is KernelBody
+        and type(scene) is KernelScene
+        and type(max_travel) is float
+        and type(margin) is float
+        and 0.0 < max_travel < math.inf
+        and -math.inf < margin < math.inf
+    ):
+        return  # the common case, in a few comparisons
     if not isinstance(body, KernelBody):
         raise ConfigError(
             f"body must be a KernelBody (KernelBody(body_spheres(robot))), got {type(body).__name__}"
@@ -803,10 +851,10 @@ def first_free(
     collision-free, or −1 if none is. ``order`` must hold distinct indices into ``paths`` (a
     :class:`~kinlearn.errors.ConfigError` otherwise); it may leave paths out."""
     _check_args(body, scene, max_travel, margin)
-    arr = _joints(paths, body.dof, "joint paths", 3)
+    arr = _joints(paths, body.dof, "joint paths", 3, finite=False)  # the kernel checks finiteness
     P = arr.shape[0]
     if order is None:
-        idx = np.arange(P, dtype=np.int64)
+        idx = _NATURAL[P] if P < len(_NATURAL) else np.arange(P, dtype=np.int64)
     else:
         idx = np.asarray(order)
         if idx.ndim != 1 or (idx.size and idx.dtype.kind not in "iu"):
@@ -815,8 +863,18 @@ def first_free(
         if idx.size and not _distinct_indices(idx, P):
             raise ConfigError(f"order must hold distinct path indices in 0…{P - 1}, got {idx.tolist()}")
     if idx.shape[0] == 0:
+        if not _all_finite(arr):
+            raise NonFiniteError(f"joint paths hold {int((~np.isfinite(arr)).sum())} NaN/inf value(s)")
         return -1
-    return int(_first_free_packed(arr, idx, float(max_travel), float(margin), *body.packed, scene.packed))
+    f, n = body.packed
+    k = int(_first_free_packed(arr, idx, float(max_travel), float(margin), f, n, scene.packed))
+    if k == -2:
+        raise NonFiniteError(f"joint paths hold {int((~np.isfinite(arr)).sum())} NaN/inf value(s)")
+    return k
+
+
+#: The order 0, 1, …, P − 1 of a few paths, made once (never written: the kernels only read it).
+_NATURAL = [np.arange(P, dtype=np.int64) for P in range(33)]
 
 
 def warm_up() -> None:
