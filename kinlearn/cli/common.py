@@ -40,6 +40,7 @@ __all__ = [
     "data_record",
     "file_identity",
     "int_list",
+    "number_text",
     "number_type",
     "open_command_run",
     "register_subcommand",
@@ -164,6 +165,14 @@ NONNEGATIVE_INT = number_type(int, low=0)
 POSITIVE_FLOAT = number_type(float, low=0, open_low=True)
 NONNEGATIVE_FLOAT = number_type(float, low=0)
 PROBABILITY = number_type(float, low=0, high=1)
+
+
+def number_text(x: float) -> str:
+    """A default as a command's help writes it: ``0.083``, ``1000``, ``0``, small ones as ``2e-3``."""
+    if x != 0 and abs(x) < 0.01:
+        mantissa, exponent = f"{x:e}".split("e")
+        return f"{float(mantissa):g}e{int(exponent)}"
+    return f"{x:g}"
 
 
 def int_list(low: int) -> Callable[[str], tuple[int, ...]]:

@@ -41,6 +41,7 @@ from .common import (
     add_run_options,
     data_record,
     file_identity,
+    number_text,
     number_type,
     open_command_run,
     register_subcommand,
@@ -75,6 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_babbling_options(p: argparse.ArgumentParser, transitions: int | None) -> None:
+    from ..data.babbling import BabblingConfig as B
+
     p.add_argument(
         "--transitions",
         type=POSITIVE_INT,
@@ -82,18 +85,21 @@ def _add_babbling_options(p: argparse.ArgumentParser, transitions: int | None) -
         help="transitions to babble (walkers × steps, rounded up to whole steps)",
     )
     p.add_argument(
-        "--walkers", type=POSITIVE_INT, default=1000, help="parallel random walkers (default: 1000)"
+        "--walkers",
+        type=POSITIVE_INT,
+        default=B.walkers,
+        help=f"parallel random walkers (default: {B.walkers})",
     )
     p.add_argument(
         "--max-step",
         type=POSITIVE_FLOAT,
-        default=0.083,
-        help="max joint change per step, rad (default: 0.083)",
+        default=B.max_step,
+        help=f"max joint change per step, rad (default: {number_text(B.max_step)})",
     )
     p.add_argument(
         "--retarget-prob",
         type=PROBABILITY,
-        default=0.0,
+        default=B.retarget_prob,
         help="per-step chance of a new joint target before the current one is reached (1 = new target every step)",
     )
 
@@ -116,30 +122,34 @@ def _babbling_config(args: argparse.Namespace, n: int):
 
 
 def _add_babble(sub) -> None:
+    from ..data.babbling import BabblingConfig as B
+
     p = add_command(
         sub, "babble", "Motor babbling: write (s, a, s') transitions to babbling.npz.", _run_babble
     )
-    _add_babbling_options(p, 500_000)
+    _add_babbling_options(p, B.walkers * B.steps)
     p.add_argument(
         "--ef-noise",
         type=NONNEGATIVE_FLOAT,
-        default=0.0,
+        default=B.ef_noise,
         metavar="SIGMA",
-        help="Gaussian noise on each observed end-effector coordinate, standard deviation in m (default: 0)",
+        help="Gaussian noise on each observed end-effector coordinate, standard deviation in m "
+        f"(default: {number_text(B.ef_noise)})",
     )
     p.add_argument(
         "--outliers",
         type=number_type(float, low=0, high=1, open_high=True),
-        default=0.0,
+        default=B.outliers,
         metavar="FRACTION",
-        help="share of the observed states whose end effector is displaced by --outlier-size (default: 0)",
+        help="share of the observed states whose end effector is displaced by --outlier-size "
+        f"(default: {number_text(B.outliers)})",
     )
     p.add_argument(
         "--outlier-size",
         type=POSITIVE_FLOAT,
-        default=0.05,
+        default=B.outlier_size,
         metavar="METRES",
-        help="how far an outlier is displaced, in a random direction (default: 0.05)",
+        help=f"how far an outlier is displaced, in a random direction (default: {number_text(B.outlier_size)})",
     )
     p.add_argument(
         "--urdf",
@@ -179,7 +189,9 @@ def _run_babble(args: argparse.Namespace) -> int:
 
 
 def _add_train(sub, kind: str) -> None:
-    from ..models.forward_inverse import FM_PRESETS
+    from ..models.presets import FM_PRESETS
+    from ..training.forward_inverse import THROUGH_FM_ACTION_WEIGHT
+    from ..training.loop import TrainConfig
 
     what = "forward" if kind == "fm" else "inverse"
     p = add_command(
@@ -223,8 +235,8 @@ def _add_train(sub, kind: str) -> None:
     p.add_argument(
         "--val-fraction",
         type=number_type(float, low=0, high=1, open_high=True),
-        default=0.1,
-        help="held-out share of the data, in [0, 1) (default: 0.1)",
+        default=TrainConfig.val_fraction,
+        help=f"held-out share of the data, in [0, 1) (default: {number_text(TrainConfig.val_fraction)})",
     )
     add_run_options(p, resumable=True)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -244,7 +256,10 @@ def _add_train(sub, kind: str) -> None:
         )
         p.add_argument("--through-fm-epochs", type=POSITIVE_INT, default=12, help="epochs of that refinement")
         p.add_argument(
-            "--action-weight", type=NONNEGATIVE_FLOAT, default=0.01, help="pull toward the babbled action"
+            "--action-weight",
+            type=NONNEGATIVE_FLOAT,
+            default=THROUGH_FM_ACTION_WEIGHT,
+            help="pull toward the babbled action",
         )
     p.set_defaults(kind=kind)
 
@@ -256,6 +271,7 @@ def _run_train(args: argparse.Namespace) -> int:
     from ..models.forward_inverse import FM_PRESETS, fm_config, im_config, load_fm
     from ..training.forward_inverse import (
         TrainResult,
+        data_max_step,
         format_validation_table,
         train_config,
         train_fm,
@@ -292,6 +308,10 @@ def _run_train(args: argparse.Namespace) -> int:
     else:
         bcfg = _babbling_config(args, args.transitions or DEFAULT_TRANSITIONS[args.preset])
         configs["babbling"] = bcfg.to_dict()
+    if kind == "fm":  # the FM records the step bound of its data, as train_fm does
+        step = data_max_step(data) if data is not None else bcfg.max_step
+        model_cfg = dataclasses.replace(model_cfg, max_step=step)
+        configs["model"] = model_cfg.to_dict()
     through_fm = dcfg = None
     if kind == "im" and args.through_fm is not None:
         through_fm = load_fm(args.through_fm, robot=args.robot)
@@ -347,6 +367,8 @@ def _run_train(args: argparse.Namespace) -> int:
 
 
 def _add_validate(sub) -> None:
+    from ..data.babbling import BabblingConfig as B
+
     p = add_command(
         sub,
         "validate",
@@ -358,9 +380,14 @@ def _add_validate(sub) -> None:
     p.add_argument("--im", default=None, help="IM checkpoint (.pt), or 'analytic'")
     p.add_argument("--n", type=POSITIVE_INT, default=100_000, help="fresh transitions (default: 100000)")
     p.add_argument(
-        "--max-step", type=POSITIVE_FLOAT, default=0.083, help="babbling step bound, rad (default: 0.083)"
+        "--max-step",
+        type=POSITIVE_FLOAT,
+        default=B.max_step,
+        help=f"babbling step bound, rad (default: {number_text(B.max_step)})",
     )
-    p.add_argument("--retarget-prob", type=PROBABILITY, default=0.0, help="babbling retarget probability")
+    p.add_argument(
+        "--retarget-prob", type=PROBABILITY, default=B.retarget_prob, help="babbling retarget probability"
+    )
     p.add_argument("--im-iterations", type=POSITIVE_INT, default=1, help="DLS iterations of the analytic IM")
     add_run_options(p, resumable=False)
 

@@ -55,9 +55,17 @@ def _add_make_endpoints(sub) -> None:
         help="held-out pairs (default: 2000; 0: none, and train-tm reports no held-out metrics)",
     )
     p.add_argument(
-        "--start-spread", type=NONNEGATIVE_FLOAT, default=0.15, help="start noise around home, rad"
+        "--start-spread",
+        type=NONNEGATIVE_FLOAT,
+        default=EndpointConfig.start_spread,
+        help="start noise around home, rad",
     )
-    p.add_argument("--min-distance", type=NONNEGATIVE_FLOAT, default=0.2, help="least start-goal distance, m")
+    p.add_argument(
+        "--min-distance",
+        type=NONNEGATIVE_FLOAT,
+        default=EndpointConfig.min_distance,
+        help="least start-goal distance, m",
+    )
     add_run_options(p, resumable=False)
 
 

@@ -24,6 +24,7 @@ from .common import (
     add_run_options,
     file_identity,
     int_list,
+    number_text,
     open_command_run,
     register_subcommand,
 )
@@ -35,6 +36,9 @@ from .common import (
 
 @register_subcommand
 def _add_train_planner(sub) -> None:
+    from ..training.joint_path import PLANNER_MODEL
+    from ..training.joint_path import PathTrainConfig as C
+
     p = add_command(
         sub,
         "train-planner",
@@ -54,22 +58,35 @@ def _add_train_planner(sub) -> None:
         help="a learned IM kept beside the TM for position goals (im.pt)",
     )
     p.add_argument(
-        "--iterations", type=POSITIVE_INT, default=6000, help="training iterations (default: 6000)"
+        "--iterations",
+        type=POSITIVE_INT,
+        default=C.iterations,
+        help=f"training iterations (default: {C.iterations})",
     )
     p.add_argument(
-        "--batch-size", type=POSITIVE_INT, default=512, help="problems per iteration (default: 512)"
+        "--batch-size",
+        type=POSITIVE_INT,
+        default=C.batch_size,
+        help=f"problems per iteration (default: {C.batch_size})",
     )
     p.add_argument(
-        "--lr", type=POSITIVE_FLOAT, default=2e-3, help="Adam learning rate, cosine decay (default: 2e-3)"
+        "--lr",
+        type=POSITIVE_FLOAT,
+        default=C.lr,
+        help=f"Adam learning rate, cosine decay (default: {number_text(C.lr)})",
     )
+    hidden = PLANNER_MODEL["hidden"]
     p.add_argument(
         "--hidden",
         type=int_list(1),
-        default=(128, 128, 128),
-        help="MLP hidden widths, comma-separated (default: 128,128,128)",
+        default=hidden,
+        help=f"MLP hidden widths, comma-separated (default: {','.join(map(str, hidden))})",
     )
     p.add_argument(
-        "--modes", type=NONNEGATIVE_INT, default=6, help="sine modes of the joint correction (0: free)"
+        "--modes",
+        type=NONNEGATIVE_INT,
+        default=PLANNER_MODEL["modes"],
+        help="sine modes of the joint correction (0: free)",
     )
     p.add_argument(
         "--heldout",
@@ -97,6 +114,7 @@ def _run_train_planner(args: argparse.Namespace) -> int:
         iterations=args.iterations,
         batch_size=args.batch_size,
         lr=args.lr,
+        max_step=fm.max_step,  # the rolled-out path steps as far as the FM's data did
         model={"hidden": list(args.hidden), "modes": args.modes},
         seed=args.seed,
     )
@@ -137,6 +155,9 @@ def _run_train_planner(args: argparse.Namespace) -> int:
 
 @register_subcommand
 def _add_train_obstacle_planner(sub) -> None:
+    from ..models.obstacle_path import ObstaclePathConfig
+    from ..training.obstacle_path import ObstacleTrainConfig as C
+
     p = add_command(
         sub,
         "train-obstacle-planner",
@@ -164,14 +185,29 @@ def _add_train_obstacle_planner(sub) -> None:
         help="train through a learned body model (body.pt) instead of the analytic sphere body",
     )
     p.add_argument(
-        "--iterations", type=POSITIVE_INT, default=3000, help="training iterations (default: 3000)"
+        "--iterations",
+        type=POSITIVE_INT,
+        default=C.iterations,
+        help=f"training iterations (default: {C.iterations})",
     )
-    p.add_argument("--batch-size", type=POSITIVE_INT, default=64, help="problems per iteration (default: 64)")
     p.add_argument(
-        "--lr", type=POSITIVE_FLOAT, default=2e-3, help="Adam learning rate, cosine decay (default: 2e-3)"
+        "--batch-size",
+        type=POSITIVE_INT,
+        default=C.batch_size,
+        help=f"problems per iteration (default: {C.batch_size})",
     )
     p.add_argument(
-        "--candidates", type=POSITIVE_INT, default=6, help="paths proposed per problem (default: 6)"
+        "--lr",
+        type=POSITIVE_FLOAT,
+        default=C.lr,
+        help=f"Adam learning rate, cosine decay (default: {number_text(C.lr)})",
+    )
+    candidates = ObstaclePathConfig.candidates
+    p.add_argument(
+        "--candidates",
+        type=POSITIVE_INT,
+        default=candidates,
+        help=f"paths proposed per problem (default: {candidates})",
     )
     p.add_argument(
         "--init-checkpoint",

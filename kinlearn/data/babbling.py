@@ -47,12 +47,18 @@ from ..errors import ConfigError, DatasetError
 from ..io import file_sha256, load_npz, save_npz
 
 __all__ = [
+    "MAX_STEP",
     "BabblingConfig",
     "Transitions",
     "babble",
     "load_transitions",
     "save_transitions",
 ]
+
+#: The babbling step bound: the largest joint change per step and joint, rad (REFERENCE #4: 2 rad/s × 41.7 ms).
+#: A learned FM is valid for actions within the bound of the data it learned from, which it records
+#: (:attr:`kinlearn.models.interface.ForwardModel.max_step`); this is the default everywhere.
+MAX_STEP = 0.083
 
 DTYPES: dict[str, torch.dtype] = {"float32": torch.float32, "float64": torch.float64}
 #: Fields of :class:`BabblingConfig` that :meth:`~BabblingConfig.to_dict` leaves out at their defaults.
@@ -84,7 +90,7 @@ class BabblingConfig:
     robot: str | None = None
     walkers: int = 1000
     steps: int = 500
-    max_step: float = 0.083
+    max_step: float = MAX_STEP
     seed: int = 0
     retarget_prob: float = 0.0
     dtype: Literal["float32", "float64"] = "float32"

@@ -29,7 +29,7 @@ from ..models.chain import ThroughFMIM, solve_position
 from ..models.forward_inverse import AnalyticIM, InverseModel
 from ..models.interface import ForwardModel
 from ..models.trajectory import TrajectoryModel
-from ..planning.planner import MAX_STEP, Planner, step_to_position
+from ..planning.planner import Planner, step_to_position
 from .metrics import plan_metrics
 
 __all__ = ["IM_KINDS", "fm_im_ablation", "fm_im_table"]
@@ -62,7 +62,10 @@ def _position_goals(robot, fm, im_kind, mlp_im, q0, goal) -> torch.Tensor:
         return theta
     im = (mlp_im if im_kind == "mlp" else AnalyticIM(robot)).eval()
     ef0 = kinematics(robot).position(q0)
-    return torch.from_numpy(step_to_position(fm.eval(), im, q0.numpy(), ef0.numpy(), goal.numpy(), lo, hi))
+    theta = step_to_position(
+        fm.eval(), im, q0.numpy(), ef0.numpy(), goal.numpy(), lo, hi, max_step=fm.max_step
+    )
+    return torch.from_numpy(theta)
 
 
 def fm_im_ablation(
@@ -95,7 +98,7 @@ def fm_im_ablation(
                 cell = {"position": _summary((fk.position(theta) - goal).norm(dim=-1)), "task": None}
                 if waypoint_tm is not None and task_pairs is not None:
                     im = (
-                        ThroughFMIM(fm, lo, hi, max_step=MAX_STEP)
+                        ThroughFMIM(fm, lo, hi, max_step=fm.max_step)
                         if kind == "through"
                         else (mlp_im if kind == "mlp" else AnalyticIM(robot))
                     )

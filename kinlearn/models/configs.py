@@ -3,9 +3,11 @@ widths, activation and options beyond the paper; each is what its checkpoint rec
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
+from ..data.babbling import MAX_STEP
 from ..errors import ConfigError
 from .interface import config_from_dict, config_to_dict
 from .layers import ACTIVATIONS, Activation
@@ -31,6 +33,9 @@ class FMConfig:
             rollout telescopes to ef(0) + g(θ(t)) − g(θ(0)): its error stays bounded instead of
             adding up over the steps. Needs ``predict_delta``.
         fk_hidden: hidden widths of g.
+        max_step: the babbling step bound of the data the model learns from (rad): the largest action
+            it is valid for (:attr:`~kinlearn.models.interface.ForwardModel.max_step`). Recorded only
+            where it is not the default, so a checkpoint without it (all older ones) reads the default.
     """
 
     robot: str = "iiwa14"
@@ -43,6 +48,7 @@ class FMConfig:
     predict_delta: bool = False
     ef_mode: Literal["head", "difference"] = "head"
     fk_hidden: tuple[int, ...] = (256, 256, 256)
+    max_step: float = MAX_STEP
 
     def __post_init__(self) -> None:
         _check_widths(self.shared, "shared", allow_empty=False)
@@ -53,10 +59,19 @@ class FMConfig:
             raise ConfigError(f"ef_mode must be 'head' or 'difference', got {self.ef_mode!r}")
         if self.ef_mode == "difference" and not self.predict_delta:
             raise ConfigError("ef_mode='difference' predicts a step, so it needs predict_delta=True")
+        if isinstance(self.max_step, bool) or not (
+            isinstance(self.max_step, (int, float)) and math.isfinite(self.max_step) and self.max_step > 0
+        ):
+            raise ConfigError(f"max_step must be a positive number of radians, got {self.max_step!r}")
         _check_common(self)
 
     def to_dict(self) -> dict:
-        return config_to_dict(self)
+        """The config as a JSON-able dict; ``max_step`` is left out at the default (the record of every
+        model babbled with the default bound stays what it was before the field existed)."""
+        d = config_to_dict(self)
+        if d["max_step"] == MAX_STEP:
+            del d["max_step"]
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> FMConfig:

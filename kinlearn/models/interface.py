@@ -20,6 +20,7 @@ from torch import nn
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import check_finite, check_last_dim
+from ..data.babbling import MAX_STEP
 from ..errors import ConfigError
 
 __all__ = ["ForwardModel", "InverseModel", "config_from_dict", "config_to_dict", "resolve_robot"]
@@ -62,6 +63,10 @@ class ForwardModel(_RobotModel):
     """``forward(s (..., S), a (..., dof)) -> s_next (..., S)``; attributes ``layout``, ``robot_name``."""
 
     kind = "fm"
+    #: The babbling step bound of the data the model learned from (rad per joint and step): the largest
+    #: action it is valid for, and what a planner bounds the IM's actions by. A learned FM records it
+    #: (:attr:`~kinlearn.models.configs.FMConfig.max_step`); exact models take the default.
+    max_step: float = MAX_STEP
 
     def forward(self, s: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         self._check(s, self.layout.size, "state s")

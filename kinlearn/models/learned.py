@@ -30,6 +30,7 @@ class LearnedFM(ForwardModel):
         config = config or FMConfig()
         super().__init__(config.robot, config.dof)
         self.config = config
+        self.max_step = float(config.max_step)
         dof, S = config.dof, config.dof + 3
         n_in = S + dof
         self.shared = mlp((n_in, *config.shared), config.activation, None)

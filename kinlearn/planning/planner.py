@@ -40,6 +40,7 @@ from ..checks import as_int, check_finite, real_array
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
 from ..collision.scene import Scene, as_scene
+from ..data.babbling import MAX_STEP
 from ..data.problem import LIMIT_TOLERANCE, STATE_EF_TOLERANCE, Problem, state_error
 from ..errors import (
     ConfigError,
@@ -84,8 +85,6 @@ _LAZY: dict = {}
 
 #: Batches up to this many plans run in NumPy (a few microseconds per operation), larger ones in torch.
 SMALL_BATCH = 16
-#: The babbling step bound (rad per joint and step, REFERENCE #4): the largest action the IM takes.
-MAX_STEP = 0.083
 #: A joint goal this close to the start (rad, every joint) is no move: its plan stays at the start.
 ZERO_MOVE = 1e-9
 #: The most refinement steps a plan may take (each costs milliseconds: a bound on a plan's time).
@@ -134,7 +133,7 @@ class Planner:
         refine: int = 1,
         exact_joints: bool = True,
         tolerance: Tolerance = DEFAULT_TOLERANCE,
-        max_step: float = MAX_STEP,
+        max_step: float | None = None,
         obstacle_tm: ObstaclePathModel | None = None,
         body: BodySpheres | None = None,
         refine_steps: int = 0,
@@ -157,7 +156,8 @@ class Planner:
         ``refine`` and ``exact_joints`` set the IM/FM rollout (see :func:`~kinlearn.models.rollout.rectify`):
         by default one model-based correction of each action and the joints kept at θ(0) + Σ â.
         ``refine=0, exact_joints=False`` is the paper's Algorithm 1 as published. ``tolerance``: when a
-        plan counts as a success. ``max_step``: the largest joint change per IM action (rad).
+        plan counts as a success. ``max_step``: the largest joint change per IM action (rad; default: the
+        FM's babbling step bound, :attr:`~kinlearn.models.interface.ForwardModel.max_step`).
         """
         if not isinstance(robot, Robot):
             raise ConfigError(f"robot must be a kinlearn.Robot (see load_robot), got {type(robot).__name__}")
@@ -173,6 +173,8 @@ class Planner:
                     f"the {what} was trained for {m.robot_name!r}, the planner is for {robot.name!r}"
                 )
         self.refine, self.exact_joints = int(refine), bool(exact_joints)
+        if max_step is None:  # the FM is valid for the steps of the data it learned from
+            max_step = fm.max_step if fm is not None else MAX_STEP
         self.tolerance, self.max_step = tolerance, float(max_step)
         self.robot = robot
         self.layout = StateLayout(robot.dof)

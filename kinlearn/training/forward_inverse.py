@@ -8,6 +8,7 @@ goals (:data:`GOALS`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +20,7 @@ from torch import nn
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
-from ..data.babbling import BabblingConfig, Transitions, babble
+from ..data.babbling import MAX_STEP, BabblingConfig, Transitions, babble
 from ..errors import ConfigError, DatasetError
 from ..io import content_sha256
 from ..models.forward_inverse import (
@@ -36,8 +37,10 @@ from .loop import OptimConfig, TrainConfig, _load_to_resume, fit, seed_everythin
 __all__ = [
     "GOALS",
     "PAPER_FIGURES",
+    "THROUGH_FM_ACTION_WEIGHT",
     "TRAIN_PRESETS",
     "TrainResult",
+    "data_max_step",
     "format_validation_table",
     "train_config",
     "train_fm",
@@ -179,12 +182,20 @@ def _train_kind(kind: str, data, model, cfg: TrainConfig | None, run_dir, resume
     cfg = cfg or train_config(kind, "paper")
     seed_everything(cfg.seed)
     if model is None:
-        model = model_cls(config_cls(robot=data.robot, dof=data.layout.dof))
-    elif isinstance(model, config_cls):
+        model = config_cls(robot=data.robot, dof=data.layout.dof)
+    if isinstance(model, FMConfig):  # an FM is valid for the steps of the data it learns from
+        model = dataclasses.replace(model, max_step=data_max_step(data))
+    if isinstance(model, config_cls):
         model = model_cls(model)
     if not isinstance(model, model_cls):
         raise ConfigError(f"train_{kind} trains a {model_cls.__name__}, got {type(model).__name__}")
     return _train_supervised(kind, model, data, cfg, run_dir, resume)
+
+
+def data_max_step(data: Transitions) -> float:
+    """The babbling step bound ``data`` were made with (their babbling config's ``max_step``, rad), or
+    :data:`~kinlearn.data.babbling.MAX_STEP` where they record none (recorded observations)."""
+    return float((data.config or {}).get("max_step", MAX_STEP))
 
 
 def train_fm(
@@ -196,8 +207,8 @@ def train_fm(
 ) -> TrainResult:
     """Train a :class:`LearnedFM` on babbling transitions (paper settings by default).
 
-    ``model`` is a config (the model is built after seeding with ``cfg.seed``) or a model to train
-    further. With ``run_dir`` the checkpoint ``run_dir/fm.pt`` (loadable by :func:`kinlearn.models.forward_inverse.load_fm`)
+    ``model`` is a config (the model is built after seeding with ``cfg.seed``; its ``max_step`` becomes
+    the data's babbling step bound, :func:`data_max_step`) or a model to train further. With ``run_dir`` the checkpoint ``run_dir/fm.pt`` (loadable by :func:`kinlearn.models.forward_inverse.load_fm`)
     and ``metrics.jsonl`` are written every epoch; ``resume=True`` continues from that checkpoint.
     """
     return _train_kind("fm", data, model, cfg, run_dir, resume)
@@ -212,6 +223,11 @@ def train_im(
 ) -> TrainResult:
     """Train a :class:`LearnedIM` on babbling transitions (paper settings by default); see :func:`train_fm`."""
     return _train_kind("im", data, model, cfg, run_dir, resume)
+
+
+#: ``kinlearn train-im --through-fm``'s pull toward the babbled action (``--action-weight``): the shipped
+#: IMs were refined with it. :func:`train_im_distal`'s own default (0.1) is what ``reproduce`` uses.
+THROUGH_FM_ACTION_WEIGHT = 0.01
 
 
 def train_im_distal(
@@ -284,7 +300,7 @@ def validate_models(
     robot: Robot | str = "iiwa14",
     n: int = 100_000,
     seed: int = 10_000,
-    max_step: float = 0.083,
+    max_step: float = MAX_STEP,
     retarget_prob: float = 0.0,
     walkers: int = 1000,
 ) -> dict:

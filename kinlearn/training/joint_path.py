@@ -37,13 +37,14 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..body.state import straight_line
+from ..data.babbling import MAX_STEP
 from ..data.endpoints import workspace_box
 from ..errors import ConfigError, TrainingDivergedError
 from ..models.forward_inverse import AnalyticFM, ForwardModel, load_fm
 from ..models.joint_path import JointPathConfig, JointPathModel, densify, save_path_model
 from .loop import iteration_loop, seed_everything
 
-__all__ = ["PathLossConfig", "PathTrainConfig", "build_fm", "path_loss", "train_path_model"]
+__all__ = ["PLANNER_MODEL", "PathLossConfig", "PathTrainConfig", "build_fm", "path_loss", "train_path_model"]
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,13 @@ class PathLossConfig:
                 raise ConfigError(f"loss weight {f.name} must be a finite number ≥ 0, got {v}")
 
 
+#: The joint-path TM that ``kinlearn train-planner`` trains by default (its ``--hidden`` and ``--modes``):
+#: the shipped planners' widths, 128-128-128 (they were trained with ``--modes 8``). A bare
+#: :class:`PathTrainConfig` (``model={}``: :class:`~kinlearn.models.joint_path.JointPathConfig`'s own
+#: 256-256-256 and a free correction) is what ``reproduce``'s workspace task trains.
+PLANNER_MODEL: dict = {"hidden": (128, 128, 128), "modes": 6}
+
+
 @dataclass(frozen=True)
 class PathTrainConfig:
     """Everything that decides a joint-path TM training run; saved as the run's ``config.json``.
@@ -72,7 +80,8 @@ class PathTrainConfig:
     ``fm``: ``"learned"`` (``fm_checkpoint``, a path) or ``"analytic"`` (the ablation). Problems are
     drawn afresh every iteration, uniformly within ``range_fraction`` of the joint range (the
     ``workspace`` endpoint preset's distribution). ``max_step``: the babbling step bound (rad) the
-    FM was trained on; the rolled-out path never steps further. Adam with cosine decay to zero.
+    FM was trained on (its :attr:`~kinlearn.models.interface.ForwardModel.max_step`); the rolled-out
+    path never steps further. Adam with cosine decay to zero.
     """
 
     robot: str = "iiwa14"
@@ -82,7 +91,7 @@ class PathTrainConfig:
     batch_size: int = 512
     lr: float = 2e-3
     range_fraction: float = 1.0
-    max_step: float = 0.083
+    max_step: float = MAX_STEP
     checkpoint_every: int = 250
     loss: PathLossConfig = field(default_factory=PathLossConfig)
     model: dict = field(default_factory=dict)

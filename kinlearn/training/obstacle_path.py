@@ -97,7 +97,7 @@ class ObstacleTrainConfig:
     body_checkpoint: str | None = None
     iterations: int = 3000
     batch_size: int = 64
-    lr: float = 1e-3
+    lr: float = 2e-3
     points: int = 2
     checkpoint_every: int = 100
     init_checkpoint: str | None = None
