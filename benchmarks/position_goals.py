@@ -69,10 +69,11 @@ def main() -> None:
         # The IM through the chain on babbling-sized actions, executed through the analytic FK.
         gen = torch.Generator().manual_seed(5)
         q = robot.sample(5000, gen, dtype=torch.float64)
-        a = (2 * torch.rand(q.shape, generator=gen, dtype=torch.float64) - 1) * 0.083
+        step = planner.chain.max_step  # the babbling step bound (data.babbling.MAX_STEP)
+        a = (2 * torch.rand(q.shape, generator=gen, dtype=torch.float64) - 1) * step
         fk = kinematics(robot)
         target = fk.position((q + a).clamp(lo, hi))
-        im = ThroughFMIM(planner.chain, lo, hi, iterations=3, max_step=0.083)
+        im = ThroughFMIM(planner.chain, lo, hi, iterations=3, max_step=step)
         with torch.no_grad():
             act = im(im.layout.join(q, fk.position(q)), target)
         im_err = float((fk.position(q + act) - target).norm(dim=-1).mean()) * 1e3
