@@ -477,14 +477,18 @@ def _fm_im(config: ReproduceConfig, robot, models: Path, chains: dict, task, way
 
 
 def _workspace_config(config: ReproduceConfig, robot, models: Path, kind: str):
-    """The joint-path TM training of the workspace task, through the learned or the analytic FM."""
+    """The joint-path TM training of the workspace task, through the learned or the analytic FM (its
+    rolled-out paths step no further than the FM's babbling step bound)."""
+    from ..models.forward_inverse import AnalyticFM, load_fm
     from ..training.joint_path import PathTrainConfig
 
+    fm = load_fm(models / "fm.pt", robot=robot.name) if kind == "learned" else AnalyticFM(robot)
     return PathTrainConfig(
         robot=robot.name,
         fm=kind,
         fm_checkpoint=str((models / "fm.pt").resolve()) if kind == "learned" else None,
         iterations=config.workspace_iterations,
+        max_step=fm.max_step,
         batch_size=config.workspace_batch_size,
         seed=config.seed,
     )
