@@ -1,0 +1,468 @@
+"""Every Python and shell block of README.md and docs/*.md runs here, so that a drifted example fails.
+
+One test per file; its blocks run in order in a temporary directory (as a reader at a clone's root:
+``benchmarks/`` and ``kinlearn/checkpoints/`` are linked in), and blocks of one file may build on each
+other:
+
+- ````python```: one namespace per file.
+- ````bash```: read command by command (``\\`` continues a line, ``#`` starts a comment, ``&&`` chains).
+  ``kinlearn …`` runs in this process (:func:`kinlearn.cli.main.main`) and must exit 0 (``plan`` may exit
+  1: a plan that missed its goal, as tiny models do); ``python - <<'EOF'`` runs its text as Python. What
+  takes minutes or would change the installation (:data:`PARSE_ONLY`: ``kinlearn reproduce``,
+  ``kinlearn model-error``, ``kinlearn export --to-package``, every ``python benchmarks/*.py``) is parsed
+  by its own argument parser instead, so a renamed option or script still fails; a synopsis
+  (``[--option VALUE]``) must name only options its parser has. Set-up commands are checked: ``pip
+  install -e '.[extra]'`` against pyproject.toml's extras, the test command against ``.ci/run``.
+  Any other command fails: say here how to run it.
+- ````text``` (``json``, ``yaml``, …): output or file contents, not run. A block without an info string fails.
+
+Tiny sizes: the docs show real ones; :data:`TINY_OPTIONS` sets the amounts of work of the commands,
+:data:`TINY_DEFAULTS` lowers configuration defaults, :data:`TINY_PYTHON` replaces literal text of a
+file's Python (each entry must still match, so that this table keeps up with the docs). The reader's own
+files the docs name (``log.csv``, ``my_arm.urdf``, ``scene.yaml``, …) are written first (:func:`user_files`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import re
+import runpy
+import shlex
+import shutil
+import sys
+import types
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+import torch
+
+import kinlearn
+from kinlearn.body import robot as robot_module
+from kinlearn.data.babbling import BabblingConfig
+from kinlearn.training.identify import IdentifyConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+RUN = {"python": "python", "bash": "shell", "sh": "shell", "shell": "shell"}
+NOT_RUN = {"text", "json", "yaml", "csv", "xml", "toml", "console", "output"}
+
+#: Options set on each command, whatever the docs give (absent ones are added): the work of a real run,
+#: cut to seconds. A command not listed runs as written.
+TINY_OPTIONS: dict[str, dict[str, list[str]]] = {
+    "babble": {"--transitions": ["3000"], "--walkers": ["50"]},
+    "train-fm": {"--epochs": ["1"], "--validate": ["0"], "--no-progress": []},
+    "train-im": {"--epochs": ["1"], "--through-fm-epochs": ["1"], "--validate": ["0"], "--no-progress": []},
+    "train-planner": {"--iterations": ["2"], "--batch-size": ["16"], "--heldout": ["0"], "--no-progress": []},
+    "make-endpoints": {"--n": ["64"], "--heldout": ["16"]},
+    "train-tm": {"--epochs": ["1"], "--no-progress": []},
+    "train-obstacle-planner": {
+        "--problems-per-family": ["1"],
+        "--iterations": ["2"],
+        "--batch-size": ["2"],
+        "--no-progress": [],
+    },
+    "validate": {"--n": ["1000"]},
+    "identify": {"--quiet": []},
+}
+
+#: Defaults of configuration classes lowered while the docs run (the CLI has no option for them).
+TINY_DEFAULTS = {
+    IdentifyConfig: {"mlp_steps": 40, "mlp_hidden": (32, 32), "references": 1, "iterations": 4},
+    BabblingConfig: {"walkers": 50, "steps": 40},
+}
+
+#: Literal replacements in a file's Python, (text, tiny text); each must occur in that file.
+TINY_PYTHON: dict[str, list[tuple[str, str]]] = {
+    "docs/usage.md": [
+        ("EndpointConfig(n=2000, seed=0)", "EndpointConfig(n=200, seed=0)"),
+        ("pairs.split(1500)", "pairs.split(150)"),
+        ("epochs=10)", "epochs=1)"),
+        ("walkers=1000, steps=300", "walkers=50, steps=40"),
+        (
+            "time_parameterize(robot, plan.joints, dt=1 / 20)",
+            "time_parameterize(robot, plan.joints, dt=1 / 4)",
+        ),
+        (
+            'model_error_sweep("iiwa14", n_goals=2000, seeds=(0, 1, 2), progress=True)',
+            'model_error_sweep("iiwa14", n_goals=16, seeds=(0,), levels=((0.02, 1.0),), calibration_samples=1000)',
+        ),
+    ],
+}
+
+#: Per file: text substituted in its commands (placeholders that stand for a value).
+PLACEHOLDERS = {"docs/arms.md": {"NAME": "iiwa14"}}
+
+#: Commands that run only their argument parser: (program, first word or None for every one).
+PARSE_ONLY = {
+    ("kinlearn", "reproduce"),
+    ("kinlearn", "model-error"),
+    ("kinlearn", "--to-package"),
+    ("python", None),
+}
+
+#: Per file: commands run before its blocks (outputs of runs the file reads).
+PREREQUISITES = {"docs/results.md": ["make-endpoints --n 16 --heldout 16 --run-dir runs/default/endpoints"]}
+
+#: Per file: names a block leaves to the reader (their own arrays), defined before the file's blocks.
+READER_NAMES = {
+    "docs/usage.md": """
+import torch as _torch
+_robot = kinlearn.load_robot("iiwa14")
+start_joints, goal_joints = _robot.sample(2, _torch.Generator().manual_seed(0), dtype=_torch.float64)
+my_joint_paths = _torch.stack([start_joints + (goal_joints - start_joints) * t for t in _torch.linspace(0, 1, 12)])
+""",
+}
+
+
+@dataclass
+class Block:
+    doc: str  # path relative to the repository
+    line: int  # of the opening fence
+    info: str
+    text: str
+
+
+def blocks(path: Path) -> list[Block]:
+    rel = path.relative_to(ROOT).as_posix()
+    out, lines, i = [], path.read_text().splitlines(), 0
+    while i < len(lines):
+        m = re.match(r"^(\s*)(```+)(.*)$", lines[i])
+        if not m:
+            i += 1
+            continue
+        indent, fence, info = len(m.group(1)), m.group(2), m.group(3).strip()
+        j = i + 1
+        while j < len(lines) and not lines[j].strip().startswith(fence):
+            j += 1
+        assert j < len(lines), f"{rel}:{i + 1}: a code block that is never closed"
+        text = "\n".join(line[indent:] for line in lines[i + 1 : j])
+        out.append(Block(rel, i + 1, info.split()[0].lower() if info else "", text))
+        i = j + 1
+    return out
+
+
+ALL_BLOCKS = [b for doc in DOCS for b in blocks(doc)]
+
+
+def test_every_block_says_what_it_is():
+    """A command to run is ```python or ```bash; output and file contents ```text (or json, yaml …)."""
+    assert len(ALL_BLOCKS) > 40
+    unknown = [
+        f"{b.doc}:{b.line} ```{b.info}" for b in ALL_BLOCKS if b.info not in RUN and b.info not in NOT_RUN
+    ]
+    assert not unknown, "blocks without a known info string: " + ", ".join(unknown)
+
+
+def test_tiny_python_still_matches():
+    for doc, pairs in TINY_PYTHON.items():
+        text = "\n".join(b.text for b in ALL_BLOCKS if b.doc == doc and RUN.get(b.info) == "python")
+        for old, _ in pairs:
+            assert old in text, f"TINY_PYTHON[{doc!r}]: {old!r} is no longer in its Python blocks"
+
+
+# --------------------------------------------------------------------------------------------------
+# The reader's files
+# --------------------------------------------------------------------------------------------------
+
+ARM4_URDF = """<?xml version="1.0"?>
+<robot name="myarm">
+  <link name="base"/><link name="l1"/><link name="l2"/><link name="l3"/><link name="l4"/><link name="tool0"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+    <origin xyz="0 0 0.15"/><axis xyz="0 0 1"/><limit lower="-2.9" upper="2.9" velocity="1.5" effort="40"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0 0 0.2"/><axis xyz="0 1 0"/><limit lower="-1.8" upper="1.8" velocity="1.5" effort="40"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/>
+    <origin xyz="0 0 0.3"/><axis xyz="0 1 0"/><limit lower="-2.2" upper="2.2" velocity="2.0" effort="20"/></joint>
+  <joint name="j4" type="revolute"><parent link="l3"/><child link="l4"/>
+    <origin xyz="0 0 0.25"/><axis xyz="0 1 0"/><limit lower="-2.0" upper="2.0" velocity="3.0" effort="10"/></joint>
+  <joint name="j_tool" type="fixed"><parent link="l4"/><child link="tool0"/><origin xyz="0 0 0.1"/></joint>
+</robot>
+"""
+
+
+@pytest.fixture(scope="module")
+def reader_files(tmp_path_factory) -> Path:
+    """Files a reader brings, made once: a recorded iiwa14 log, URDFs, a MoveIt scene and request, a scene."""
+    import yaml
+
+    from kinlearn.collision import Box, Cylinder, Scene, Sphere
+    from kinlearn.data.recorded import Observations, save_recorded
+
+    d = tmp_path_factory.mktemp("reader")
+    iiwa = kinlearn.load_robot("iiwa14")
+    babbled = kinlearn.babble(kinlearn.BabblingConfig(walkers=10, steps=150, ef_noise=0.001, seed=3))
+    save_recorded(d / "log.csv", Observations.from_transitions(babbled, iiwa.joint_names))
+    urdf = iiwa.urdf.decode()
+    tool = (
+        f'  <link name="tool0"/>\n  <joint name="tool0_joint" type="fixed"><parent link="{iiwa.ee_frame}"/>'
+        '<child link="tool0"/><origin xyz="0 0 0.02"/></joint>\n</robot>'
+    )
+    (d / "my_arm.urdf").write_text(urdf[: urdf.rindex("</robot>")] + tool + "\n")
+    (d / "myarm.urdf").write_text(ARM4_URDF)
+    (d / "path" / "to").mkdir(parents=True)
+    (d / "path" / "to" / "myarm.urdf").write_text(ARM4_URDF)
+    scene = Scene.from_primitives(
+        [
+            Box((0.75, 0.0, 0.1), (0.3, 0.5, 0.025)),
+            Cylinder((-0.7, 0.6, 0.3), 0.04, 0.3),
+            Sphere((0.0, -0.8, 0.5), 0.1),
+        ]
+    )
+    (d / "scene.yaml").write_text(yaml.safe_dump(scene.to_moveit(frame_id="panda_link0")))
+    scene.save(d / "scene.npz")
+    panda = kinlearn.load_robot("panda")
+    start, goal = panda.sample(2, torch.Generator().manual_seed(1), dtype=torch.float64)
+    names = panda.joint_names
+    request = {
+        "start_state": {"joint_state": {"name": list(names), "position": start.tolist()}},
+        "goal_constraints": [
+            {
+                "joint_constraints": [
+                    {"joint_name": n, "position": v} for n, v in zip(names, goal.tolist(), strict=True)
+                ]
+            }
+        ],
+    }
+    (d / "request.yaml").write_text(yaml.safe_dump(request))
+    return d
+
+
+# --------------------------------------------------------------------------------------------------
+# Running a file's blocks
+# --------------------------------------------------------------------------------------------------
+
+
+class DocRun:
+    def __init__(self, doc: str):
+        self.doc = doc
+        # A module of its own, so that a block may define dataclasses (they look their module up).
+        self.module = types.ModuleType("kinlearn_docs_" + re.sub(r"\W", "_", doc))
+        sys.modules[self.module.__name__] = self.module
+        self.ns: dict = self.module.__dict__
+        self.where = doc
+
+    def fail(self, message: str):
+        pytest.fail(f"{self.where}: {message}", pytrace=False)
+
+    # ----------------------------------------------------------------------------------------- python
+    def python(self, text: str, line: int, tiny: bool = True) -> None:
+        if tiny:
+            for old, new in TINY_PYTHON.get(self.doc, []):
+                text = text.replace(old, new)
+        code = compile("\n" * line + text, self.doc, "exec")  # tracebacks name the doc's lines
+        exec(code, self.ns)
+
+    # ------------------------------------------------------------------------------------------ shell
+    def shell(self, text: str, line: int) -> None:
+        lines = text.splitlines()
+        i = 0
+        while i < len(lines):
+            start = i
+            command = lines[i]
+            while command.rstrip().endswith("\\") and i + 1 < len(lines):
+                i += 1
+                command = command.rstrip()[:-1] + " " + lines[i]
+            i += 1
+            here = re.search(r"<<\s*'?(\w+)'?\s*$", command)
+            self.where = f"{self.doc}:{line + 1 + start}"
+            if here:
+                body = []
+                while i < len(lines) and lines[i].strip() != here.group(1):
+                    body.append(lines[i])
+                    i += 1
+                i += 1
+                tokens = shlex.split(command[: here.start()], comments=True)
+                if tokens[:2] not in (["python", "-"], ["python3", "-"]):
+                    self.fail(f"a here-document for {tokens!r}: only `python -` is run")
+                self.python("\n".join(body), line + 1 + start, tiny=False)
+                continue
+            tokens = shlex.split(command, comments=True)
+            for sub in PLACEHOLDERS.get(self.doc, {}).items():
+                tokens = [t.replace(*sub) for t in tokens]
+            while tokens:
+                cut = tokens.index("&&") if "&&" in tokens else len(tokens)
+                self.command(tokens[:cut])
+                tokens = tokens[cut + 1 :]
+
+    def command(self, tokens: list[str]) -> None:
+        program, args = tokens[0], tokens[1:]
+        if program == "kinlearn":
+            self.kinlearn(args)
+        elif program in ("python", "python3") and args[:2] == ["-m", "venv"]:
+            pass  # a fresh environment: the suite runs in one
+        elif program == "." and args == [".venv/bin/activate"]:
+            pass
+        elif program == "pip" and args[:1] == ["install"]:
+            toml = (ROOT / "pyproject.toml").read_text()
+            section = toml.split("[project.optional-dependencies]", 1)[1].split("\n[", 1)[0]
+            extras = set(re.findall(r"^([\w-]+)\s*=", section, re.M))
+            for arg in args[1:]:
+                m = re.fullmatch(r"(?:\.|kinlearn)\[([\w,-]+)\]", arg)
+                if m:
+                    missing = set(m.group(1).split(",")) - extras
+                    assert not missing, (
+                        f"{self.where}: pip install {arg}: no extra {missing} in pyproject.toml"
+                    )
+        elif program in ("python", "python3") and args[:2] == ["-m", "pytest"]:
+            assert " ".join(tokens) in (ROOT / ".ci" / "run").read_text(), (
+                f"{self.where}: CI runs another test command"
+            )
+        elif program in ("python", "python3") and args and args[0].endswith(".py"):
+            self.script(args[0], args[1:])
+        else:
+            self.fail(f"no way to run {' '.join(tokens)!r} here: say how in tests/test_docs.py")
+
+    def kinlearn(self, args: list[str]) -> None:
+        from kinlearn.cli.main import build_parser, main
+
+        if args and "[" not in " ".join(args) and not self.parse_only("kinlearn", args):
+            args = tiny_options(args)
+            threads = torch.get_num_threads()
+            try:
+                code = main(args)
+            except SystemExit as exc:  # argparse refused the command
+                code = exc.code
+            finally:
+                torch.set_num_threads(threads)
+            allowed = (0, 1) if args[0] == "plan" else (0,)
+            assert code in allowed, f"{self.where}: kinlearn {' '.join(args)} exited with {code}"
+            return
+        self.parse(build_parser(), args, "kinlearn")
+
+    def parse_only(self, program: str, args: list[str]) -> bool:
+        return any(p == program and (w is None or w in args) for p, w in PARSE_ONLY)
+
+    def parse(self, parser: argparse.ArgumentParser, args: list[str], name: str) -> None:
+        if any(a.startswith("[") for a in args):  # a synopsis: the options it names must exist
+            named = [a.strip("[]") for a in args if a.strip("[]").startswith("--")]
+            for sub in parser._subparsers._group_actions if parser._subparsers else []:
+                if args and args[0] in sub.choices:
+                    parser = sub.choices[args[0]]
+            unknown = [o for o in named if o not in parser._option_string_actions]
+            assert not unknown, f"{self.where}: {name} has no option {unknown}"
+            return
+        try:
+            parser.parse_args(args)
+        except SystemExit as exc:
+            self.fail(f"{name} {' '.join(args)}: refused by its parser (exit {exc.code})")
+
+    def script(self, path: str, args: list[str]) -> None:
+        """A benchmark script: its main() runs up to its parse_args, which parses ``args`` and stops."""
+        file = Path(path)
+        assert file.is_file(), f"{self.where}: no script {path}"
+
+        class Parsed(Exception):
+            pass
+
+        parsers: list[argparse.ArgumentParser] = []
+
+        def parse_args(parser, argv=None, namespace=None):
+            parsers.append(parser)
+            raise Parsed
+
+        saved = sys.argv, list(sys.path)
+        sys.argv, sys.path[:0] = [str(file)], [str(file.parent.resolve())]
+        original = argparse.ArgumentParser.parse_args
+        argparse.ArgumentParser.parse_args = parse_args
+        try:
+            module = runpy.run_path(str(file), run_name="docs_parse")
+            assert "main" in module, f"{self.where}: {path} has no main()"
+            module["main"]()
+        except Parsed:
+            pass
+        finally:
+            argparse.ArgumentParser.parse_args = original
+            sys.argv, sys.path[:] = saved
+        assert parsers, f"{self.where}: {path}'s main() parsed no arguments"
+        self.parse(parsers[-1], args, path)
+
+
+def tiny_options(args: list[str]) -> list[str]:
+    sets = TINY_OPTIONS.get(args[0], {})
+    parser_flags = {k for k, v in sets.items() if not v}
+    out, i = [args[0]], 1
+    while i < len(args):
+        a = args[i]
+        if a in sets:  # drop the doc's value; the tiny one is added below
+            i += 1
+            while i < len(args) and not args[i].startswith("--") and a not in parser_flags:
+                i += 1
+            continue
+        out.append(a)
+        i += 1
+    for option, value in sets.items():
+        out += [option, *value]
+    return out
+
+
+def lowered_defaults(monkeypatch) -> None:
+    for cls, values in TINY_DEFAULTS.items():
+        init = cls.__init__
+        names = [f.name for f in dataclasses.fields(cls) if f.init and not f.kw_only]
+        defaults = list(init.__defaults__ or ())
+        for name, value in values.items():
+            if name in names[len(names) - len(defaults) :]:
+                defaults[names.index(name) - (len(names) - len(defaults))] = value
+            else:
+                kw = dict(init.__kwdefaults__ or {})
+                assert name in kw, f"TINY_DEFAULTS: {cls.__name__} has no default {name!r}"
+                kw[name] = value
+                monkeypatch.setattr(init, "__kwdefaults__", kw)
+        monkeypatch.setattr(init, "__defaults__", tuple(defaults))
+
+
+@pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_doc_blocks_run(doc, reader_files, tmp_path, monkeypatch):
+    rel = doc.relative_to(ROOT).as_posix()
+    runnable = [b for b in blocks(doc) if b.info in RUN]
+    if not runnable:
+        pytest.skip(f"{rel} has no block to run")
+    shutil.copytree(reader_files, tmp_path, dirs_exist_ok=True)
+    (tmp_path / "benchmarks").symlink_to(ROOT / "benchmarks")
+    (tmp_path / "kinlearn").mkdir()
+    (tmp_path / "kinlearn" / "checkpoints").symlink_to(Path(kinlearn.__file__).parent / "checkpoints")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    lowered_defaults(monkeypatch)
+    viewers = []
+    try:
+        from kinlearn.viz import viewer as viewer_module
+
+        # A viewer that waits for Ctrl-C returns at once, closed, as after Ctrl-C.
+        monkeypatch.setattr(viewer_module.PlanViewer, "wait", lambda self: self.close())
+        init = viewer_module.PlanViewer.__init__
+
+        def tracked(self, *a, **k):
+            init(self, *a, **k)
+            viewers.append(self)
+
+        monkeypatch.setattr(viewer_module.PlanViewer, "__init__", tracked)
+    except ImportError:
+        pass
+    robots = set(robot_module.ROBOTS)
+    run = DocRun(rel)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the docs' own warnings (tiny models, domain)
+            for command in PREREQUISITES.get(rel, []):
+                run.kinlearn(shlex.split(command))
+            if rel in READER_NAMES:
+                run.ns["kinlearn"] = kinlearn
+                run.python(READER_NAMES[rel], 0, tiny=False)
+            for b in runnable:
+                run.where = f"{rel}:{b.line}"
+                if RUN[b.info] == "python":
+                    run.python(b.text, b.line)
+                else:
+                    run.shell(b.text, b.line)
+    finally:
+        sys.modules.pop(run.module.__name__, None)
+        for v in viewers:
+            v.close()
+        for name in set(robot_module.ROBOTS) - robots:
+            robot_module.unregister_robot(name)
+        os.chdir(ROOT)
