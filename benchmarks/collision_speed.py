@@ -33,7 +33,7 @@ from kinlearn.collision import (
     self_collision_distance,
 )
 from kinlearn.collision.kernel import KernelBody, KernelScene, check_paths, first_free
-from kinlearn.collision.problems import ProblemSet
+from kinlearn.data.problems import ProblemSet
 
 HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"
 

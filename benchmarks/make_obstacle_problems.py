@@ -3,7 +3,7 @@
     python benchmarks/make_obstacle_problems.py [--per-family 340] [--budget 900] \\
         [--out benchmarks/data/obstacle_problems_heldout.npz]
 
-Three families (tabletop, shelf, barrier; see ``kinlearn/collision/problems.py``), each from a fixed
+Three families (tabletop, shelf, barrier; see ``kinlearn/data/problems.py``), each from a fixed
 seed (held-out seeds below; training sets use other seeds). Problems are made round-robin, one of
 each family in turn, so that a time budget cuts every family at the same count; problem i of a
 family is the same whatever the budget (its sub-seed depends on (seed, i) only). Every problem is
@@ -23,7 +23,7 @@ from pathlib import Path
 import torch
 from _common import header, markdown_table
 
-from kinlearn.collision.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
+from kinlearn.data.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
 
 #: Held-out seeds, one per family. Training scenes must use other seeds.
 HELDOUT_SEEDS = {"tabletop": 1001, "shelf": 1002, "barrier": 1003}

@@ -18,7 +18,7 @@ import torch
 from _common import header
 
 from kinlearn.collision import check_path
-from kinlearn.collision.problems import ProblemSet
+from kinlearn.data.problems import ProblemSet
 from kinlearn.planning.planner import Planner
 
 HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"

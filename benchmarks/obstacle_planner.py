@@ -38,7 +38,7 @@ from pathlib import Path
 import torch
 from _common import header
 
-from kinlearn.collision.problems import FAMILIES, ProblemSet
+from kinlearn.data.problems import FAMILIES, ProblemSet
 from kinlearn.errors import KinlearnError, MissingDependencyError
 from kinlearn.evaluation.obstacles import (
     OUTCOME_KEYS,

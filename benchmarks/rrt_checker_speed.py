@@ -24,7 +24,7 @@ from _common import header, markdown_table
 
 from kinlearn import load_robot
 from kinlearn.collision import body_spheres
-from kinlearn.collision.problems import ProblemSet, RrtChecker, rrt_connect_solve
+from kinlearn.data.problems import ProblemSet, RrtChecker, rrt_connect_solve
 
 HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"
 

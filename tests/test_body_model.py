@@ -12,7 +12,7 @@ import torch
 
 from kinlearn import load_robot
 from kinlearn.collision import body_obstacle_distance, body_spheres, check_path, clearances, in_collision
-from kinlearn.collision.problems import ProblemSet
+from kinlearn.data.problems import ProblemSet
 from kinlearn.errors import CheckpointError, ConfigError, DatasetError, NonFiniteError, ShapeError
 from kinlearn.io import load_checkpoint, save_checkpoint
 from kinlearn.models.body import BODY_KIND, BodyModelConfig, LearnedBody, load_body_model, save_body_model

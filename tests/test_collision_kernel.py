@@ -108,7 +108,7 @@ def test_path_checks_match_check_path(arm):
 def test_the_planners_verdicts_on_the_heldout_problems_are_unchanged():
     """On the committed held-out problems the kernel picks the candidate torch's check_path picks (the
     first collision-free one in the planner's order), as the NumPy check before it did."""
-    from kinlearn.collision.problems import ProblemSet
+    from kinlearn.data.problems import ProblemSet
     from kinlearn.models.obstacle_path import scene_primitives
     from kinlearn.planning.planner import Planner
 
@@ -152,7 +152,7 @@ def test_typed_errors():
 
 
 def test_rrt_checker_compiled_answers_as_torch():
-    from kinlearn.collision.problems import RrtChecker
+    from kinlearn.data.problems import RrtChecker
 
     robot = load_robot("iiwa14")
     body = body_spheres(robot).double()

@@ -9,7 +9,7 @@ import torch
 
 from kinlearn import kinematics, load_robot
 from kinlearn.collision import Scene, body_spheres, check_path, clearances
-from kinlearn.collision.problems import (
+from kinlearn.data.problems import (
     FAMILIES,
     ProblemConfig,
     ProblemSet,

@@ -8,7 +8,7 @@ import torch
 
 from kinlearn import kinematics, load_robot
 from kinlearn.collision import Scene, body_spheres, check_path, clearances
-from kinlearn.collision.problems import FAMILIES, ProblemSet
+from kinlearn.data.problems import FAMILIES, ProblemSet
 from kinlearn.errors import ShapeError
 from kinlearn.evaluation.obstacles import (
     OUTCOME_KEYS,

@@ -10,7 +10,7 @@ import torch
 from kinlearn import load_robot
 from kinlearn.body.kinematics import kinematics
 from kinlearn.collision import Scene, check_path
-from kinlearn.collision.problems import ProblemSet
+from kinlearn.data.problems import ProblemSet
 from kinlearn.errors import ConfigError, ObstacleError, ShapeError
 from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel
 from kinlearn.planning.planner import Planner

@@ -203,7 +203,7 @@ def test_judge_refuses_paths_that_do_not_fit(robot, joints):
 
 
 def test_problems_from_endpoint_pairs_and_obstacle_sets(robot):
-    from kinlearn.collision.problems import ProblemSet
+    from kinlearn.data.problems import ProblemSet
     from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 
     pairs = make_endpoints(EndpointConfig(robot="iiwa14", n=8, seed=3))

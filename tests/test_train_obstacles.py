@@ -9,7 +9,7 @@ import torch
 
 from kinlearn import load_robot
 from kinlearn.collision import body_obstacle_distance, body_spheres
-from kinlearn.collision.problems import ProblemConfig, make_problems
+from kinlearn.data.problems import ProblemConfig, make_problems
 from kinlearn.errors import CheckpointError, ConfigError
 from kinlearn.io import load_checkpoint
 from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel
@@ -25,7 +25,7 @@ from kinlearn.training.obstacle_path import (
 @pytest.fixture(scope="module")
 def problems(tmp_path_factory):
     """Six unverified problems (two per family) in one file."""
-    from kinlearn.collision.problems import ProblemSet
+    from kinlearn.data.problems import ProblemSet
 
     cfg = ProblemConfig(verify=False)
     sets = [make_problems(f, 2, 4242, config=cfg) for f in ("tabletop", "shelf", "barrier")]

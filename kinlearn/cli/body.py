@@ -130,7 +130,7 @@ def _run_train_body(args: argparse.Namespace) -> int:
     problems = None
     if args.validate > 0:
         # Read now, not after the training: a bad file is refused before anything is written.
-        from ..collision.problems import ProblemSet
+        from ..data.problems import ProblemSet
 
         problems = ProblemSet.load(args.problems, robot=args.robot)
         configs["validation"] = {

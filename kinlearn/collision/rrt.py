@@ -13,7 +13,7 @@ Why compiled here and not OMPL's RRT-Connect: OMPL's Python bindings call back i
 state and motion check, which dominates on these problems (measured on one core, the same checker,
 ``benchmarks/rrt_checker_speed.py``); here the planner's loop, its random numbers and the checks run
 in one compiled call. OMPL stays kinlearn's reference sampling baseline and the verifier of generated
-problems (:mod:`kinlearn.collision.problems`).
+problems (:mod:`kinlearn.data.problems`).
 
 Work is done in rounds of ``iterations`` (:class:`RrtConnect` keeps the trees between rounds), so a
 caller can stop at a deadline between rounds; the same seed and the same total number of iterations

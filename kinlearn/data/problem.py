@@ -205,7 +205,7 @@ class Problem:
 
     @classmethod
     def from_problem_set(cls, problems) -> Problem:
-        """The problems of an obstacle benchmark set (:class:`~kinlearn.collision.problems.ProblemSet`:
+        """The problems of an obstacle benchmark set (:class:`~kinlearn.data.problems.ProblemSet`:
         start and goal joints, one scene each), checked like :meth:`make`."""
         return cls.make(load_robot(problems.robot), problems.start, problems.goal, obstacles=problems.scene)
 

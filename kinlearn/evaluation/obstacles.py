@@ -29,7 +29,7 @@ import torch
 from ..body.kinematics import kinematics
 from ..collision import BodySpheres, Scene, check_path
 from ..collision.geometry import box_faces, cylinder_faces
-from ..collision.problems import FAMILIES, ProblemSet
+from ..data.problems import FAMILIES, ProblemSet
 from ..data.problem import LIMIT_TOLERANCE
 from ..errors import ConfigError, ShapeError
 from ..io import atomic_write
@@ -133,7 +133,7 @@ def obstacle_outcome(
     ``body``: :func:`~kinlearn.collision.body_spheres` of the robot (the 12-sphere body with the base).
     ``joints``: a tensor ``(N, T+1, dof)`` or a sequence of ``N`` paths ``(K_i, dof)`` (tensors or
     arrays; ``None`` for a method that found no path; a path holding NaN/inf counts as none).
-    ``problems``: a :class:`~kinlearn.collision.problems.ProblemSet` of ``N`` problems, or a tuple
+    ``problems``: a :class:`~kinlearn.data.problems.ProblemSet` of ``N`` problems, or a tuple
     ``(start (N, dof), goal (N, dof), scene)`` with a scene of batch ``(N,)`` or one scene for all.
 
     Returns a dict of ``(N,)`` CPU tensors (:data:`OUTCOME_KEYS`): bool ``success`` (all of the

@@ -14,7 +14,7 @@ unless one is passed; its robot is the robot planned for.
                                  (:func:`kinlearn.planning.baselines.cartesian_line`), then a straight
                                  joint-space move from the IK's last configuration to the goal joints;
                                  obstacle-unaware.
-:func:`scene_rrt_connect`        OMPL's RRT-Connect on :class:`~kinlearn.collision.problems.RrtChecker`
+:func:`scene_rrt_connect`        OMPL's RRT-Connect on :class:`~kinlearn.data.problems.RrtChecker`
                                  (the dense 1 cm check), optionally with OMPL's path simplification,
                                  within a time limit that covers both.
 :func:`trajectory_optimiser`     a fixed number of Adam steps on a knot path initialised on the straight
@@ -57,7 +57,7 @@ from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..checks import as_int
 from ..collision import BodySpheres, Scene, body_obstacle_distance, body_spheres, self_collision_distance
-from ..collision.problems import rrt_connect_solve
+from ..data.problems import rrt_connect_solve
 from ..data.problem import Problem
 from ..errors import ConfigError, ShapeError, UnknownRobotError
 from . import baselines as _free
@@ -210,7 +210,7 @@ def scene_rrt_connect(
     max_travel: float = 0.01,
     body: BodySpheres | None = None,
 ) -> tuple[torch.Tensor | None, float]:
-    """OMPL RRT-Connect around ``scene`` on the dense checker (:func:`~kinlearn.collision.problems.rrt_connect_solve`).
+    """OMPL RRT-Connect around ``scene`` on the dense checker (:func:`~kinlearn.data.problems.rrt_connect_solve`).
 
     With ``simplify`` OMPL's path simplifier shortens the path in whatever the search left of
     ``time_limit`` seconds; it checks that limit only between its steps and does at least one round,

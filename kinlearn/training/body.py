@@ -18,7 +18,7 @@ from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import check_last_dim
 from ..collision import BodySpheres, Scene, check_path, clearances
-from ..collision.problems import ProblemSet
+from ..data.problems import ProblemSet
 from ..data.babbling import Transitions
 from ..data.recorded import load_data
 from ..errors import ConfigError, DatasetError, ShapeError

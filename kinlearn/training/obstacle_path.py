@@ -1,7 +1,7 @@
 """Self-supervised training of the obstacle-aware TM through a frozen body model.
 
 No planner shows it a path. Each iteration draws training problems (start and goal joints in a
-scene, from :func:`~kinlearn.collision.problems.make_problems` with seeds other than the benchmark's,
+scene, from :func:`~kinlearn.data.problems.make_problems` with seeds other than the benchmark's,
 unverified: nothing needs to know a path exists), and the TM proposes ``candidates`` joint paths for
 each. Every candidate is cut into ``points`` configurations per segment and put through the frozen
 body model (the analytic sphere body, or the one the robot learned from babbling), which says where
@@ -35,7 +35,7 @@ from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.distance import body_obstacle_distance
-from ..collision.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
+from ..data.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
 from ..errors import ConfigError
 from ..models.obstacle_path import (
     ObstaclePathConfig,

@@ -45,11 +45,11 @@ import torch
 from ..body.kinematics import dls_step, kinematics
 from ..body.robot import Robot, load_robot
 from ..body.state import straight_line
+from ..collision.body import BodySpheres, body_spheres
+from ..collision.check import check_path, clearances, segment_steps
+from ..collision.scene import Scene
 from ..errors import ConfigError, DatasetError, MissingDependencyError, ObstacleError, PlanningError
 from ..io import load_npz, save_npz
-from .body import BodySpheres, body_spheres
-from .check import check_path, clearances, segment_steps
-from .scene import Scene
 
 __all__ = [
     "FAMILIES",
@@ -310,7 +310,7 @@ class RrtChecker:
         self.motions = 0
         self.compiled = bool(compiled)
         if self.compiled:
-            from . import kernel
+            from ..collision import kernel
 
             kb, ks = kernel.KernelBody.of(body), kernel.KernelScene.of(self.scene)
             # The kernels themselves, their arguments bound once: OMPL calls these thousands of times.
