@@ -31,7 +31,7 @@ log = save_recorded(
 )
 
 # Nothing but the joint count; a short first fit keeps the example quick (the default is 1500 steps).
-result = kinlearn.identify(log, dof=7, config=IdentifyConfig(mlp_steps=400))
+result = kinlearn.train.identify(log, dof=7, config=IdentifyConfig(mlp_steps=400))
 print(result.report["initialisation"])
 print(f"held-out residual {result.report['holdout_residual']['median'] * 1e3:.2f} mm (with the 1 mm noise)")
 

@@ -34,8 +34,8 @@ path = Path(tempfile.mkdtemp()) / "myarm.urdf"
 path.write_text(URDF)
 robot = kinlearn.register_robot("myarm", path, ee_frame="tcp")
 
-data = kinlearn.babble(kinlearn.BabblingConfig(robot="myarm", walkers=100, steps=60, ef_noise=5e-4))
-result = kinlearn.identify(data, robot="myarm", prior=False, config=IdentifyConfig(mlp_steps=400))
+data = kinlearn.data.babble(kinlearn.data.BabblingConfig(robot="myarm", walkers=100, steps=60, ef_noise=5e-4))
+result = kinlearn.train.identify(data, robot="myarm", prior=False, config=IdentifyConfig(mlp_steps=400))
 print(
     f"identified in {result.report['seconds']:.1f} s; held-out residual "
     f"{result.report['holdout_residual']['median'] * 1e3:.2f} mm"

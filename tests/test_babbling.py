@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 import torch
 
-from kinlearn import ConfigError, DatasetError, Robot, ShapeError, kinematics, load_robot
+from kinlearn import ConfigError, Robot, ShapeError, kinematics, load_robot
 from kinlearn.body.state import StateLayout
 from kinlearn.data.babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
+from kinlearn.errors import DatasetError
 from kinlearn.io import file_sha256, save_npz
 
 

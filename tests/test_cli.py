@@ -8,11 +8,11 @@ import shutil
 import pytest
 import torch
 
-from kinlearn import ConfigError, DatasetError
 from kinlearn.cli.common import add_command, register_subcommand
 from kinlearn.cli.main import build_parser, main
 from kinlearn.data.babbling import BabblingConfig, load_transitions
 from kinlearn.data.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
+from kinlearn.errors import ConfigError, DatasetError
 from kinlearn.models.chain import ChainFM
 from kinlearn.models.forward_inverse import LearnedFM, LearnedIM, load_fm, load_im
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner

@@ -157,7 +157,7 @@ def test_register_robot_with_spheres(tmp_path):
         body, ref = body_spheres(mine), body_spheres(panda)
         assert torch.equal(body.local, ref.local) and torch.equal(body.pairs, ref.pairs)
     finally:
-        kinlearn.unregister_robot(name) if hasattr(kinlearn, "unregister_robot") else None
+        kinlearn.body.unregister_robot(name)
     bad = tmp_path / "bad.urdf"
     text = (ROBOTS / "panda" / "panda_spherized.urdf").read_text()
     bad.write_text(

@@ -311,16 +311,15 @@ def test_problem_indexing_and_len_are_typed(robot):
 
 
 def test_baselines_take_a_robot_or_its_name(robot):
-    from kinlearn import Problem
+    from kinlearn import Problem, baselines
     from kinlearn.errors import UnknownRobotError
-    from kinlearn.planning.baselines import RRTConnect
-    from kinlearn.planning.obstacle_baselines import JointLine
 
     problem = Problem.make(robot, START[None], GOAL[None], obstacles=[[3.0, 3.0, 3.0, 0.1]])
-    for make in (kinlearn.JointInterpolation, kinlearn.CartesianDLS, RRTConnect, JointLine):
+    for name in baselines.names():  # every registered baseline
+        make = baselines.get(name)
         by_name, by_robot = make("iiwa14"), make(robot)
         assert by_name.robot.name == by_robot.robot.name == "iiwa14"
-        if make is not RRTConnect:  # (needs OMPL)
+        if not make.one_at_a_time:  # (the searches need OMPL, or take a while)
             assert torch.equal(by_name.plan(problem).joints, by_robot.plan(problem).joints)
         with pytest.raises(UnknownRobotError):
             make("no-such-arm")
@@ -360,19 +359,19 @@ def test_half_precision_plans_stay_within_the_limits_they_are_judged_by(robot, d
 
 
 def test_baseline_work_is_bounded(robot):
-    from kinlearn.planning.baselines import MAX_STEPS, cartesian_dls, rrt_connect
-    from kinlearn.planning.obstacle_baselines import trajectory_optimiser
+    from kinlearn.baselines import JointLine, cartesian_line, rrt_connect, trajectory_optimiser
+    from kinlearn.planning.baselines import MAX_STEPS
 
     with pytest.raises(ConfigError, match="steps"):
-        kinlearn.JointInterpolation(robot, steps=MAX_STEPS + 1)
+        JointLine(robot, steps=MAX_STEPS + 1)
     problem = kinlearn.Problem.make(robot, START, GOAL)  # the function forms take states
     with pytest.raises(ConfigError, match="iterations"):
-        cartesian_dls(robot, problem.start, problem.goal, iterations=10**9)
+        cartesian_line(robot, problem.start, problem.goal, iterations=10**9)
     with pytest.raises(ConfigError, match="time_limit"):
         rrt_connect(robot, problem.start, problem.goal, time_limit=1e9)
     with pytest.raises(ConfigError, match="steps"):
         trajectory_optimiser(START, GOAL, kinlearn.Scene(torch.tensor([[3.0, 3.0, 3.0, 0.1]])), steps=10**9)
-    assert kinlearn.JointInterpolation(robot, steps=np.int64(5)).steps == 5
+    assert JointLine(robot, steps=np.int64(5)).steps == 5
 
 
 def test_the_dense_check_refuses_work_beyond_its_budget(robot):

@@ -6,7 +6,8 @@ import pytest
 import torch
 from conftest import ALL_ROBOTS
 
-from kinlearn import NonFiniteError, ShapeError, dls_step, kinematics, load_robot
+from kinlearn import NonFiniteError, ShapeError, kinematics, load_robot
+from kinlearn.body import dls_step
 from kinlearn.body.kinematics import FastKinematics, PkKinematics
 from kinlearn.errors import ConfigError
 

@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 import torch
 
-from kinlearn import DatasetError, RecordedDataError, load_robot, train_fm
+from kinlearn import load_robot
 from kinlearn.cli.main import main
 from kinlearn.data.babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
 from kinlearn.data.recorded import Observations, load_data, load_recorded, save_recorded
+from kinlearn.errors import DatasetError, RecordedDataError
 from kinlearn.io import file_sha256, save_npz
 from kinlearn.models.forward_inverse import fm_config
+from kinlearn.train import train_fm
 from kinlearn.training.forward_inverse import train_config
 
 ROBOT = load_robot("iiwa14")

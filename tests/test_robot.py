@@ -8,15 +8,15 @@ import torch
 from conftest import ALL_ROBOTS
 
 from kinlearn import (
-    ROBOTS,
     JointLimitError,
     NonFiniteError,
-    RobotDescriptionError,
     ShapeError,
     UnknownRobotError,
     available_robots,
     load_robot,
 )
+from kinlearn.body import ROBOTS
+from kinlearn.errors import RobotDescriptionError
 
 
 def test_iiwa14_published_numbers():

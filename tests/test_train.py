@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from kinlearn import CheckpointError, ConfigError, DatasetError, kinematics, load_robot
+from kinlearn import CheckpointError, ConfigError, kinematics, load_robot
+from kinlearn.errors import DatasetError
 from kinlearn.data.babbling import BabblingConfig, babble
 from kinlearn.models.forward_inverse import (
     AnalyticFM,
