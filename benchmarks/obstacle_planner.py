@@ -194,7 +194,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--problems", default=str(HELDOUT), help="an obstacle problem set (.npz)")
     ap.add_argument("--n", type=int, default=None, help="problems in all (default: every one)")
-    ap.add_argument("--families", nargs="+", choices=FAMILIES, default=list(FAMILIES))
+    ap.add_argument(
+        "--families", nargs="+", choices=FAMILIES, default=None, help="default: every family in the set"
+    )
     ap.add_argument("--methods", nargs="+", default=None, help="row names to run (default: all)")
     ap.add_argument("--rrt-time", type=float, default=1.0, help="RRT-Connect's limit per problem (s)")
     ap.add_argument("--opt-steps", type=int, nargs="+", default=[25, 100, 400])
@@ -226,6 +228,7 @@ def main() -> None:
         print(msg, flush=True)
 
     everything = ProblemSet.load(args.problems, robot=ROBOT)
+    args.families = args.families or [f for f in FAMILIES if len(everything.of(f))]
     chosen = select(everything, args.n, args.families)
     problems = everything[chosen]
     log(

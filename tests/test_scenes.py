@@ -60,10 +60,10 @@ def test_families_have_rotated_boxes_cylinders_and_obstacles_across_the_way():
 
 def test_scale_follows_the_arm_and_bad_input_is_refused():
     assert scene_scale(load_robot("iiwa14")) == pytest.approx(1.0, abs=0.01)
-    small = build_scene("shelf", torch.Generator().manual_seed(3), scale=0.5, yaw=0.0)
-    full = build_scene("shelf", torch.Generator().manual_seed(3), scale=1.0, yaw=0.0)
+    small = build_scene("bookcase", torch.Generator().manual_seed(3), scale=0.5, yaw=0.0)
+    full = build_scene("bookcase", torch.Generator().manual_seed(3), scale=1.0, yaw=0.0)
     assert small.primitives[0].centre[0] == pytest.approx(0.5 * full.primitives[0].centre[0])
     with pytest.raises(ConfigError, match="unknown scene family"):
         build_scene("kitchen", torch.Generator())
     with pytest.raises(ConfigError, match="scale"):
-        build_scene("shelf", torch.Generator(), scale=-1.0)
+        build_scene("bookcase", torch.Generator(), scale=-1.0)

@@ -1,7 +1,12 @@
-"""Obstacle benchmark problems for the iiwa14: (start joints, goal joints, scene), verified solvable.
+"""Obstacle planning problems for any arm with a sphere body: (start joints, goal joints, scene),
+verified solvable.
 
-Three scene families, modelled on the MπNets / MotionBenchMaker ones and scaled to the iiwa14's reach
-(robot base at the origin, z up, a floor at z = 0 in every scene):
+Ten scene families (robot base at the origin, z up, a floor at z = 0 in every scene): the seven of
+:mod:`kinlearn.data.scenes` (``bookcase``, ``cubby``, ``cage``, ``bin``, ``table``, ``wall``,
+``clutter``: boxes in any orientation, cylinders and spheres, sized to the arm by
+:func:`~kinlearn.data.scenes.scene_scale` and turned to any yaw), and the first three, modelled on the
+MπNets / MotionBenchMaker ones, written for the iiwa14's reach (the shipped iiwa14 obstacle network's
+training scenes; the panda's and the ur5's horizontal reach is within 1% of it):
 
 =============  ====================================================================================
 ``tabletop``   a table (a 4 cm slab, top at 0–25 cm) in front of the robot with 2–6 boxes (up to 40 cm
@@ -14,7 +19,7 @@ Three scene families, modelled on the MπNets / MotionBenchMaker ones and scaled
                the robot's front), so the arm must go over or around it.
 =============  ====================================================================================
 
-Each scene is turned by 0°, 90° or −90° about z (which keeps boxes axis-aligned). Start and goal are
+Each of these three is turned by 0°, 90° or −90° about z (which keeps boxes axis-aligned). Start and goal are
 joint configurations found by damped-least-squares IK from random initial joints towards sampled
 end-effector targets, kept only if they are within the joint limits by ``joint_margin``, at least
 ``min_clearance`` from the scene and from self-collision, and their end effectors are ≥ 0.2 m apart.
@@ -37,7 +42,6 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 import torch
@@ -50,9 +54,11 @@ from ..collision.check import check_path, clearances, segment_steps
 from ..collision.scene import Scene
 from ..errors import ConfigError, DatasetError, MissingDependencyError, ObstacleError, PlanningError
 from ..io import load_npz, save_npz
+from .scenes import SCENE_FAMILIES, build_scene, scene_scale
 
 __all__ = [
     "FAMILIES",
+    "LEGACY_FAMILIES",
     "PROBLEM_FORMAT",
     "ProblemConfig",
     "ProblemSet",
@@ -62,8 +68,10 @@ __all__ = [
     "rrt_connect_solve",
 ]
 
-Family = Literal["tabletop", "shelf", "barrier"]
-FAMILIES: tuple[str, ...] = ("tabletop", "shelf", "barrier")
+#: The iiwa14's first three families (the shipped obstacle network's training scenes), then the seven
+#: of :mod:`kinlearn.data.scenes` (rotated boxes, cylinders; scaled to the arm).
+LEGACY_FAMILIES: tuple[str, ...] = ("tabletop", "shelf", "barrier")
+FAMILIES: tuple[str, ...] = LEGACY_FAMILIES + SCENE_FAMILIES
 #: Version of the problem-set ``.npz`` layout written by :meth:`ProblemSet.save`.
 PROBLEM_FORMAT = 1
 
@@ -529,10 +537,14 @@ class ProblemSet:
             raise DatasetError(
                 f"{path} holds problem format {config.get('problem_format')!r}; this kinlearn reads {PROBLEM_FORMAT}"
             )
-        if list(config.get("families", [])) != list(FAMILIES):
+        stored = list(config.get("families", []))
+        unknown = [f for f in stored if f not in FAMILIES]
+        if not stored or unknown:
             raise DatasetError(
-                f"{path} numbers its families {config.get('families')}, this kinlearn {list(FAMILIES)}"
+                f"{path} names families {stored}; this kinlearn knows {list(FAMILIES)}"
+                + (f" (not {unknown})" if unknown else "")
             )
+        renumber = np.array([FAMILIES.index(f) for f in stored], dtype=np.int64)
         try:
             scene = Scene.from_arrays({k[6:]: v for k, v in arrays.items() if k.startswith("scene_")})
             start = torch.as_tensor(arrays["start"], dtype=_F64)
@@ -541,7 +553,7 @@ class ProblemSet:
                 start,
                 torch.as_tensor(arrays["goal"], dtype=_F64),
                 scene,
-                torch.as_tensor(arrays["family"].astype(np.int64)),
+                torch.as_tensor(renumber[arrays["family"].astype(np.int64)]),
                 torch.as_tensor(arrays["hard"]),
                 torch.as_tensor(arrays["seed"]),
                 torch.as_tensor(arrays["solve_time"].astype(np.float64)),
@@ -599,28 +611,39 @@ def _pick_valid(
     return q[ok][good][0]
 
 
-def _one_problem(family: str, body: BodySpheres, sub_seed: int, cfg: ProblemConfig):
+def _layout(family: str, gen: torch.Generator, scale: float):
+    """One scene of ``family`` and its start and goal target samplers (base frame), or None."""
+    if family not in LEGACY_FAMILIES:
+        layout = build_scene(family, gen, scale)
+        return layout.scene(), layout.start, layout.goal
+    built = _BUILDERS[family](gen)
+    if built is None:
+        return None
+    boxes, spheres, start_sampler, goal_sampler = built
+    turn = (0, 1, 3)[_randint(gen, 0, 2)]
+    bx = torch.tensor(boxes, dtype=_F64).reshape(-1, 6)
+    sp = torch.tensor(spheres, dtype=_F64).reshape(-1, 4)
+    bx, sp, R = _turn(bx, sp, turn)
+    scene = Scene(sp, bx, floor=torch.tensor(0.0, dtype=_F64))
+
+    def turned(sampler):
+        return lambda n, g: sampler(n, g) @ R.T
+
+    return scene, turned(start_sampler), turned(goal_sampler)
+
+
+def _one_problem(family: str, body: BodySpheres, sub_seed: int, cfg: ProblemConfig, scale: float = 1.0):
     gen = torch.Generator().manual_seed(sub_seed)
-    build = _BUILDERS[family]
     kin = kinematics(body.robot, "fast")
     for attempt in range(cfg.max_attempts):
-        built = build(gen)
+        built = _layout(family, gen, scale)
         if built is None:
             continue
-        boxes, spheres, start_sampler, goal_sampler = built
-        turn = (0, 1, 3)[_randint(gen, 0, 2)]
-        bx = torch.tensor(boxes, dtype=_F64).reshape(-1, 6)
-        sp = torch.tensor(spheres, dtype=_F64).reshape(-1, 4)
-        bx, sp, R = _turn(bx, sp, turn)
-        scene = Scene(sp, bx, floor=torch.tensor(0.0, dtype=_F64))
-
-        def turned(sampler, R=R):
-            return lambda n, g: sampler(n, g) @ R.T
-
-        start = _pick_valid(body, scene, turned(start_sampler), gen, cfg)
+        scene, start_sampler, goal_sampler = built
+        start = _pick_valid(body, scene, start_sampler, gen, cfg)
         if start is None:
             continue
-        goal = _pick_valid(body, scene, turned(goal_sampler), gen, cfg)
+        goal = _pick_valid(body, scene, goal_sampler, gen, cfg)
         if goal is None:
             continue
         if float((kin.position(start) - kin.position(goal)).norm()) < cfg.min_ee_distance:
@@ -648,7 +671,10 @@ def make_problems(
     progress: Callable[[int, int], None] | None = None,
     first: int = 0,
 ) -> ProblemSet:
-    """``n`` verified problems of ``family`` (one of :data:`FAMILIES`) for the iiwa14, seeded by ``seed``.
+    """``n`` verified problems of ``family`` (one of :data:`FAMILIES`) for ``robot`` (default the
+    iiwa14; any arm with a sphere body), seeded by ``seed``; the families of
+    :mod:`~kinlearn.data.scenes` are sized by the arm's :func:`~kinlearn.data.scenes.scene_scale`
+    (to 0.01).
 
     Problem i depends on ``(seed, i)`` only (:func:`problem_seed`); ``first`` starts the set at problem
     ``first`` of that sequence (to generate a long set in parts). ``progress(done, n)`` is called after
@@ -667,12 +693,13 @@ def make_problems(
     cfg = config or ProblemConfig()
     robot = robot or load_robot("iiwa14")
     body = body_spheres(robot, dense=cfg.dense_body).double()
+    scale = round(scene_scale(robot), 2)
     if cfg.verify:
         _import_ompl()
     starts, goals, scenes, hard, seeds, times = [], [], [], [], [], []
     for i in range(n):
         sub = problem_seed(seed, first + i)
-        start, goal, scene, is_hard, solve_time, _ = _one_problem(family, body, sub, cfg)
+        start, goal, scene, is_hard, solve_time, _ = _one_problem(family, body, sub, cfg, scale)
         starts.append(start)
         goals.append(goal)
         scenes.append(scene)
@@ -690,5 +717,5 @@ def make_problems(
         torch.tensor(hard, dtype=torch.bool),
         torch.tensor(seeds, dtype=torch.int64),
         torch.tensor(times, dtype=_F64),
-        {"family": family, "n": n, "seed": seed, "first": first, **asdict(cfg)},
+        {"family": family, "n": n, "seed": seed, "first": first, "scale": scale, **asdict(cfg)},
     )

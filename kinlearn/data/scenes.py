@@ -10,7 +10,7 @@ so that the same structure appears on every side of the robot and its boxes are 
 frame (in one published benchmark 98% of the boxes are).
 
 =============  ====================================================================================
-``shelf``      a bookcase of 2–4 levels and 1–3 columns, open towards the robot; the goal inside a
+``bookcase``   a bookcase of 2–4 levels and 1–3 columns, open towards the robot; the goal inside a
                cell, the start in another cell or in front of the shelf.
 ``cubby``      one or two open-front boxes at a random height; the goal inside one, the start inside
                the other or outside above or beside it.
@@ -158,7 +158,7 @@ def _open_box(x_open, yc, z0, depth, half_w, height, open_face: str) -> list[Pri
     return out
 
 
-def _shelf(g, s):
+def _bookcase(g, s):
     x_open, depth = s * _u(g, 0.5, 0.7), s * _u(g, 0.3, 0.4)
     columns, levels = _randint(g, 1, 3), _randint(g, 2, 4)
     col_w = s * _u(g, 0.3, 0.45) if columns > 1 else s * _u(g, 0.5, 0.8)
@@ -443,7 +443,7 @@ def _clutter(g, s):
 
 
 _BUILDERS: dict[str, Callable] = {
-    "shelf": _shelf,
+    "bookcase": _bookcase,
     "cubby": _cubby,
     "cage": _cage,
     "bin": _bin,

@@ -35,7 +35,7 @@ from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.distance import body_obstacle_distance
-from ..data.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
+from ..data.problems import FAMILIES, LEGACY_FAMILIES, ProblemConfig, ProblemSet, make_problems
 from ..errors import ConfigError
 from ..models.obstacle_path import (
     ObstaclePathConfig,
@@ -57,7 +57,7 @@ __all__ = [
 ]
 
 #: Seeds of the training problems, one per family (the held-out benchmark uses 1001–1003).
-TRAINING_SEEDS = {"tabletop": 2001, "shelf": 2002, "barrier": 2003}
+TRAINING_SEEDS = {name: 2001 + k for k, name in enumerate(FAMILIES)}  # tabletop 2001, shelf 2002, …
 
 
 @dataclass(frozen=True)
@@ -136,18 +136,27 @@ class ObstacleTrainConfig:
 
 
 def make_training_problems(
-    out_dir: str | Path, per_family: int, chunk: int = 250, robot: Robot | None = None, progress=None
+    out_dir: str | Path,
+    per_family: int,
+    chunk: int = 250,
+    robot: Robot | None = None,
+    progress=None,
+    families: tuple[str, ...] = LEGACY_FAMILIES,
 ) -> list[Path]:
-    """Generate (or reuse) unverified training problems: ``per_family`` of each family with
-    :data:`TRAINING_SEEDS`, in files of ``chunk`` problems under ``out_dir``. Deterministic: chunk c of a
-    family is problems ``c·chunk …`` of its seed's sequence, whoever generates it."""
+    """Generate (or reuse) unverified training problems: ``per_family`` of each of ``families`` (default
+    the three the shipped iiwa14 network was trained on) with :data:`TRAINING_SEEDS`, in files of
+    ``chunk`` problems under ``out_dir``. Deterministic: chunk c of a family is problems ``c·chunk …`` of
+    its seed's sequence, whoever generates it."""
+    unknown = [f for f in families if f not in FAMILIES]
+    if not families or unknown:
+        raise ConfigError(f"training families must be some of {', '.join(FAMILIES)}, got {list(families)}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     cfg = ProblemConfig(verify=False)
     paths = []
     for c in range(math.ceil(per_family / chunk)):
         n = min(chunk, per_family - c * chunk)
-        for fam in FAMILIES:
+        for fam in families:
             path = out_dir / (f"{fam}_{c:02d}.npz" if n == chunk else f"{fam}_{c:02d}_{n}.npz")
             if not path.is_file():
                 make_problems(fam, n, TRAINING_SEEDS[fam], robot=robot, config=cfg, first=c * chunk).save(
