@@ -321,7 +321,7 @@ def save_transitions(data: Transitions, path: str | Path) -> Path:
 def load_transitions(path: str | Path, robot: str | Robot | None = None) -> Transitions:
     """Load transitions saved by :func:`save_transitions`.
 
-    Raises :class:`~kinlearn.DatasetError` for a missing or corrupt file, a file of another kind, or
+    Raises :class:`~kinlearn.errors.DatasetError` for a missing or corrupt file, a file of another kind, or
     (when ``robot`` is given: a name or a :class:`~kinlearn.Robot`) a file made for another robot.
     """
     name = robot.name if isinstance(robot, Robot) else robot

@@ -201,7 +201,7 @@ def save_endpoints(pairs: EndpointPairs, path: str | Path) -> Path:
 
 
 def load_endpoints(path: str | Path, robot: str | None = None) -> EndpointPairs:
-    """Load pairs saved by :func:`save_endpoints`. Raises :class:`~kinlearn.DatasetError` for a missing or
+    """Load pairs saved by :func:`save_endpoints`. Raises :class:`~kinlearn.errors.DatasetError` for a missing or
     corrupt file, one for another robot, or one whose arrays are missing, misshapen or not finite."""
     from ..errors import DatasetError
 

@@ -132,7 +132,7 @@ class Observations:
 
     def transitions(self, robot: str | Robot) -> Transitions:
         """The transitions of consecutive rows within each episode: s = [θ, ef], a = θ' − θ, s' (float64),
-        labelled with ``robot`` (its name), ready for :func:`~kinlearn.train_fm` / :func:`~kinlearn.train_im`.
+        labelled with ``robot`` (its name), ready for :func:`~kinlearn.train.train_fm` / :func:`~kinlearn.train.train_im`.
 
         Raises :class:`~kinlearn.errors.RecordedDataError` when no episode has two rows.
         """
@@ -587,10 +587,10 @@ def load_recorded(
 
 
 def load_data(path: str | Path, robot: str | Robot | None = None, *, drop_nan: bool = False) -> Transitions:
-    """Transitions from a kinlearn babbling ``.npz`` (:func:`~kinlearn.load_transitions`, checked to be of
+    """Transitions from a kinlearn babbling ``.npz`` (:func:`~kinlearn.data.load_transitions`, checked to be of
     ``robot``) or from a recorded log (:func:`load_recorded`, then :meth:`Observations.transitions`,
     labelled with ``robot``'s name; without a robot, unlabelled: ``""``). The loader of every learning
-    command's ``--data``. Raises :class:`~kinlearn.DatasetError` (or its
+    command's ``--data``. Raises :class:`~kinlearn.errors.DatasetError` (or its
     :class:`~kinlearn.errors.RecordedDataError`) for a bad file.
     """
     path = Path(path)
@@ -605,7 +605,7 @@ def load_observations(
 ) -> Observations:
     """Observations (θ, ef) from a kinlearn babbling ``.npz`` (its states,
     :meth:`Observations.from_transitions`) or a recorded log (:func:`load_recorded`): what
-    identification learns from. Raises :class:`~kinlearn.DatasetError` for a bad file."""
+    identification learns from. Raises :class:`~kinlearn.errors.DatasetError` for a bad file."""
     path = Path(path)
     if path.suffix.lower() == ".npz" and path.is_file() and _is_kinlearn_npz(path):
         data = load_transitions(path, robot=robot)

@@ -18,8 +18,8 @@ from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import check_last_dim
 from ..collision import BodySpheres, Scene, check_path, clearances
-from ..data.problems import ProblemSet
 from ..data.babbling import Transitions
+from ..data.problems import ProblemSet
 from ..data.recorded import load_data
 from ..errors import ConfigError, DatasetError, ShapeError
 from ..io import content_sha256
@@ -116,7 +116,7 @@ def train_body_model(
 
     ``data``: a babbling ``.npz`` (``kinlearn babble``) or a recorded log (:func:`kinlearn.data.recorded.load_data`;
     the joints of its transitions' states are used), loaded
-    :class:`~kinlearn.Transitions`, a joint tensor ``(N, dof)``, or ``None``: ``config.samples``
+    :class:`~kinlearn.data.Transitions`, a joint tensor ``(N, dof)``, or ``None``: ``config.samples``
     configurations drawn uniformly in the joint box with ``config.seed``. A share
     ``config.val_fraction`` is held out for the per-epoch record. Uses :func:`kinlearn.training.loop.fit`:
     with ``run_dir``, ``metrics.jsonl`` and the checkpoint ``run_dir/body.pt`` (weights + training
