@@ -9,7 +9,6 @@ import pytest
 import torch
 
 from kinlearn.body.kinematics import kinematics
-from kinlearn.body.robot import load_robot
 from kinlearn.body.state import StateLayout
 from kinlearn.errors import (
     ConfigError,
@@ -28,11 +27,6 @@ from kinlearn.planning.baselines import (
 )
 
 HOME = torch.tensor([0.0, 0.5, 0.0, -1.2, 0.0, 1.0, 0.0], dtype=torch.float64)
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
 
 
 def pairs(robot, n: int, seed: int = 0, dtype=torch.float64):

@@ -22,11 +22,6 @@ TINY = BodyModelConfig(hidden=(48, 48), epochs=6, batch_size=128, lr=1e-2, sampl
 
 
 @pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
-
-
-@pytest.fixture(scope="module")
 def analytic(robot):
     return body_spheres(robot)
 

@@ -16,11 +16,6 @@ from kinlearn.errors import ConfigError, NonFiniteError, RobotDescriptionError, 
 
 
 @pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
-
-
-@pytest.fixture(scope="module")
 def q64(robot):
     return robot.sample(200, torch.Generator().manual_seed(3), dtype=torch.float64)
 

@@ -4,19 +4,8 @@ guarantee, collisions that endpoint checks miss, self-collision and bad inputs."
 import pytest
 import torch
 
-from kinlearn import load_robot
-from kinlearn.collision import Scene, body_spheres, check_path, clearances, in_collision, segment_steps
+from kinlearn.collision import Scene, check_path, clearances, in_collision, segment_steps
 from kinlearn.errors import ConfigError, NonFiniteError, ShapeError
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
-
-
-@pytest.fixture(scope="module")
-def body(robot):
-    return body_spheres(robot).double()
 
 
 def _bent(theta1: float) -> torch.Tensor:

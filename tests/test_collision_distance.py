@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import torch
 
-from kinlearn import load_robot
 from kinlearn.collision import (
     Scene,
     body_obstacle_distance,
@@ -40,11 +39,6 @@ def _random_boxes(n, gen, spread=0.4, hmax=0.27):
     c = (torch.rand(n, 3, generator=gen, dtype=torch.float64) - 0.5) * 2 * spread
     h = 0.02 + (hmax - 0.02) * torch.rand(n, 3, generator=gen, dtype=torch.float64)
     return torch.cat([c, h], dim=1)
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
 
 
 def test_sphere_sphere_matches_coal():

@@ -19,11 +19,6 @@ START = torch.tensor([-1.2, 0.9, 0.5, -1.6, 0.3, 1.2, -2.0], dtype=torch.float64
 GOAL = torch.tensor([1.5, -0.4, -0.8, 1.1, -1.9, -0.6, 2.4], dtype=torch.float64)
 
 
-@pytest.fixture(scope="module")
-def robot():
-    return kinlearn.load_robot("iiwa14")
-
-
 # ------------------------------------------------------------------------------------------- numbers
 
 

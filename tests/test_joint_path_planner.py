@@ -28,12 +28,7 @@ ALL_ROBOTS = ("iiwa14", "panda", "ur5", "xarm7", "z1")
 
 
 @pytest.fixture(scope="module")
-def iiwa():
-    return load_robot("iiwa14")
-
-
-@pytest.fixture(scope="module")
-def trained(iiwa, tmp_path_factory):
+def trained(robot, tmp_path_factory):
     """A tiny joint-path TM trained through the analytic FM (seconds)."""
     run = tmp_path_factory.mktemp("jp")
     cfg = PathTrainConfig(
@@ -44,8 +39,8 @@ def trained(iiwa, tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def planner(iiwa, trained):
-    return Planner(iiwa, trained[1], AnalyticFM(iiwa), AnalyticIM(iiwa, iterations=3))
+def planner(robot, trained):
+    return Planner(robot, trained[1], AnalyticFM(robot), AnalyticIM(robot, iterations=3))
 
 
 @pytest.fixture(scope="module")
@@ -53,9 +48,9 @@ def workspace_pairs():
     return make_endpoints(EndpointConfig(n=256, seed=3, preset="workspace", range_fraction=0.9))
 
 
-def test_workspace_endpoints_cover_the_joint_range(iiwa):
+def test_workspace_endpoints_cover_the_joint_range(robot):
     pairs = make_endpoints(EndpointConfig(n=4000, seed=1, preset="workspace", range_fraction=0.9))
-    lo, hi = workspace_box(iiwa, 0.9)
+    lo, hi = workspace_box(robot, 0.9)
     q = torch.cat((pairs.start[:, :7], pairs.goal[:, :7])).double()
     assert bool(((q >= lo - 1e-6) & (q <= hi + 1e-6)).all())
     # Uniform across the box: every joint reaches within 5% of both ends of it.
@@ -63,31 +58,31 @@ def test_workspace_endpoints_cover_the_joint_range(iiwa):
     assert bool((q.min(0).values < lo + 0.05 * span).all()) and bool(
         (q.max(0).values > hi - 0.05 * span).all()
     )
-    ef = kinematics(iiwa).position(pairs.start[:, :7].double())
+    ef = kinematics(robot).position(pairs.start[:, :7].double())
     assert torch.allclose(ef.float(), pairs.start[:, 7:], atol=1e-5)
 
 
-def test_joint_goals_are_reached_exactly_and_limits_hold(planner, workspace_pairs, iiwa):
+def test_joint_goals_are_reached_exactly_and_limits_hold(planner, workspace_pairs, robot):
     plan = planner.plan(workspace_pairs.start, workspace_pairs.goal)
     assert plan.joints.shape == (256, 12, 7) and plan.waypoints.shape == (256, 10, 3)
     assert torch.equal(plan.joints[:, 0], workspace_pairs.start[:, :7])
     assert torch.equal(plan.joints[:, -1], workspace_pairs.goal[:, :7])
     assert float(plan.joint_error.max()) == 0.0 and float(plan.goal_error.max()) < 1e-5
     assert bool(plan.success.all())
-    lo, hi = iiwa.limits(torch.float32)
+    lo, hi = robot.limits(torch.float32)
     assert bool(((plan.joints >= lo - 1e-6) & (plan.joints <= hi + 1e-6)).all())
-    assert torch.allclose(plan.ef.double(), kinematics(iiwa).position(plan.joints.double()), atol=1e-5)
+    assert torch.allclose(plan.ef.double(), kinematics(robot).position(plan.joints.double()), atol=1e-5)
 
 
-def test_limits_hold_even_when_the_model_asks_for_more(iiwa):
+def test_limits_hold_even_when_the_model_asks_for_more(robot):
     """A model whose corrections leave the limits is clamped: every returned configuration is inside."""
-    tm = JointPathModel(JointPathConfig.for_robot(iiwa, hidden=(16,)))
+    tm = JointPathModel(JointPathConfig.for_robot(robot, hidden=(16,)))
     with torch.no_grad():
         tm.net[-1].bias.fill_(3.0)  # corrections of 3 half-ranges
-    p = Planner(iiwa, tm)
-    q = iiwa.sample((100, 2), torch.Generator().manual_seed(0))
+    p = Planner(robot, tm)
+    q = robot.sample((100, 2), torch.Generator().manual_seed(0))
     plan = p.plan(q[:, 0], q[:, 1])
-    lo, hi = iiwa.limits(torch.float32)
+    lo, hi = robot.limits(torch.float32)
     assert bool(((plan.joints >= lo) & (plan.joints <= hi)).all())
     assert bool(plan.success.all())
 
@@ -127,16 +122,16 @@ def test_numpy_fk_matches_the_fast_kinematics(name):
 
 
 @pytest.mark.parametrize("modes", [0, 4])
-def test_numpy_path_model_matches_the_torch_model(iiwa, modes):
-    tm = JointPathModel(JointPathConfig.for_robot(iiwa, hidden=(32, 32), modes=modes)).double()
+def test_numpy_path_model_matches_the_torch_model(robot, modes):
+    tm = JointPathModel(JointPathConfig.for_robot(robot, hidden=(32, 32), modes=modes)).double()
     g = torch.Generator().manual_seed(0)
     with torch.no_grad():
         for p in tm.net.parameters():
             p.copy_(torch.randn(p.shape, generator=g, dtype=p.dtype) * 0.3)
         tm.in_mean.normal_(generator=g)
         tm.in_std.uniform_(0.5, 2.0, generator=g)
-    q = iiwa.sample((2, 20), g, dtype=torch.float64)
-    ef = kinematics(iiwa).position(q)
+    q = robot.sample((2, 20), g, dtype=torch.float64)
+    ef = kinematics(robot).position(q)
     with torch.no_grad():
         out = tm(torch.cat((q[0], ef[0]), -1), torch.cat((q[1], ef[1]), -1))
     joints, wp = NumpyPathModel(tm, dtype=np.float64)(
@@ -148,13 +143,13 @@ def test_numpy_path_model_matches_the_torch_model(iiwa, modes):
     assert np.abs(joints32 - out.joints.numpy()).max() < 1e-4  # float32 arithmetic, the planner's default
 
 
-def test_position_goals_are_reached_or_flagged(planner, workspace_pairs, iiwa):
+def test_position_goals_are_reached_or_flagged(planner, workspace_pairs, robot):
     start = workspace_pairs.start[:32, :7]
     target = workspace_pairs.goal[:32, 7:]
     plan = planner.plan(start, goal_position=target)
     assert plan.joints.shape == (32, 12, 7)
     assert torch.equal(plan.target, target)
-    err = (kinematics(iiwa).position(plan.joints[:, -1].double()) - target.double()).norm(dim=-1)
+    err = (kinematics(robot).position(plan.joints[:, -1].double()) - target.double()).norm(dim=-1)
     assert torch.allclose(plan.goal_error.double(), err, atol=1e-6)
     assert bool(torch.isnan(plan.joint_error).all())
     assert torch.equal(plan.success, plan.goal_error <= 0.01)
@@ -164,13 +159,13 @@ def test_position_goals_are_reached_or_flagged(planner, workspace_pairs, iiwa):
     # An unreachable target (5 m away) is a failure the plan says so, not a silent plan.
     far = planner.plan(start[:2], goal_position=torch.tensor([5.0, 0.0, 0.0]).expand(2, 3))
     assert not bool(far.success.any()) and bool((far.goal_error > 3.0).all())
-    lo, hi = iiwa.limits(torch.float32)
+    lo, hi = robot.limits(torch.float32)
     assert bool(((far.joints >= lo - 1e-6) & (far.joints <= hi + 1e-6)).all())
 
 
-def test_position_goals_need_models(iiwa, trained):
+def test_position_goals_need_models(robot, trained):
     with pytest.raises(ConfigError, match="FM and IM"):
-        Planner(iiwa, trained[1]).plan(torch.zeros(7), goal_position=[0.5, 0.0, 0.5])
+        Planner(robot, trained[1]).plan(torch.zeros(7), goal_position=[0.5, 0.0, 0.5])
 
 
 def test_plan_rejects_bad_input(planner):
@@ -204,7 +199,7 @@ def test_unbatched_plan_cannot_be_indexed(planner):
     assert "1/1 plans succeeded" in plan.summary()
 
 
-def test_domain_warning_and_strict_error(iiwa, tmp_path):
+def test_domain_warning_and_strict_error(robot, tmp_path):
     """A paper-task planner warns on starts far from its training starts; strict=True raises."""
     pairs = make_endpoints(EndpointConfig(n=32, seed=5))
     train_tm(
@@ -224,8 +219,8 @@ def test_domain_warning_and_strict_error(iiwa, tmp_path):
         p.plan(far, pairs.goal[0], strict=True)
 
 
-def test_densify_keeps_every_step_within_the_bound(iiwa):
-    q = iiwa.sample((50, 12), torch.Generator().manual_seed(4), dtype=torch.float64)
+def test_densify_keeps_every_step_within_the_bound(robot):
+    q = robot.sample((50, 12), torch.Generator().manual_seed(4), dtype=torch.float64)
     dense, m = densify(q, MAX_STEP)
     assert torch.equal(dense[:, ::m], q)
     assert float((dense[:, 1:] - dense[:, :-1]).abs().max()) <= MAX_STEP + 1e-12
@@ -233,10 +228,10 @@ def test_densify_keeps_every_step_within_the_bound(iiwa):
     assert m3 % 3 == 0 and m3 >= m and torch.equal(dense3[:, ::m3], q)
 
 
-def test_parallel_ef_along_equals_the_step_by_step_rollout(iiwa):
+def test_parallel_ef_along_equals_the_step_by_step_rollout(robot):
     """The difference FM's telescoped rollout is the sequential rollout of its own steps."""
     fm = LearnedFM(fm_config("iiwa14", "improved", fk_hidden=(32, 32))).double()
-    q = iiwa.sample((4, 9), torch.Generator().manual_seed(6), dtype=torch.float64) * 0.1
+    q = robot.sample((4, 9), torch.Generator().manual_seed(6), dtype=torch.float64) * 0.1
     path, _ = densify(q, MAX_STEP)
     ef0 = torch.randn(4, 3, dtype=torch.float64)
     with torch.no_grad():
@@ -244,8 +239,8 @@ def test_parallel_ef_along_equals_the_step_by_step_rollout(iiwa):
         slow = ForwardModel.ef_along(fm, path, ef0)
         assert torch.allclose(fast, slow, atol=1e-9)
         assert torch.allclose(fm.ef_along(path, ef0, every=3), slow[:, ::3], atol=1e-9)
-    exact = AnalyticFM(iiwa).ef_along(path, ef0)
-    assert torch.allclose(exact, kinematics(iiwa).position(path), atol=1e-12)
+    exact = AnalyticFM(robot).ef_along(path, ef0)
+    assert torch.allclose(exact, kinematics(robot).position(path), atol=1e-12)
 
 
 def test_training_resumes_bit_identically(tmp_path, monkeypatch):
@@ -274,7 +269,7 @@ def test_training_resumes_bit_identically(tmp_path, monkeypatch):
     assert not list((tmp_path / "b").glob("*.tmp"))
 
 
-def test_path_train_config_checks(iiwa):
+def test_path_train_config_checks(robot):
     with pytest.raises(ConfigError, match="fm_checkpoint"):
         PathTrainConfig(fm="learned")
     with pytest.raises(ConfigError, match="lr"):
@@ -282,22 +277,22 @@ def test_path_train_config_checks(iiwa):
     with pytest.raises(ConfigError, match="iterations"):
         PathTrainConfig(fm="analytic", iterations=0)
     with pytest.raises(ConfigError, match="modes"):
-        JointPathConfig.for_robot(iiwa, modes=-1)
+        JointPathConfig.for_robot(robot, modes=-1)
 
 
-def test_saved_planner_folder_loads(trained, iiwa):
+def test_saved_planner_folder_loads(trained, robot):
     run, tm = trained
     p = Planner.load(run)
     assert isinstance(p.tm, JointPathModel)
-    q = iiwa.sample((2, 3), torch.Generator().manual_seed(1))
-    assert torch.equal(p.plan(q[0], q[1]).joints, Planner(iiwa, tm).plan(q[0], q[1]).joints)
+    q = robot.sample((2, 3), torch.Generator().manual_seed(1))
+    assert torch.equal(p.plan(q[0], q[1]).joints, Planner(robot, tm).plan(q[0], q[1]).joints)
 
 
-def test_plan_timed_respects_the_robots_limits(planner, iiwa):
+def test_plan_timed_respects_the_robots_limits(planner, robot):
     plan = planner.plan(torch.zeros(7), torch.full((7,), 0.4))
     traj = plan.timed()
     assert traj.q.shape[1] == 7 and traj.t[0] == 0.0 and traj.duration > 0
-    vel = np.asarray(iiwa.velocity_limits)
+    vel = np.asarray(robot.velocity_limits)
     assert (np.abs(traj.qd) <= vel * (1 + 1e-5)).all()
     assert np.allclose(traj.q[-1], plan.joints[-1].numpy(), atol=1e-6)
     with pytest.raises(ShapeError, match="single plan"):
@@ -320,7 +315,7 @@ def test_plan_show_holds_the_plan(planner):
         viewer.close()
 
 
-def test_plan_command(trained, iiwa, tmp_path, capsys):
+def test_plan_command(trained, robot, tmp_path, capsys):
     from kinlearn.cli.main import main
     from kinlearn.models.forward_inverse import save_model
 
@@ -328,8 +323,8 @@ def test_plan_command(trained, iiwa, tmp_path, capsys):
     folder = tmp_path / "planner"
     folder.mkdir()
     (folder / "tm.pt").write_bytes((run / "tm.pt").read_bytes())
-    save_model(AnalyticFM(iiwa), folder / "fm.pt")
-    save_model(AnalyticIM(iiwa, iterations=3), folder / "im.pt")
+    save_model(AnalyticFM(robot), folder / "fm.pt")
+    save_model(AnalyticIM(robot, iterations=3), folder / "im.pt")
     start, goal = "-0.3,0.45,0,-1.35,0,1.05,0", "0.6,1.1,0,-0.7,0,0.9,0"  # a negative first value
     timed = tmp_path / "traj.csv"
     assert (
@@ -394,9 +389,9 @@ def test_readme_quick_start_runs(tmp_path, monkeypatch):
     assert namespace["traj"].duration > 0
 
 
-def test_plan_takes_a_robot_object(iiwa, workspace_pairs):
+def test_plan_takes_a_robot_object(robot, workspace_pairs):
     """kinlearn.plan(..., robot=Robot) uses that robot's shipped planner."""
-    plan = kinlearn.plan(workspace_pairs.start[:2, :7], workspace_pairs.goal[:2, :7], robot=iiwa)
+    plan = kinlearn.plan(workspace_pairs.start[:2, :7], workspace_pairs.goal[:2, :7], robot=robot)
     assert plan.joints.shape[0] == 2 and plan.robot == "iiwa14"
     panda = load_robot("panda")
     q = panda.sample(2, torch.Generator().manual_seed(0), dtype=torch.float64)

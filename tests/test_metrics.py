@@ -162,11 +162,6 @@ def test_input_validation():
 # --------------------------------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
-
-
 def hand_made_plan(robot, end_offsets: torch.Tensor) -> Plan:
     """Straight joint paths whose executed end is replaced by goal ef + offset (per trajectory)."""
     layout = StateLayout(robot.dof)

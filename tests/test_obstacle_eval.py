@@ -6,8 +6,8 @@ import math
 import pytest
 import torch
 
-from kinlearn import kinematics, load_robot
-from kinlearn.collision import Scene, body_spheres, check_path, clearances
+from kinlearn import kinematics
+from kinlearn.collision import Scene, check_path, clearances
 from kinlearn.data.problems import FAMILIES, ProblemSet
 from kinlearn.errors import ShapeError
 from kinlearn.evaluation.obstacles import (
@@ -22,16 +22,6 @@ from kinlearn.evaluation.obstacles import (
 F64 = torch.float64
 #: A configuration within the limits whose 12-sphere body collides with itself (checked below).
 SELF_COLLIDING = [1.1406, 2.0034, 2.9417, 2.0850, 0.2484, 1.5315, 1.3671]
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
-
-
-@pytest.fixture(scope="module")
-def body(robot):
-    return body_spheres(robot).double()
 
 
 @pytest.fixture(scope="module")

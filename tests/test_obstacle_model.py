@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import torch
 
-from kinlearn import load_robot
 from kinlearn.body.kinematics import kinematics
 from kinlearn.collision import Scene
 from kinlearn.errors import CheckpointError, ConfigError
@@ -18,11 +17,6 @@ from kinlearn.models.obstacle_path import (
     scene_primitives,
 )
 from kinlearn.planning.inference import NumpyObstacleModel
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
 
 
 def _model(robot, **fields) -> ObstaclePathModel:

@@ -16,31 +16,26 @@ from kinlearn.training.tm import tm_preset, train_tm
 
 
 @pytest.fixture(scope="module")
-def iiwa():
-    return load_robot("iiwa14")
-
-
-@pytest.fixture(scope="module")
 def pairs():
     return make_endpoints(EndpointConfig(n=64, seed=5))
 
 
 @pytest.fixture(scope="module")
-def analytic_planner(iiwa, pairs, tmp_path_factory):
+def analytic_planner(robot, pairs, tmp_path_factory):
     run = tmp_path_factory.mktemp("tm")
     cfg = tm_preset("default", fm="analytic", im="analytic", epochs=2, batch_size=16)
     train_tm(cfg, run, pairs, progress=False)
     return Planner.load(run)
 
 
-def test_plan_shapes_and_joint_path(analytic_planner, pairs, iiwa):
+def test_plan_shapes_and_joint_path(analytic_planner, pairs, robot):
     plan = analytic_planner.plan(pairs.start[:5], pairs.goal[:5])
     assert plan.waypoints.shape == (5, 10, 3)
     assert plan.actions.shape == (5, 11, 7)
     assert plan.joints.shape == (5, 12, 7) and plan.ef.shape == (5, 12, 3)
     assert torch.equal(plan.joints[:, 0], pairs.start[:5, :7])
     assert torch.allclose(plan.joints[:, 1:], plan.joints[:, :1] + plan.actions.cumsum(1), atol=1e-6)
-    assert torch.allclose(plan.ef, kinematics(iiwa).position(plan.joints), atol=1e-6)
+    assert torch.allclose(plan.ef, kinematics(robot).position(plan.joints), atol=1e-6)
 
 
 def test_plan_is_deterministic_bit_for_bit(analytic_planner, pairs):
@@ -86,13 +81,13 @@ def test_plan_rejects_bad_input(analytic_planner, pairs):
         analytic_planner.plan(s, lying)
 
 
-def test_planner_refuses_models_of_another_robot(iiwa, pairs):
+def test_planner_refuses_models_of_another_robot(robot, pairs):
     panda = load_robot("panda")
     tm = TrajectoryModel(TMConfig())
     with pytest.raises(ConfigError, match="panda"):
         Planner(panda, tm, AnalyticFM(panda), AnalyticIM(panda))
     with pytest.raises(ConfigError, match="iiwa14"):
-        Planner(iiwa, tm, AnalyticFM(iiwa), AnalyticIM(panda))
+        Planner(robot, tm, AnalyticFM(robot), AnalyticIM(panda))
 
 
 def test_load_checks_robot(analytic_planner, tmp_path, pairs):
@@ -110,14 +105,14 @@ def test_corrupt_checkpoint(tmp_path):
         Planner.load(tmp_path)
 
 
-def test_shipped_checkpoint_loads_and_plans(pairs, iiwa):
+def test_shipped_checkpoint_loads_and_plans(pairs, robot):
     """The shipped planner reaches the goal *state* on the paper's task too, and says so."""
     assert (DEFAULT_CHECKPOINTS / "iiwa14" / "tm.pt").is_file()
     plan = kinlearn.plan(pairs.start, pairs.goal)
     assert plan.joints.shape == (64, 12, 7) and plan.waypoints.shape == (64, 10, 3)
     assert torch.equal(plan.joints, kinlearn.plan(pairs.start, pairs.goal).joints)
     assert torch.isfinite(plan.ef).all()
-    m = kinlearn.plan_metrics(plan, iiwa)
+    m = kinlearn.plan_metrics(plan, robot)
     assert float(m["state_success"].mean()) >= 0.95 and bool(plan.success.all())
     assert float(m["limit_violation"].sum()) == 0
     assert float(m["executed_sharp_turn"].mean()) <= 0.1
@@ -152,10 +147,10 @@ def test_tiny_learned_pipeline_for_panda(tmp_path):
     assert plan.joints.shape == (4, 12, 7) and torch.isfinite(plan.ef).all()
 
 
-def test_rollout_options_are_checked(iiwa):
+def test_rollout_options_are_checked(robot):
     tm = TrajectoryModel(TMConfig())
     with pytest.raises(ConfigError, match="refine"):
-        Planner(iiwa, tm, AnalyticFM(iiwa), AnalyticIM(iiwa), refine=-1)
+        Planner(robot, tm, AnalyticFM(robot), AnalyticIM(robot), refine=-1)
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")

@@ -7,7 +7,6 @@ from pathlib import Path
 import pytest
 import torch
 
-from kinlearn import load_robot
 from kinlearn.body.kinematics import kinematics
 from kinlearn.collision import Scene, check_path
 from kinlearn.data.problems import ProblemSet
@@ -16,11 +15,6 @@ from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel
 from kinlearn.planning.planner import Planner
 
 BENCHMARK = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "obstacle_problems_heldout.npz"
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
 
 
 @pytest.fixture(scope="module")

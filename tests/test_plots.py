@@ -9,7 +9,6 @@ import pytest
 import torch
 
 from kinlearn.body.kinematics import kinematics
-from kinlearn.body.robot import load_robot
 from kinlearn.body.state import StateLayout
 from kinlearn.errors import ConfigError, MissingDependencyError, ShapeError
 from kinlearn.evaluation.metrics import PAPER_TABLE2, plan_metrics, trajectory_metrics
@@ -32,11 +31,6 @@ def png_size(path) -> tuple[int, int]:
     assert data[:8] == PNG_SIGNATURE and data[12:16] == b"IHDR"
     assert len(data) > 20_000  # a drawn figure, not an empty canvas
     return struct.unpack(">II", data[16:24])
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
 
 
 @pytest.fixture(scope="module")

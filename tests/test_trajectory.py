@@ -7,7 +7,7 @@ import json
 import pytest
 import torch
 
-from kinlearn import ConfigError, kinematics, load_robot
+from kinlearn import ConfigError, kinematics
 from kinlearn.body.state import StateLayout
 from kinlearn.data.endpoints import EndpointConfig, load_endpoints, make_endpoints, save_endpoints
 from kinlearn.errors import CheckpointError, DatasetError
@@ -25,23 +25,18 @@ from kinlearn.training.tm import load_tm, tm_preset, train_tm
 
 
 @pytest.fixture(scope="module")
-def iiwa():
-    return load_robot("iiwa14")
-
-
-@pytest.fixture(scope="module")
 def pairs():
     return make_endpoints(EndpointConfig(n=160, seed=3))
 
 
-def test_endpoints_reproducible_and_in_region(pairs, iiwa):
+def test_endpoints_reproducible_and_in_region(pairs, robot):
     again = make_endpoints(EndpointConfig(n=160, seed=3))
     assert torch.equal(pairs.start, again.start) and torch.equal(pairs.goal, again.goal)
-    lay = StateLayout(iiwa.dof)
-    kin = kinematics(iiwa)
+    lay = StateLayout(robot.dof)
+    kin = kinematics(robot)
     for s in (pairs.start, pairs.goal):
         theta, ef = lay.split(s)
-        iiwa.check_joints(theta)
+        robot.check_joints(theta)
         assert (kin.position(theta) - ef).abs().max() < 1e-5
     x0, x1, y0, y1, z0, z1 = (0.3, 0.85, -0.5, 0.5, 0.1, 0.3)
     g = pairs.goal[:, lay.ef]
@@ -94,9 +89,9 @@ def test_bad_tm_config():
         LossConfig.preset("fancy")
 
 
-def test_batched_rectification_equals_per_sample_loop(pairs, iiwa):
-    lay = StateLayout(iiwa.dof)
-    fm, im = AnalyticFM(iiwa), AnalyticIM(iiwa, iterations=2)
+def test_batched_rectification_equals_per_sample_loop(pairs, robot):
+    lay = StateLayout(robot.dof)
+    fm, im = AnalyticFM(robot), AnalyticIM(robot, iterations=2)
     s0, sT = pairs.start[:5].double(), pairs.goal[:5].double()
     wp = torch.linspace(0, 1, 12, dtype=torch.float64)[1:-1, None] * (
         sT[:, None, lay.ef] - s0[:, None, lay.ef]
@@ -113,21 +108,21 @@ def test_batched_rectification_equals_per_sample_loop(pairs, iiwa):
             assert torch.allclose(s, states[n, t], atol=1e-12)
 
 
-def test_analytic_rectification_is_consistent_with_fk(pairs, iiwa):
-    lay = StateLayout(iiwa.dof)
+def test_analytic_rectification_is_consistent_with_fk(pairs, robot):
+    lay = StateLayout(robot.dof)
     tm = TrajectoryModel(TMConfig())
     tm.fit_normalization(pairs.start, pairs.goal)
     s0, sT = pairs.start[:32], pairs.goal[:32]
     with torch.no_grad():
-        states, actions = rectify(tm(s0, sT), s0, sT, AnalyticFM(iiwa), AnalyticIM(iiwa), lay)
+        states, actions = rectify(tm(s0, sT), s0, sT, AnalyticFM(robot), AnalyticIM(robot), lay)
     theta, ef = lay.split(states)
-    assert torch.allclose(ef, kinematics(iiwa).position(theta), atol=1e-6)
+    assert torch.allclose(ef, kinematics(robot).position(theta), atol=1e-6)
     # joints are the start plus the cumulative actions
     assert torch.allclose(theta, s0[:, None, lay.joints] + actions.cumsum(1), atol=1e-5)
 
 
-def test_loss_presets_known_values(iiwa):
-    lay = StateLayout(iiwa.dof)
+def test_loss_presets_known_values(robot):
+    lay = StateLayout(robot.dof)
     s0 = torch.zeros(1, 10)
     sT = torch.zeros(1, 10)
     sT[0, 7] = 1.1  # goal 1.1 m along x; T = 11 → spacing 0.1
@@ -150,7 +145,7 @@ def _tiny(robot="iiwa14", **kw):
     return tm_preset("default", robot=robot, fm="analytic", im="analytic", **kw)
 
 
-def test_training_lowers_loss_and_keeps_fm_im_frozen(pairs, tmp_path, iiwa):
+def test_training_lowers_loss_and_keeps_fm_im_frozen(pairs, tmp_path, robot):
     fm = LearnedFM(FMConfig(robot="iiwa14", dof=7))
     im = LearnedIM(IMConfig(robot="iiwa14", dof=7))
     before = (copy.deepcopy(fm.state_dict()), copy.deepcopy(im.state_dict()))
@@ -217,10 +212,10 @@ def test_training_config_errors(pairs, tmp_path):
         train_tm(_tiny(robot="panda"), tmp_path, pairs, progress=False)
 
 
-def test_rectify_refinement_and_exact_joints(pairs, iiwa):
-    lay = StateLayout(iiwa.dof)
-    fm = AnalyticFM(iiwa)
-    weak_im = AnalyticIM(iiwa, iterations=1, damping=0.2)  # heavily damped: undershoots every target
+def test_rectify_refinement_and_exact_joints(pairs, robot):
+    lay = StateLayout(robot.dof)
+    fm = AnalyticFM(robot)
+    weak_im = AnalyticIM(robot, iterations=1, damping=0.2)  # heavily damped: undershoots every target
     s0, sT = pairs.start[:32].double(), pairs.goal[:32].double()
     frac = torch.linspace(0, 1, 12, dtype=torch.float64)[1:-1, None]
     wp = s0[:, None, lay.ef] + frac * (sT[:, None, lay.ef] - s0[:, None, lay.ef])
