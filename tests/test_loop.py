@@ -1,17 +1,24 @@
-"""The one training loop: resume equals an uninterrupted run, one checkpoint format (earlier ones still
-resume), refusals of another configuration, divergence; and the imitation trainer that runs in it."""
+"""kinlearn.training.loop: resume equals an uninterrupted run, one checkpoint format (earlier ones still
+resume), refusals of another configuration, divergence; optimisers, schedules, seeding, the run log and
+the generic fit. (The trainers that run in the loop are tested beside their modules.)"""
 
 import json
 
+import numpy as np
 import pytest
 import torch
 
-from kinlearn.data.endpoints import EndpointConfig, make_endpoints
-from kinlearn.errors import CheckpointError, TrainingDivergedError
+from kinlearn.errors import CheckpointError, ConfigError, DatasetError, TrainingDivergedError
 from kinlearn.io import load_checkpoint, save_checkpoint
-from kinlearn.training import imitation
-from kinlearn.training.imitation import load_imitation, train_imitation
-from kinlearn.training.loop import OptimConfig, TrainingLoop
+from kinlearn.training.loop import (
+    OptimConfig,
+    RunLogger,
+    TrainConfig,
+    TrainingLoop,
+    fit,
+    make_optimizer,
+    seed_everything,
+)
 
 STATE_KEYS = {
     "step",
@@ -134,57 +141,100 @@ def test_divergence_is_raised_by_the_loop(tmp_path):
 
 
 # --------------------------------------------------------------------------------------------------
-# The imitation trainer in the loop
+# Optimisers, schedules, seeding, the run log, the generic fit
 # --------------------------------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def pairs():
-    return make_endpoints(EndpointConfig(n=48, seed=5))
+@pytest.mark.parametrize(
+    ("cfg", "cls"),
+    [
+        (OptimConfig("adam", 1e-3), torch.optim.Adam),
+        (OptimConfig("adamw", 1e-3, weight_decay=4e-3), torch.optim.AdamW),
+        (OptimConfig("rmsprop", 1e-3, alpha=0.9, momentum=0.5), torch.optim.RMSprop),
+        (OptimConfig("sgd", 0.5, momentum=0.9), torch.optim.SGD),
+    ],
+)
+def test_make_optimizer(cfg, cls):
+    p = torch.nn.Parameter(torch.zeros(3))
+    opt = make_optimizer(cfg, [p])
+    assert isinstance(opt, cls)
+    group = opt.param_groups[0]
+    assert group["lr"] == cfg.lr and group["weight_decay"] == cfg.weight_decay
+    if cfg.name == "rmsprop":
+        assert group["alpha"] == 0.9 and group["momentum"] == 0.5
 
 
-FAST = OptimConfig(name="adam", lr=1e-2)
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"name": "lbfgs"},
+        {"lr": 0.0},
+        {"lr": -1.0},
+        {"lr": float("nan")},
+        {"lr": float("inf")},
+        {"alpha": 1.0},
+        {"weight_decay": -1.0},
+    ],
+)
+def test_bad_optim_config(kwargs):
+    with pytest.raises(ConfigError):
+        OptimConfig(**kwargs)
 
 
-def test_imitation_resumes_to_the_uninterrupted_weights(pairs, tmp_path, monkeypatch):
-    kw = dict(epochs=3, batch_size=16, optim=FAST, seed=1, progress=False)
-    plain_history: list[float] = []
-    plain = train_imitation(pairs, history=plain_history, **kw)  # no run folder: nothing written
-    whole = train_imitation(pairs, run_dir=tmp_path / "whole", **kw)
-    assert _same(plain, whole)
-    real, saves = imitation.save_checkpoint, []
-
-    def dying(path, **fields):
-        if len(saves) == 2:
-            raise KeyboardInterrupt  # killed during epoch 3: the checkpoint holds epoch 2
-        saves.append(fields["extra"]["step"])
-        return real(path, **fields)
-
-    monkeypatch.setattr(imitation, "save_checkpoint", dying)
-    with pytest.raises(KeyboardInterrupt):
-        train_imitation(pairs, run_dir=tmp_path / "cut", **kw)
-    monkeypatch.setattr(imitation, "save_checkpoint", real)
-    history: list[float] = []
-    resumed = train_imitation(pairs, run_dir=tmp_path / "cut", history=history, **kw)
-    assert saves == [1, 2] and _same(whole, resumed)
-    assert history == plain_history and len(history) == 3
-    lines = (tmp_path / "cut" / "metrics.jsonl").read_text().splitlines()
-    assert [json.loads(x)["epoch"] for x in lines] == [1, 2, 3]
-    payload = load_checkpoint(tmp_path / "cut" / "imitation.pt", kind="tm-imitation", robot="iiwa14")
-    assert STATE_KEYS <= set(payload["extra"]) and payload["extra"]["step"] == 3
-    assert _same(load_imitation(tmp_path / "cut" / "imitation.pt"), whole)
+def test_bad_train_config():
+    for kwargs in ({"epochs": 0}, {"val_fraction": 1.0}, {"schedule": "step"}, {"min_lr_ratio": 2.0}):
+        with pytest.raises(ConfigError):
+            TrainConfig(**kwargs)
 
 
-def test_imitation_refuses_to_resume_another_run(pairs, tmp_path):
-    kw = dict(epochs=1, batch_size=16, seed=1, progress=False, run_dir=tmp_path)
-    train_imitation(pairs, optim=FAST, **kw)
-    with pytest.raises(CheckpointError, match=r"optim\.lr: 0\.01 → 0\.02"):
-        train_imitation(pairs, optim=OptimConfig(name="adam", lr=2e-2), **kw)
-    with pytest.raises(CheckpointError, match="data_sha256"):
-        train_imitation(make_endpoints(EndpointConfig(n=48, seed=6)), optim=FAST, **kw)
-    train_imitation(make_endpoints(EndpointConfig(n=48, seed=6)), optim=FAST, resume=False, **kw)
+def test_cosine_schedule():
+    cfg = TrainConfig(optim=OptimConfig(lr=1.0), schedule="cosine", min_lr_ratio=0.1)
+    assert cfg.lr_at(0, 101) == 1.0
+    assert cfg.lr_at(50, 101) == pytest.approx(0.55)
+    assert cfg.lr_at(100, 101) == pytest.approx(0.1)
 
 
-def test_imitation_divergence_is_a_typed_error(pairs):
-    with pytest.raises(TrainingDivergedError, match="imitation TM training diverged at epoch"):
-        train_imitation(pairs, epochs=3, batch_size=16, optim=OptimConfig("sgd", 1e6), progress=False)
+def test_seed_everything():
+    g = seed_everything(5)
+    a = (torch.rand(3), np.random.rand(), torch.rand(2, generator=g))  # noqa: NPY002
+    g = seed_everything(5)
+    b = (torch.rand(3), np.random.rand(), torch.rand(2, generator=g))  # noqa: NPY002
+    assert torch.equal(a[0], b[0]) and a[1] == b[1] and torch.equal(a[2], b[2])
+
+
+def test_run_logger(tmp_path):
+    with RunLogger(tmp_path / "run") as log:
+        log.log({"epoch": 1, "loss": 0.5})
+        log.log({"epoch": 2, "loss": 0.25, "note": "x"})
+    lines = (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()
+    assert [json.loads(line)["loss"] for line in lines] == [0.5, 0.25]
+
+
+def test_fit_is_generic_and_rejects_mismatched_tensors():
+    torch.manual_seed(0)
+    x = torch.randn(512, 2)
+    y = x @ torch.tensor([[2.0], [-1.0]])
+    model = torch.nn.Linear(2, 1)
+    cfg = TrainConfig(optim=OptimConfig("sgd", 0.1), epochs=20, batch_size=64, progress=False)
+    hist = fit(model, (x, y), (x, y), cfg, loss_fn=lambda m, a, b: (m(a) - b).square().mean())
+    assert len(hist) == 20 and hist[-1]["val_loss"] < 1e-4
+    with pytest.raises(DatasetError):
+        fit(model, (x, y[:5]), None, cfg, loss_fn=lambda m, a, b: m(a).sum())
+
+
+def test_one_schedule_for_every_trainer():
+    from kinlearn.training.loop import make_schedule
+
+    p = torch.nn.Parameter(torch.zeros(1))
+    opt = torch.optim.SGD([p], lr=2.0)
+    sched = make_schedule(opt, "cosine", 4)
+    rates = []
+    for _ in range(6):
+        rates.append(sched.get_last_lr()[0])
+        opt.step()
+        sched.step()
+    assert rates == pytest.approx([2.0, 1.0 + 2**-0.5, 1.0, 1.0 - 2**-0.5, 0.0, 0.0])
+    constant = make_schedule(torch.optim.SGD([p], lr=0.5), "constant", 4)
+    assert constant.get_last_lr() == [0.5]
+    with pytest.raises(ConfigError, match="constant' or 'cosine"):
+        make_schedule(opt, "linear", 4)
