@@ -30,7 +30,7 @@ class StandStill(Baseline):
     goals: ClassVar[tuple[str, ...]] = ("state", "position")
 
     def plan(self, problem: Problem) -> Plan:
-        self._check(problem)
+        self.check_problem(problem)
         joints = problem.start_joints.unsqueeze(-2).expand(*problem.batch_shape, 2, self.robot.dof)
         return judge(problem, joints)
 

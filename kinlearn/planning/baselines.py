@@ -132,8 +132,10 @@ class Baseline:
         if self.body is not None and not isinstance(self.body, BodySpheres):
             raise ConfigError(f"body must be a kinlearn BodySpheres or None, got {type(self.body).__name__}")
 
-    def _check(self, problem: Problem) -> None:
-        """Refuse a problem this baseline cannot plan; warn where it would ignore the problem's obstacles."""
+    def check_problem(self, problem: Problem) -> None:
+        """Refuse a problem this baseline cannot plan (:class:`ConfigError`: not a :class:`Problem`, of
+        another robot, of a goal kind not in ``goals``); warn where it would ignore the problem's
+        obstacles. A baseline's ``plan`` calls it first."""
         _check_problem(self, problem, self.label)
         if problem.goal_kind not in self.goals:
             problem.require(self.goals[0], self.label)
@@ -145,6 +147,8 @@ class Baseline:
                 ObstaclesIgnoredWarning,
                 stacklevel=3,
             )
+
+    _check = check_problem
 
 
 def _check_dls(iterations, damping) -> None:
