@@ -38,11 +38,15 @@ def _assert_valid(problems: ProblemSet, body, margin: float = 0.05, clearance: f
     assert bool((apart >= 0.2).all())
 
 
+# Verification runs RRT-Connect within a time limit: which problems pass depends on the machine's speed,
+# so this generation is outside the unit suite (pytest -m generation runs it).
+@pytest.mark.generation
+@pytest.mark.slow
 @pytest.mark.parametrize("family", ["tabletop", "barrier"])
 def test_generated_problems_are_valid_and_verified(body, family):
     problems = make_problems(family, 2, seed=5)
     assert len(problems) == 2 and problems.family.tolist() == [FAMILIES.index(family)] * 2
-    assert bool((problems.solve_time > 0).all() and (problems.solve_time < 5.0).all())
+    assert bool((problems.solve_time > 0).all() and torch.isfinite(problems.solve_time).all())  # solved
     assert problems.seed.tolist() == [problem_seed(5, 0), problem_seed(5, 1)]
     _assert_valid(problems, body)
 
@@ -69,7 +73,7 @@ def test_rrt_connect_path_passes_the_dense_check(body):
     problems = make_problems("barrier", 1, seed=11, config=ProblemConfig(verify=False))
     start, goal, scene = problems.problem(0)
     path, elapsed = rrt_connect_solve(body, scene, start, goal, time_limit=5.0, seed=0)
-    assert path is not None and 0 < elapsed < 5.0
+    assert path is not None and elapsed > 0
     assert np.allclose(path[0], start.numpy()) and np.allclose(path[-1], goal.numpy())
     assert bool(check_path(body, torch.as_tensor(path), scene).collision_free)
     # An unreachable goal (inside an obstacle's reach) is reported as no path, not an error.

@@ -29,11 +29,6 @@ from kinlearn.planning.planner import Planner
 
 
 @pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
-
-
-@pytest.fixture(scope="module")
 def joints(robot):
     g = torch.Generator().manual_seed(0)
     lo, hi = robot.limits(torch.float64)
@@ -126,6 +121,11 @@ def test_every_planner_plans_a_problem_by_the_protocol(robot):
         assert torch.allclose(plan.joints[:, 0].double(), p.start_joints, atol=1e-6), name
         assert plan.success.shape == (2,) and plan.collision_free is None, name  # free space: not checked
         assert bool((plan.goal_error >= 0).all()), name
+        # The verdict is judge's: its paths judged afresh succeed wherever the plan says they do, with
+        # the same goal errors.
+        again = judge(p, plan.joints.double())
+        assert bool((plan.success <= again.success).all()), name
+        assert torch.allclose(again.goal_error, plan.goal_error.double(), atol=1e-4), name
 
 
 def test_a_baseline_that_ignores_obstacles_says_so(robot, joints):
