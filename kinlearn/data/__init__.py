@@ -8,7 +8,8 @@ endpoint pairs       :func:`make_endpoints`, :class:`EndpointConfig`, :class:`En
                      :func:`save_endpoints`, :func:`load_endpoints`
 recorded data        :class:`Observations`, :func:`load_recorded`, :func:`load_data`,
                      :func:`load_observations`, :func:`save_recorded`
-planning problems    :class:`Problem` (also ``kinlearn.Problem``)
+planning problems    :class:`Problem` (also ``kinlearn.Problem``); obstacle benchmark sets:
+                     :func:`make_problems`, :class:`ProblemConfig`, :class:`ProblemSet`
 ===================  ==========================================================================
 
 Each name is imported when first used.
@@ -22,6 +23,7 @@ if TYPE_CHECKING:
     from .babbling import BabblingConfig, Transitions, babble, load_transitions, save_transitions
     from .endpoints import EndpointConfig, EndpointPairs, load_endpoints, make_endpoints, save_endpoints
     from .problem import Problem
+    from .problems import ProblemConfig, ProblemSet, make_problems
     from .recorded import Observations, load_data, load_observations, load_recorded, save_recorded
 
 __all__ = [
@@ -30,6 +32,8 @@ __all__ = [
     "EndpointPairs",
     "Observations",
     "Problem",
+    "ProblemConfig",
+    "ProblemSet",
     "Transitions",
     "babble",
     "load_data",
@@ -38,6 +42,7 @@ __all__ = [
     "load_recorded",
     "load_transitions",
     "make_endpoints",
+    "make_problems",
     "save_endpoints",
     "save_recorded",
     "save_transitions",
