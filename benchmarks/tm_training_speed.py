@@ -3,7 +3,7 @@
     python benchmarks/tm_training_speed.py [--threads 1] [--pairs 12000] [--per-sample 200] [--analytic]
 
 The per-sample loop is written here, not in kinlearn, to reproduce the structure of the authors'
-code (REFERENCE #16): one endpoint pair at a time (batch 1), the TM's forward pass, then Algorithm 1
+code (github.com/Mcibula/traj-planning-icann2025): one endpoint pair at a time (batch 1), the TM's forward pass, then Algorithm 1
 as 22 separate model calls (IM then FM for each of the T = 11 steps), the loss (paper Eq. 4, with
 rectified targets computed without gradient), backward and an optimiser step per sample. kinlearn's
 batched training step does the same computation for a whole batch: one IM and one FM call per time

@@ -88,7 +88,7 @@ def polyline_metrics(points: torch.Tensor, prefix: str = "") -> dict[str, torch.
 def trajectory_metrics(
     ef_start: torch.Tensor, waypoints: torch.Tensor, ef_goal: torch.Tensor
 ) -> dict[str, torch.Tensor]:
-    """The paper's per-trajectory metrics (REFERENCE #12) of waypoints between two endpoints.
+    """The paper's per-trajectory metrics (the paper's Table 2 and its caption) of waypoints between two endpoints.
 
     Args:
         ef_start: ``(..., 3)`` end-effector position of the start state s(0).

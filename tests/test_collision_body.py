@@ -54,7 +54,7 @@ def test_link_poses_match_pinocchio(robot, q64):
 
 def test_sphere_counts_and_reference_numbers(robot):
     sparse, dense = body_spheres(robot), body_spheres(robot, dense=True)
-    # Drake's 12 arm spheres, link by link (REFERENCE #27), plus 6 covering the base cylinder.
+    # Drake's 12 arm spheres, link by link (Drake's iiwa14_spheres_collision.urdf), plus 6 covering the base cylinder.
     assert np.bincount(sparse.link.numpy(), minlength=8).tolist() == [6, 1, 2, 3, 2, 2, 1, 1]
     assert sparse.num_spheres == 18 and dense.num_spheres == 46
     assert np.bincount(dense.link.numpy(), minlength=8).tolist() == [4, 5, 9, 9, 6, 9, 3, 1]

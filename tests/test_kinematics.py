@@ -43,7 +43,7 @@ def test_poses_agree(robot, q1000):
 
 
 def test_pk_float64_is_exact_not_float32_rounded(robot, q1000):
-    """pytorch-kinematics alone keeps float32-rounded constants; ours must not (REFERENCE #19)."""
+    """pytorch-kinematics alone keeps float32-rounded constants; ours must not (pytorch-kinematics 0.10 parses URDF origins in float32)."""
     err = (
         (kinematics(robot, "pk").position(q1000) - kinematics(robot, "pinocchio").position(q1000)).abs().max()
     )

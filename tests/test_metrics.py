@@ -102,7 +102,7 @@ def test_known_spacing_deviation():
 
 
 def reference_loop(points: torch.Tensor) -> dict[str, float]:
-    """The definitions of REFERENCE #12 written out point by point with acos (valid away from 0/180°)."""
+    """The definitions of the paper's Table 2 written out point by point with acos (valid away from 0/180°)."""
     d = [float((points[k + 1] - points[k]).norm()) for k in range(len(points) - 1)]
     mean = sum(d) / len(d)
     angles = []

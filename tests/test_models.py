@@ -138,7 +138,7 @@ def n_params(m):
 
 def test_paper_architectures():
     fm, im = LearnedFM(fm_config("iiwa14")), LearnedIM(im_config("iiwa14"))
-    # REFERENCE #5: 17 → 30 tanh → (20 tanh → 7) and (20 tanh → 3); #6: 13 → 40-60-60-40 tanh → 7.
+    # The paper's Sect. 4 and Cibula et al. 2024, Sect. 4.1: FM 17 → 30 tanh → (20 tanh → 7) and (20 tanh → 3); IM 13 → 40-60-60-40 tanh → 7.
     assert n_params(fm) == (17 * 30 + 30) + (30 * 20 + 20 + 20 * 7 + 7) + (30 * 20 + 20 + 20 * 3 + 3) == 1990
     assert n_params(im) == 13 * 40 + 40 + 40 * 60 + 60 + 60 * 60 + 60 + 60 * 40 + 40 + 40 * 7 + 7 == 9407
     assert sum(isinstance(m, torch.nn.Tanh) for m in fm.modules()) == 3

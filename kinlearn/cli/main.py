@@ -204,7 +204,7 @@ def _add_train(sub, kind: str) -> None:
         "--preset",
         choices=sorted(FM_PRESETS),
         default="paper",
-        help="model + training preset: paper (REFERENCE #5-6), improved, tiny (seconds; for tests)",
+        help="model + training preset: paper (the paper's Sect. 4), improved, tiny (seconds; for tests)",
     )
     add_data_options(p, "to train on (default: babble afresh)")
     _add_babbling_options(p, None)

@@ -3,8 +3,8 @@
 Each walker starts at a configuration drawn uniformly within the joint limits and holds an absolute
 joint target, also drawn uniformly within the limits. At every step each joint moves toward its
 target by at most ``max_step`` rad (the per-joint difference is clipped to ``[-max_step, max_step]``),
-which models position control at a bounded joint speed for one control period (REFERENCE #4:
-2 rad/s × 41.7 ms ≈ 0.083 rad). A joint that is within ``max_step`` of its target lands on it
+which models position control at a bounded joint speed for one control period (the earlier paper's babbling, Cibula et al., ICANN 2024, Sect. 4.1, in its
+code github.com/Mcibula/causal-learning-arm: 2 rad/s × 41.7 ms ≈ 0.083 rad). A joint that is within ``max_step`` of its target lands on it
 exactly. When every joint of a walker has reached its target, the walker draws a new one; with
 ``retarget_prob > 0`` it also draws a new one with that probability at every step, before it
 arrives. States never leave the limits: a step lies between the current state and a target that is
@@ -55,7 +55,7 @@ __all__ = [
     "save_transitions",
 ]
 
-#: The babbling step bound: the largest joint change per step and joint, rad (REFERENCE #4: 2 rad/s × 41.7 ms).
+#: The babbling step bound: the largest joint change per step and joint, rad (Cibula et al., ICANN 2024: 2 rad/s × 41.7 ms).
 #: A learned FM is valid for actions within the bound of the data it learned from, which it records
 #: (:attr:`kinlearn.models.interface.ForwardModel.max_step`); this is the default everywhere.
 MAX_STEP = 0.083

@@ -8,7 +8,7 @@ Two presets (``EndpointConfig.preset``):
 - ``"paper-task"`` (the default, kept for reproducing the paper): as in the paper's experiment, starts lie in a fixed neighbourhood of a home configuration and goals
 are random reachable configurations whose end effector lies in a task region in front of the robot,
   above the table plane; the goal's joints are given. The paper's own generator is unpublished
-  (REFERENCE #18); ours mirrors its plots: starts around ef ≈ (0.57, 0.2, 0.54) m for the iiwa14
+  (the paper's Sect. 4 and Fig. 3); ours mirrors its plots: starts around ef ≈ (0.57, 0.2, 0.54) m for the iiwa14
   (the paper's (−0.2, 0.57, 0.54) in a base frame rotated 90° about z) and goals low, near a table.
 """
 

@@ -116,7 +116,7 @@ REPRODUCE_PRESETS: dict[str, dict] = {
         "workspace_pairs": 1_000,
         "identify_samples": 30_000,
     },
-    # Paper sizes: 500k babbling transitions (REFERENCE #4), 12,000 + 2,000 pairs, 50 TM epochs,
+    # Paper sizes: 500k babbling transitions (Cibula et al., ICANN 2024, Sect. 4.1), 12,000 + 2,000 pairs, 50 TM epochs,
     # 10 seeds. Shortened to fit an hour on 2 cores: FM/IM epochs, the batch-1 reference-parity run
     # (1,000 of the 12,000 pairs, all 50 epochs) and the workspace TMs' iterations.
     "full": {

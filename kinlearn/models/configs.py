@@ -17,7 +17,7 @@ __all__ = ["FMConfig", "IMConfig"]
 
 @dataclass(frozen=True)
 class FMConfig:
-    """Learned forward model. Defaults are the paper's (REFERENCE #5).
+    """Learned forward model. Defaults are the paper's (Sect. 4; Cibula et al., ICANN 2024, Sect. 4.1).
 
     Attributes:
         robot, dof: the robot the model belongs to (state size dof + 3).
@@ -80,7 +80,7 @@ class FMConfig:
 
 @dataclass(frozen=True)
 class IMConfig:
-    """Learned inverse model. Defaults are the paper's monolithic IM (REFERENCE #6).
+    """Learned inverse model. Defaults are the paper's monolithic IM (Sect. 4; Cibula et al., ICANN 2024, Sect. 4.1).
 
     Attributes:
         robot, dof: the robot the model belongs to.

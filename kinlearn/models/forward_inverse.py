@@ -9,7 +9,7 @@ S = dof + 3 and s = [θ, ef] (:class:`~kinlearn.body.state.StateLayout`). Every 
 ``robot_name``, accepts leading batch dimensions, is differentiable in its inputs and follows the
 inputs' dtype (learned models hold float32 weights unless converted with ``.to()``).
 
-Learned models (REFERENCE #5–6):
+Learned models (the paper's Sect. 4; Cibula et al., ICANN 2024, Sect. 4.1):
 
 - :class:`LearnedFM`: input [s, a] → shared dense layer(s) → a joints head (→ θ') and an ef head
   (→ ef'). Paper: shared 30 tanh; heads 20 tanh → 7 linear and 20 tanh → 3 linear.

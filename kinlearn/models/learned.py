@@ -1,4 +1,4 @@
-"""The learned forward and inverse models (MLPs, REFERENCE #5–6):
+"""The learned forward and inverse models (MLPs; the paper's Sect. 4, Cibula et al., ICANN 2024, Sect. 4.1):
 
 - :class:`LearnedFM`: input [s, a] → shared dense layer(s) → a joints head (→ θ') and an ef head
   (→ ef'). Paper: shared 30 tanh; heads 20 tanh → 7 linear and 20 tanh → 3 linear.

@@ -8,7 +8,7 @@ from .configs import FMConfig, IMConfig
 
 __all__ = ["FM_PRESETS", "IM_PRESETS", "fm_config", "im_config"]
 
-#: Named model settings. ``paper`` is REFERENCE #5–6 exactly; ``improved`` adds normalisation,
+#: Named model settings. ``paper`` is the paper's FM and IM exactly (Sect. 4; Cibula et al., ICANN 2024, Sect. 4.1); ``improved`` adds normalisation,
 #: delta prediction / ef-displacement input and width; ``tiny`` is ``improved``'s options at the
 #: paper's widths (for quick tests).
 FM_PRESETS: dict[str, dict] = {

@@ -1,7 +1,7 @@
 """Rectification (paper Algorithm 1) and the trajectory model's loss (paper Eq. 4 and variants).
 
 Both are batched over samples and loop over time only: one IM call and one FM call per time step
-for the whole batch (the authors' code made 22 separate model calls per trajectory, REFERENCE #16).
+for the whole batch (the authors' code made 22 separate model calls per trajectory: the authors' code, github.com/Mcibula/traj-planning-icann2025).
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ class LossConfig:
     - ``start`` / ``goal``: L[ŝ(1), target] and L[ŝ(T−1), target]. With ``endpoint_target="on"`` the
       targets are s(0) and s(T) themselves (paper Eq. 4); with ``"one_spacing"`` they are one
       uniform spacing from them along the start–goal segment, where the metrics want the
-      extreme waypoints (REFERENCE #26).
+      extreme waypoints (measured: docs/results.md).
     - ``smoothness``: mean squared second difference of the points [ef(s(0)), ŝ(1) … ŝ(T−1), ef(s(T))],
       times T²: zero exactly for evenly spaced points on a straight line.
     - ``gradient``: ``"stop"`` computes the rectified states without gradient (detached targets, as
@@ -104,7 +104,7 @@ class LossConfig:
 LOSS_PRESETS: dict[str, dict] = {
     # Paper Eq. 4: rectification term + ŝ(1) on s(0) + ŝ(T−1) on s(T).
     "paper": dict(rectification=1.0, start=1.0, goal=1.0, endpoint_target="on", smoothness=0.0),
-    # The authors' released script: the endpoint terms only (REFERENCE #15).
+    # The authors' released script: the endpoint terms only (the authors' code, github.com/Mcibula/traj-planning-icann2025).
     "released": dict(rectification=0.0, start=1.0, goal=1.0, endpoint_target="on", smoothness=0.0),
     # kinlearn's default: the robot-model term plus what the metrics ask for.
     "smooth": dict(rectification=1.0, start=1.0, goal=1.0, endpoint_target="one_spacing", smoothness=1.0),

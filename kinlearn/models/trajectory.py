@@ -1,11 +1,11 @@
 """The trajectory model (TM): a GRU decoder mapping [s(0), s(T)] to T − 1 end-effector waypoints.
 
-Paper Sect. 3 and Fig. 1; default sizes from REFERENCE #8: one GRU layer of 20 units run for
+Paper Sect. 3 and Fig. 1; default sizes from Sect. 4: one GRU layer of 20 units run for
 T − 1 = 10 steps with the same input at every step, a shared dense tanh layer of 20 units, and one
 head (10 tanh → 3 linear) giving the end-effector position ŝ(t) of every intermediate waypoint. The
 joints of each waypoint are not predicted: they come from the forward model during rectification.
 
-Unlike the authors' code (REFERENCE #13–14) every sub-module is registered, so all of them train,
+Unlike the authors' code (github.com/Mcibula/traj-planning-icann2025) every sub-module is registered, so all of them train,
 and the initial hidden state is deterministic (zeros or learned); ``h0="random"`` exists only to
 reproduce the authors' behaviour.
 """

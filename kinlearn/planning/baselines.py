@@ -364,7 +364,7 @@ def rrt_connect(
     Honest caveat: **without obstacles RRT-Connect is trivial**: the two trees connect after one or two
     extensions, a query takes tens of microseconds, and its path is a random detour of joint
     interpolation. It is a fair baseline for planning *time* (and its tail) only alongside this
-    statement; its time would grow with obstacles, which no planner in kinlearn models.
+    statement; its time grows with obstacles (among them: :class:`kinlearn.planning.obstacle_baselines.SceneRRTConnect`).
 
     ``seed`` seeds OMPL's process-wide random generator before planning, which makes a call
     reproducible (``None`` leaves it alone). Raises :class:`MissingDependencyError` without ``ompl``

@@ -54,7 +54,7 @@ __all__ = [
 # Forward and inverse model training
 # --------------------------------------------------------------------------------------------------
 
-#: Named training settings per model kind. ``paper``: REFERENCE #5–6. ``tiny``: seconds, for tests.
+#: Named training settings per model kind. ``paper``: the paper's Sect. 4 (Cibula et al., ICANN 2024, Sect. 4.1, for the architectures). ``tiny``: seconds, for tests.
 TRAIN_PRESETS: dict[str, dict[str, dict]] = {
     "fm": {
         "paper": {"optim": {"name": "adam", "lr": 1e-3}, "epochs": 60, "batch_size": 256},
@@ -288,7 +288,7 @@ def train_im_distal(
 # Validation against the analytic robot
 # --------------------------------------------------------------------------------------------------
 
-#: The paper's reported mean absolute errors (REFERENCE #7) and this project's goals.
+#: The paper's reported mean absolute errors (its Sect. 4) and this project's goals.
 PAPER_FIGURES = {"fm_ef_mae_mm": 1.1, "fm_joints_mae_rad": 6.3e-4, "im_action_mae_rad": 1.7e-3}
 GOALS = {"fm_ef_mae_mm": 0.5, "fm_joints_mae_rad": 3e-4, "im_action_mae_rad": 1e-3}
 

@@ -71,7 +71,7 @@ class TMTrainConfig:
 
     ``fm``/``im``: ``"learned"`` (loaded from ``models_dir``: ``fm.pt``, ``im.pt``) or ``"analytic"``.
     ``trainable``: ``"all"``, or ``"shared"`` (only the shared dense layer, as the authors' code
-    effectively did, REFERENCE #13). ``schedule``: constant learning rate or cosine decay to zero.
+    effectively did: the authors' code, github.com/Mcibula/traj-planning-icann2025). ``schedule``: constant learning rate or cosine decay to zero.
     """
 
     robot: str = "iiwa14"
@@ -119,7 +119,7 @@ TM_PRESETS: dict[str, dict] = {
     "default": {},
     # The paper's setting done right: Eq. 4, RMSprop 1e-3 (γ = 0.99), constant lr, no normalisation.
     "paper": {"loss": "paper", "schedule": "constant", "tm": {"normalize": False}},
-    # The authors' code, defects included on purpose (REFERENCE #13–15): only the shared layer trains,
+    # The authors' code, defects included on purpose (the authors' code, github.com/Mcibula/traj-planning-icann2025): only the shared layer trains,
     # random h0 on every call, the released loss (endpoint terms only), batch 1.
     "reference-parity": {
         "loss": "released",
