@@ -2,6 +2,8 @@
 round a sphere across the straight line, deterministically; RRT-Connect with simplification returns a
 path the success rule accepts."""
 
+from pathlib import Path
+
 import pytest
 import torch
 
@@ -102,7 +104,28 @@ def test_bad_inputs_raise_typed_errors(problem):
 def test_rrt_connect_with_simplification_returns_a_valid_path(body, problem):
     pytest.importorskip("ompl")
     start, goal, scene = problem
-    path, seconds = scene_rrt_connect(start, goal, scene, time_limit=1.0, simplify=True, seed=0)
-    assert path is not None and 0 < seconds < 5.0
+    # A generous limit (the search returns when it has a path): a busy machine must not fail the test.
+    path, seconds = scene_rrt_connect(start, goal, scene, time_limit=30.0, simplify=True, seed=0)
+    assert path is not None and seconds > 0
     assert torch.equal(path[0], start) and torch.equal(path[-1], goal)
     assert bool(obstacle_outcome(body, [path], (start, goal, scene))["success"][0])
+
+
+def test_compiled_rrt_connect_plans_around_what_the_line_hits():
+    """The compiled RRT-Connect as a registry baseline: a problem the joint line collides on is solved,
+    its plan judged collision-free by judge's dense check (torch), the same seed the same path."""
+    from kinlearn import Problem, baselines
+    from kinlearn.data.problems import ProblemSet
+
+    heldout = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "obstacle_problems_heldout.npz"
+    problems = ProblemSet.load(heldout, robot="iiwa14")
+    start, goal, scene = problems[problems.hard].problem(0)
+    planner = baselines.make("compiled-rrt-connect", "iiwa14", time_limit=5.0, seed=1)
+    assert planner.avoids_obstacles
+    problem = Problem.make(load_robot("iiwa14"), start, goal, obstacles=scene)
+    a, b = planner.plan(problem), planner.plan(problem)
+    assert bool(a.collision_free) and bool(a.success)
+    assert torch.equal(a.joints, b.joints)
+    line = baselines.make("joint-line", "iiwa14")
+    with pytest.warns(UserWarning):
+        assert not bool(line.plan(problem).collision_free)

@@ -24,6 +24,7 @@ the state, not from a global one).
 from __future__ import annotations
 
 import math
+import time
 
 import numba
 import numpy as np
@@ -31,7 +32,7 @@ import numpy as np
 from ..errors import ConfigError, ShapeError
 from . import kernel
 
-__all__ = ["RrtConnect"]
+__all__ = ["RrtConnect", "rrt_connect"]
 
 _jit = numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
@@ -252,3 +253,34 @@ class RrtConnect:
         k = 4 * p.shape[0] if attempts is None else int(attempts)
         keep = _shortcut(p, k, self.state, self.max_travel, self._f, self._n, self._s)
         return p[keep]
+
+
+def rrt_connect(
+    body,
+    scene,
+    start,
+    goal,
+    lower,
+    upper,
+    time_limit: float = 1.0,
+    seed: int = 0,
+    rounds: int = 5,
+    shortcut: bool = True,
+    clock=time.perf_counter,
+    **options,
+) -> tuple[np.ndarray | None, float, int]:
+    """Solve one query with :class:`RrtConnect` for at most ``time_limit`` seconds (checked between
+    rounds of ``rounds`` iterations, each a fraction of a millisecond), shortcutting the path found.
+
+    Returns ``(path (V, dof) or None, seconds taken, iterations)``. ``options`` go to :class:`RrtConnect`.
+    """
+    if not (isinstance(time_limit, (int, float)) and math.isfinite(time_limit) and time_limit > 0):
+        raise ConfigError(f"time_limit must be a number of seconds > 0, got {time_limit!r}")
+    t0 = clock()
+    rrt = RrtConnect(body, scene, start, goal, lower, upper, seed=seed, **options)
+    path = None
+    while path is None and not rrt.exhausted and clock() - t0 < time_limit:
+        path = rrt.run(rounds)
+    if path is not None and shortcut:
+        path = rrt.shortcut(path)
+    return path, clock() - t0, rrt.iterations

@@ -29,8 +29,8 @@ import torch
 from ..body.kinematics import kinematics
 from ..collision import BodySpheres, Scene, check_path
 from ..collision.geometry import box_faces, cylinder_faces
-from ..data.problems import FAMILIES, ProblemSet
 from ..data.problem import LIMIT_TOLERANCE
+from ..data.problems import FAMILIES, ProblemSet
 from ..errors import ConfigError, ShapeError
 from ..io import atomic_write
 from ..planning.plan import DEFAULT_TOLERANCE, Tolerance

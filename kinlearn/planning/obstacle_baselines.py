@@ -17,6 +17,8 @@ unless one is passed; its robot is the robot planned for.
 :func:`scene_rrt_connect`        OMPL's RRT-Connect on :class:`~kinlearn.data.problems.RrtChecker`
                                  (the dense 1 cm check), optionally with OMPL's path simplification,
                                  within a time limit that covers both.
+:func:`compiled_rrt_connect`     RRT-Connect compiled with the dense check (:mod:`kinlearn.collision.rrt`),
+                                 random vertex shortcuts, within a time limit.
 :func:`trajectory_optimiser`     a fixed number of Adam steps on a knot path initialised on the straight
                                  joint line: smoothness + hinge penalties on the body's clearance to the
                                  scene and to itself at the knots and points between them, joint limits
@@ -57,18 +59,20 @@ from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..checks import as_int
 from ..collision import BodySpheres, Scene, body_obstacle_distance, body_spheres, self_collision_distance
-from ..data.problems import rrt_connect_solve
 from ..data.problem import Problem
+from ..data.problems import rrt_connect_solve
 from ..errors import ConfigError, ShapeError, UnknownRobotError
 from . import baselines as _free
 from .baselines import MAX_STEPS, Baseline
 from .plan import Plan, judge
 
 __all__ = [
+    "CompiledRRTConnect",
     "OptimiserConfig",
     "SceneRRTConnect",
     "TrajectoryOptimiser",
     "cartesian_line_path",
+    "compiled_rrt_connect",
     "default_body",
     "joint_line_path",
     "scene_rrt_connect",
@@ -223,6 +227,43 @@ def scene_rrt_connect(
     scene = _one_scene(scene)
     path, _ = rrt_connect_solve(
         body, scene, start, goal, time_limit=time_limit, seed=seed, max_travel=max_travel, simplify=simplify
+    )
+    if path is None:
+        return None, time.perf_counter() - t0
+    return _pin(torch.from_numpy(np.ascontiguousarray(path)), start, goal), time.perf_counter() - t0
+
+
+def compiled_rrt_connect(
+    start,
+    goal,
+    scene: Scene,
+    *,
+    time_limit: float = 1.0,
+    seed: int = 0,
+    max_travel: float = 0.01,
+    body: BodySpheres | None = None,
+) -> tuple[torch.Tensor | None, float]:
+    """RRT-Connect compiled with the dense check (:func:`kinlearn.collision.rrt.rrt_connect`: local and
+    uniform samples, random vertex shortcuts), for at most ``time_limit`` seconds (checked every few
+    iterations). Returns ``(path (V, dof) or None, seconds)``; the same seed gives the same path
+    whenever it is found within the limit."""
+    from ..collision import kernel
+    from ..collision.rrt import rrt_connect
+
+    t0 = time.perf_counter()
+    start, goal, body = _inputs(start, goal, body)
+    scene = _one_scene(scene)
+    robot = body.robot
+    path, _, _ = rrt_connect(
+        kernel.KernelBody.of(body),
+        kernel.KernelScene.of(scene.to(_F64)),
+        start.numpy(),
+        goal.numpy(),
+        robot.lower,
+        robot.upper,
+        time_limit=time_limit,
+        seed=seed,
+        max_travel=max_travel,
     )
     if path is None:
         return None, time.perf_counter() - t0
@@ -442,6 +483,30 @@ class SceneRRTConnect(_PathPlanner):
             scene,
             time_limit=self.time_limit,
             simplify=self.simplify,
+            seed=self.seed,
+            max_travel=self.max_travel,
+            body=self.body,
+        )[0]
+
+
+@dataclass(frozen=True)
+class CompiledRRTConnect(_PathPlanner):
+    """:func:`compiled_rrt_connect` (around the problem's obstacles, on the compiled dense check) as a planner."""
+
+    robot: Robot | str | BodySpheres
+    time_limit: float = 1.0
+    seed: int = 0
+    max_travel: float = 0.01
+    body: BodySpheres | None = None
+
+    label: ClassVar[str] = "RRT-Connect around obstacles (compiled)"
+
+    def _path(self, start, goal, scene):
+        return compiled_rrt_connect(
+            start,
+            goal,
+            scene,
+            time_limit=self.time_limit,
             seed=self.seed,
             max_travel=self.max_travel,
             body=self.body,

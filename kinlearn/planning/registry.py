@@ -41,6 +41,7 @@ BUILTIN: dict[str, str] = {
     "cartesian-line": "kinlearn.planning.baselines:CartesianLine",
     "rrt-connect": "kinlearn.planning.baselines:RRTConnect",
     "scene-rrt-connect": "kinlearn.planning.obstacle_baselines:SceneRRTConnect",
+    "compiled-rrt-connect": "kinlearn.planning.obstacle_baselines:CompiledRRTConnect",
     "trajectory-optimiser": "kinlearn.planning.obstacle_baselines:TrajectoryOptimiser",
 }
 
