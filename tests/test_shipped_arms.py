@@ -10,6 +10,7 @@ import torch
 from conftest import ALL_ROBOTS
 
 import kinlearn
+from kinlearn.baselines import JointLine
 from kinlearn.body.robot import ROBOTS, load_robot
 from kinlearn.cli.view import register
 from kinlearn.errors import CheckpointError, ConfigError
@@ -18,7 +19,6 @@ from kinlearn.evaluation.workspace import evaluate_workspace, heldout_pairs
 from kinlearn.io import load_checkpoint
 from kinlearn.models.chain import ChainFM
 from kinlearn.models.forward_inverse import load_fm, load_im
-from kinlearn.planning.baselines import JointInterpolation
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
 
 #: Held-out workspace pairs per arm (uniform within ±90% of the joint range, a seed no training used).
@@ -107,7 +107,7 @@ def test_shipped_planner_shortens_the_hand_path_without_sharper_turns(shipped):
         pairs,
         {
             "planner": planner,
-            "joint interpolation": JointInterpolation(robot),
+            "joint interpolation": JointLine(robot),
         },
     )
     assert res["planner"]["state_success"] == 1.0
