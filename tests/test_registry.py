@@ -11,7 +11,7 @@ import torch
 
 from kinlearn import baselines
 from kinlearn.baselines import Baseline
-from kinlearn.body.robot import Robot, load_robot
+from kinlearn.body.robot import Robot
 from kinlearn.collision import body_spheres
 from kinlearn.data.problem import Problem
 from kinlearn.errors import ConfigError
@@ -33,11 +33,6 @@ class StandStill(Baseline):
         self.check_problem(problem)
         joints = problem.start_joints.unsqueeze(-2).expand(*problem.batch_shape, 2, self.robot.dof)
         return judge(problem, joints)
-
-
-@pytest.fixture(scope="module")
-def robot():
-    return load_robot("iiwa14")
 
 
 def test_a_registered_baseline_is_iterated_until_unregistered(robot):
