@@ -1,9 +1,12 @@
-"""Generate the committed held-out obstacle benchmark set for the iiwa14.
+"""Generate the committed held-out obstacle benchmark sets.
 
     python benchmarks/make_obstacle_problems.py [--per-family 340] [--budget 900] \\
-        [--out benchmarks/data/obstacle_problems_heldout.npz]
+        [--out benchmarks/data/obstacle_problems_heldout.npz]            # iiwa14, the first three families
+    python benchmarks/make_obstacle_problems.py --robot panda --families scenes --per-family 20 \\
+        [--out benchmarks/data/scene_problems_panda.npz]                 # the seven scene families
 
-Three families (tabletop, shelf, barrier; see ``kinlearn/data/problems.py``), each from a fixed
+Families: tabletop, shelf, barrier (the default set), or the seven of ``kinlearn/data/scenes.py``
+(``--families scenes``), or any names (see ``kinlearn/data/problems.py``), each from a fixed
 seed (held-out seeds below; training sets use other seeds). Problems are made round-robin, one of
 each family in turn, so that a time budget cuts every family at the same count; problem i of a
 family is the same whatever the budget (its sub-seed depends on (seed, i) only). Every problem is
@@ -23,44 +26,59 @@ from pathlib import Path
 import torch
 from _common import header, markdown_table
 
-from kinlearn.data.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
+from kinlearn import load_robot
+from kinlearn.data.problems import FAMILIES, LEGACY_FAMILIES, ProblemConfig, ProblemSet, make_problems
+from kinlearn.data.scenes import SCENE_FAMILIES
 
-#: Held-out seeds, one per family. Training scenes must use other seeds.
-HELDOUT_SEEDS = {"tabletop": 1001, "shelf": 1002, "barrier": 1003}
+#: Held-out seeds, one per family (tabletop 1001, shelf 1002, barrier 1003, bookcase 1004, …). Training
+#: scenes use others (kinlearn.training.obstacle_path.TRAINING_SEEDS: 2001, …).
+HELDOUT_SEEDS = {name: 1001 + k for k, name in enumerate(FAMILIES)}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--per-family", type=int, default=340)
     ap.add_argument("--budget", type=float, default=900.0, help="stop after this many seconds (whole rounds)")
+    ap.add_argument("--robot", default="iiwa14")
     ap.add_argument(
-        "--out", type=Path, default=Path(__file__).parent / "data" / "obstacle_problems_heldout.npz"
+        "--families",
+        nargs="+",
+        default=["legacy"],
+        help="family names, or 'legacy' (the first three) or 'scenes'",
     )
+    ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    print(header("obstacle benchmark problems (iiwa14)", args.threads))
+    groups = {"legacy": LEGACY_FAMILIES, "scenes": SCENE_FAMILIES}
+    families = [f for name in args.families for f in groups.get(name, (name,))]
+    if args.out is None:
+        legacy = families == list(LEGACY_FAMILIES) and args.robot == "iiwa14"
+        name = "obstacle_problems_heldout.npz" if legacy else f"scene_problems_{args.robot}.npz"
+        args.out = Path(__file__).parent / "data" / name
+    robot = load_robot(args.robot)
+    print(header(f"obstacle benchmark problems ({args.robot})", args.threads))
     cfg = ProblemConfig()
-    parts: dict[str, list[ProblemSet]] = {f: [] for f in FAMILIES}
-    spent = {f: 0.0 for f in FAMILIES}
+    parts: dict[str, list[ProblemSet]] = {f: [] for f in families}
+    spent = {f: 0.0 for f in families}
     t_start = time.perf_counter()
     for i in range(args.per_family):
         if time.perf_counter() - t_start > args.budget:
             print(f"time budget of {args.budget:.0f} s reached after {i} rounds")
             break
-        for fam in FAMILIES:
+        for fam in families:
             t0 = time.perf_counter()
-            parts[fam].append(make_problems(fam, 1, HELDOUT_SEEDS[fam], config=cfg, first=i))
+            parts[fam].append(make_problems(fam, 1, HELDOUT_SEEDS[fam], robot=robot, config=cfg, first=i))
             spent[fam] += time.perf_counter() - t0
         if (i + 1) % 10 == 0:
             print(f"  {i + 1} rounds, {time.perf_counter() - t_start:.0f} s", flush=True)
     elapsed = time.perf_counter() - t_start
-    rounds = len(parts[FAMILIES[0]])
-    problems = ProblemSet.concat([p for fam in FAMILIES for p in parts[fam]])
+    rounds = len(parts[families[0]])
+    problems = ProblemSet.concat([p for fam in families for p in parts[fam]])
     problems = dataclasses.replace(
         problems,
         config={
-            "seeds": HELDOUT_SEEDS,
+            "seeds": {f: HELDOUT_SEEDS[f] for f in families},
             "per_family": rounds,
             "problem_config": dataclasses.asdict(cfg),
             "generated_in_s": round(elapsed, 1),
@@ -68,7 +86,7 @@ def main() -> None:
     )
     path = problems.save(args.out)
     rows = []
-    for fam in FAMILIES:
+    for fam in families:
         sub = problems.of(fam)
         times = sorted(sub.solve_time.tolist())
         rows.append(
