@@ -34,6 +34,7 @@ from kinlearn.baselines import joint_line, rrt_connect_timed
 from kinlearn.errors import MissingDependencyError
 from kinlearn.evaluation.workspace import heldout_pairs
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
+from kinlearn.planning.plan import judge
 from kinlearn.planning.planner import Planner
 
 
@@ -59,14 +60,16 @@ def stats(us: np.ndarray) -> dict:
 
 def breakdown(planner: Planner, s: torch.Tensor, g: torch.Tensor, calls: int) -> list[tuple[str, float]]:
     """Median time of each stage of a batch-1 joint-path plan (µs)."""
-    th0, gg, *_ = planner._arrays(s, g, None)
-    both = np.concatenate((th0, gg))
-    ef = planner._fk.position(both)
+    problem, *_ = planner._problem(s, g, None, None)
+    st, gl = problem.start.numpy()[None], problem.goal.numpy()[None]
+    d = planner.robot.dof
+    th0, ef0, thT, efT = st[:, :d], st[:, d:], gl[:, :d], gl[:, d:]
+    joints, waypoints = planner._joint_path(th0, ef0, thT, efT)
     parts = [
-        ("input checks (to float64 arrays, shapes, limits)", lambda: planner._arrays(s, g, None)),
-        ("FK of start and goal (NumPy)", lambda: planner._fk.position(both)),
-        ("TM forward (NumPy MLP)", lambda: planner._np_tm(th0, ef[:1], gg, ef[1:])),
-        ("joint path, clamp, FK of the waypoints", lambda: planner._joint_path(th0, ef[:1], gg, ef[1:])),
+        ("the Problem (checks, FK of start and goal)", lambda: planner._problem(s, g, None, None)),
+        ("TM forward (NumPy MLP)", lambda: planner._np_tm(th0, ef0, thT, efT)),
+        ("joint path and clamp", lambda: planner._joint_path(th0, ef0, thT, efT)),
+        ("judge (FK of every configuration, limits, goal, the Plan)", lambda: judge(problem, joints[0], waypoints=waypoints[0])),
     ]
     out = []
     for name, fn in parts:

@@ -108,6 +108,7 @@ def test_path_checks_match_check_path(arm):
 def test_the_planners_verdicts_on_the_heldout_problems_are_unchanged():
     """On the committed held-out problems the kernel picks the candidate torch's check_path picks (the
     first collision-free one in the planner's order), as the NumPy check before it did."""
+    from kinlearn.data.problem import positions
     from kinlearn.data.problems import ProblemSet
     from kinlearn.models.obstacle_path import scene_primitives
     from kinlearn.planning.planner import Planner
@@ -119,10 +120,15 @@ def test_the_planners_verdicts_on_the_heldout_problems_are_unchanged():
     found = 0
     for i in range(0, len(problems.start), 5):
         start, goal, scene = problems.problem(i)
-        ef = planner._position(torch.stack((start, goal)).double().numpy())
-        rows, mask, floor = scene_primitives(scene, 1, torch.float64)
+        ef = positions(planner.robot, torch.stack((start, goal)).double().numpy())
+        rows, _, floor = (t.numpy() for t in scene_primitives(scene, 1, torch.float64))
         paths, order = planner._proposals(
-            start.double().numpy()[None], ef[:1], goal.double().numpy()[None], ef[1:], rows, mask, floor, 0
+            start.double().numpy()[None],
+            ef[:1],
+            goal.double().numpy()[None],
+            ef[1:],
+            [(rows[0], floor[0])],
+            0,
         )
         free = check_path(body, torch.from_numpy(paths[0]), scene, max_travel=0.01).collision_free.numpy()
         expect = next((int(k) for k in order[0] if free[k]), -1)

@@ -41,6 +41,7 @@ from .scene import Scene
 
 __all__ = [
     "KernelBody",
+    "KernelChain",
     "KernelScene",
     "centres",
     "check_paths",
@@ -211,6 +212,23 @@ def _clearances(
             frames,
         )  # fmt: skip
     return d, s
+
+
+@_jit
+def _tip_positions(qs, F, prismatic):
+    """End-effector positions ``(N, 3)`` of joints ``qs (N, dof)``: the chain's frames (``F[:dof]``), then
+    the tip's offset in the last one (``F[dof]``'s translation)."""
+    n, dof = qs.shape
+    out = np.empty((n, 3))
+    frames = np.empty((dof + 1, 3, 4))
+    tx, ty, tz = F[dof, 0, 3], F[dof, 1, 3], F[dof, 2, 3]
+    for i in range(n):
+        _chain(qs[i], F, prismatic, frames)
+        for a in range(3):
+            out[i, a] = (
+                frames[dof, a, 0] * tx + frames[dof, a, 1] * ty + frames[dof, a, 2] * tz + frames[dof, a, 3]
+            )
+    return out
 
 
 @_jit
@@ -663,12 +681,41 @@ class KernelBody:
         return f"KernelBody(robot={self.robot.name!r}, set={self.name!r}, spheres={self.num_spheres}, pairs={len(self.pairs)})"
 
 
+class KernelChain:
+    """A robot's end-effector FK for the kernels: its canonical fixed transforms ``F (dof + 1, 4, 4)`` (the
+    last one to the tip) and which joints are prismatic. :meth:`of` packs a robot once."""
+
+    __slots__ = ("F", "__weakref__", "dof", "prismatic")
+
+    @classmethod
+    def of(cls, robot) -> KernelChain:
+        """The packed chain of ``robot`` (a :class:`~kinlearn.body.robot.Robot`), made on its first call and
+        kept while the robot lives."""
+        hit = _CHAINS.get(robot)
+        if hit is None:
+            hit = _CHAINS[robot] = cls(robot)
+        return hit
+
+    def __init__(self, robot):
+        from ..body.kinematics import kinematics
+
+        kin = kinematics(robot, "fast")
+        self.F = np.ascontiguousarray(np.asarray(kin.F, dtype=np.float64))
+        self.prismatic = np.array(kin.prismatic, dtype=np.bool_)
+        self.dof = int(robot.dof)
+
+    def position(self, q: np.ndarray) -> np.ndarray:
+        """End-effector positions ``(N, 3)`` of float64 joints ``q (N, dof)`` (the caller's checked
+        values: no conversion here), the numbers of :meth:`FastKinematics.position` to rounding."""
+        return _tip_positions(q if q.flags.c_contiguous else np.ascontiguousarray(q), self.F, self.prismatic)
+
+
 class KernelScene:
     """One (unbatched) :class:`Scene` packed for the kernels: a float64 table per kind, padding dropped,
     and ``floor = [has floor, height]``. :meth:`of` packs a scene once and reuses it (scenes are
     immutable)."""
 
-    __slots__ = ("__weakref__", "_buf", "boxes", "cylinders", "floor", "spheres")
+    __slots__ = ("__weakref__", "_buf", "_rows", "boxes", "cylinders", "floor", "spheres")
 
     @classmethod
     def of(cls, scene: Scene) -> KernelScene:
@@ -698,7 +745,23 @@ class KernelScene:
         self.boxes = np.ascontiguousarray(np.concatenate((boxes, box_bound[:, None]), axis=1))
         self.cylinders = np.ascontiguousarray(np.concatenate((cylinders, cyl_bound[:, None]), axis=1))
         self.floor = np.array([0.0, 0.0] if scene.floor is None else [1.0, float(scene.floor)])
-        self._buf = None
+        self._buf = self._rows = None
+
+    def model_rows(self) -> np.ndarray:
+        """The scene as the obstacle-aware TM reads it, float64 ``(P, 7)``: per primitive its centre, the
+        half extents of its axis-aligned bounding box and whether it is a sphere, spheres first, then
+        boxes, then cylinders (the rows of :func:`~kinlearn.models.obstacle_path.scene_primitives`
+        without padding, computed from this packing: the scene is converted once)."""
+        if self._rows is None:
+            s, b, c = self.spheres, self.boxes, self.cylinders
+            parts = [np.concatenate((s[:, :3], np.repeat(s[:, 3:4], 3, axis=1), np.ones((len(s), 1))), 1)]
+            R = np.abs(b[:, 6:15].reshape(-1, 3, 3))
+            parts.append(np.concatenate((b[:, :3], (R * b[:, None, 3:6]).sum(-1), np.zeros((len(b), 1))), 1))
+            a = c[:, [7, 10, 13]]  # a cylinder's axis: column 2 of its rotation
+            half = c[:, 3:4] * np.sqrt(np.maximum(1.0 - a * a, _TINY)) + c[:, 4:5] * np.abs(a)
+            parts.append(np.concatenate((c[:, :3], half, np.zeros((len(c), 1))), 1))
+            self._rows = np.ascontiguousarray(np.concatenate(parts))
+        return self._rows
 
     def args(self) -> tuple:
         return self.spheres, self.boxes, self.cylinders, self.floor
@@ -722,6 +785,8 @@ class KernelScene:
 
 #: Bodies packed by :meth:`KernelBody.of`, dropped with their body.
 _BODIES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: Chains packed by :meth:`KernelChain.of`, dropped with their robot.
+_CHAINS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 #: Scenes packed by :meth:`KernelScene.of`, dropped with their scene.
 _PACKED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 

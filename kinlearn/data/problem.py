@@ -43,11 +43,31 @@ STATE_EF_TOLERANCE = 1e-3
 LIMIT_TOLERANCE = 1e-6
 
 
-def _tensor(x, what: str) -> torch.Tensor:
+#: Up to this many configurations, FK runs in the compiled kernel (microseconds); more go to torch.
+SMALL_BATCH = 16
+
+
+def _array(x, what: str) -> np.ndarray:
+    """``x`` (a tensor, array or nested sequence of real numbers) as a float64 array (a view where it
+    already is one)."""
     if isinstance(x, torch.Tensor):
         check_real_dtype(x, what)
-        return x.detach().to(torch.float64)
-    return torch.from_numpy(real_array(x, what).astype(np.float64))
+        x = x.detach()
+        if x.dtype == torch.float64 and x.device.type == "cpu":
+            return x.numpy()
+        return x.cpu().double().numpy()
+    return real_array(x, what).astype(np.float64, copy=False)
+
+
+def positions(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """End-effector positions ``(N, 3)`` of float64 joints ``q (N, dof)`` by the analytic FK: the compiled
+    kernel for a few configurations (:class:`~kinlearn.collision.kernel.KernelChain`, no per-operation
+    dispatch), torch's fast kinematics for many. The two agree to rounding (≈ 1e-16 m)."""
+    if q.shape[0] <= SMALL_BATCH:
+        from ..collision.kernel import KernelChain  # numba loads on first use, not at import
+
+        return KernelChain.of(robot).position(q)
+    return kinematics(robot, "fast").position(torch.from_numpy(q), validate=False).numpy()
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,9 +115,9 @@ class Problem:
         if (goal is None) == (goal_position is None):
             raise ConfigError("give exactly one of goal (joints or a state) and goal_position (end effector)")
         dof, S = robot.dof, StateLayout(robot.dof).size
-        x0 = _tensor(start, "start")
+        x0 = _array(start, "start")
         position = goal_position is not None
-        xT = _tensor(goal_position if position else goal, "goal_position" if position else "goal")
+        xT = _array(goal_position if position else goal, "goal_position" if position else "goal")
         if not position and xT.ndim > 0 and xT.shape[-1] == 3 and dof != 3:
             position = True
         if x0.ndim == 0 or x0.shape[-1] not in (dof, S):
@@ -112,20 +132,34 @@ class Problem:
                 f"goal must have shape (..., {S}) (a state), (..., {dof}) (joint values) or (..., 3) (an "
                 f"end-effector position) for {robot.name}; got {tuple(xT.shape)}"
             )
-        try:
-            batch = torch.broadcast_shapes(x0.shape[:-1], xT.shape[:-1])
-        except RuntimeError as exc:
-            raise ShapeError(f"start {tuple(x0.shape)} and goal {tuple(xT.shape)} do not broadcast") from exc
-        x0 = x0.expand(*batch, x0.shape[-1])
-        xT = xT.expand(*batch, xT.shape[-1])
+        if x0.shape[:-1] == xT.shape[:-1]:
+            batch = x0.shape[:-1]
+        else:
+            try:
+                batch = np.broadcast_shapes(x0.shape[:-1], xT.shape[:-1])
+            except ValueError as exc:
+                raise ShapeError(
+                    f"start {tuple(x0.shape)} and goal {tuple(xT.shape)} do not broadcast"
+                ) from exc
+            x0 = np.broadcast_to(x0, (*batch, x0.shape[-1]))
+            xT = np.broadcast_to(xT, (*batch, xT.shape[-1]))
         start_state = _state(robot, x0, "start")
-        goal_state = xT.clone() if position else _state(robot, xT, "goal")
         if position:
-            check_finite(goal_state, "goal_position")
+            if not np.isfinite(xT).all():
+                check_finite(torch.from_numpy(np.ascontiguousarray(xT)), "goal_position")
+            goal_state = np.array(xT)  # its own copy
+        else:
+            goal_state = _state(robot, xT, "goal")
         scene = None
         if obstacles is not None:
-            scene = as_scene(obstacles, batch).to(dtype=torch.float64, device="cpu")
-        return cls(robot, start_state, goal_state, "position" if position else "state", scene)
+            scene = as_scene(obstacles, torch.Size(batch)).to(dtype=torch.float64, device="cpu")
+        return cls(
+            robot,
+            torch.from_numpy(start_state),
+            torch.from_numpy(goal_state),
+            "position" if position else "state",
+            scene,
+        )
 
     def __post_init__(self) -> None:
         if self.goal_kind not in GOAL_KINDS:
@@ -235,15 +269,21 @@ def state_error(what: str, worst: float) -> StateError:
     )
 
 
-def _state(robot: Robot, x: torch.Tensor, what: str) -> torch.Tensor:
-    """Joints or a state ``(..., dof [+ 3])`` as a checked state: joints within the limits, ef = FK."""
+def _state(robot: Robot, x: np.ndarray, what: str) -> np.ndarray:
+    """Joints or a state ``(..., dof [+ 3])`` (float64) as a checked state: joints within the limits,
+    ef = FK (computed once, here)."""
     dof = robot.dof
-    check_finite(x, what)
-    q = x[..., :dof]
-    robot.check_joints(q, tol=LIMIT_TOLERANCE, what=f"{what} joints")
-    ef = kinematics(robot, "fast").position(q.reshape(-1, dof), validate=False).reshape(*q.shape[:-1], 3)
+    q = x.reshape(-1, x.shape[-1])[:, :dof]
+    # One pass checks finiteness and the limits (a comparison with NaN is false); explain on failure.
+    lo, hi = robot.lower - LIMIT_TOLERANCE, robot.upper + LIMIT_TOLERANCE
+    if not (((q >= lo) & (q <= hi)).all() and (x.shape[-1] == dof or np.isfinite(x).all())):
+        check_finite(torch.from_numpy(np.ascontiguousarray(x)), what)
+        robot.check_joints(
+            torch.from_numpy(np.ascontiguousarray(q)), tol=LIMIT_TOLERANCE, what=f"{what} joints"
+        )
+    ef = positions(robot, np.ascontiguousarray(q))
     if x.shape[-1] > dof:
-        err = torch.linalg.vector_norm(x[..., dof:] - ef, dim=-1)
-        if bool((err > STATE_EF_TOLERANCE).any()):
+        err = np.linalg.norm(x.reshape(-1, x.shape[-1])[:, dof:] - ef, axis=-1)
+        if (err > STATE_EF_TOLERANCE).any():
             raise state_error(what, float(err.max()))
-    return torch.cat((q, ef), dim=-1)
+    return np.concatenate((q, ef), axis=-1).reshape(*x.shape[:-1], dof + 3)

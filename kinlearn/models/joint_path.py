@@ -263,15 +263,28 @@ def save_path_model(
     )
 
 
-def load_path_model(path: str | Path, robot: str | None = None, *, with_dependencies: bool = False):
+def load_path_model(
+    path: str | Path,
+    robot: str | None = None,
+    *,
+    with_dependencies: bool = False,
+    payload: dict | None = None,
+):
     """Load a joint-path TM saved by :func:`save_path_model` (training state, if any, is ignored).
 
     With ``with_dependencies`` also return ``{"fm": Path, "im": Path}``: the models it records, found and
     hash-checked (:func:`kinlearn.io.resolve_dependency`), or, where it records none, the ``fm.pt``/``im.pt``
-    beside it.
+    beside it. ``payload``: the file's content as :func:`~kinlearn.io.load_checkpoint` already read and
+    verified it (the file is then not read again); its kind and robot are checked here.
     """
     path = Path(path)
-    payload = load_checkpoint(path, kind=JointPathModel.kind, robot=robot)
+    if payload is None:
+        payload = load_checkpoint(path, kind=JointPathModel.kind, robot=robot)
+    elif payload.get("kind") != JointPathModel.kind or (robot is not None and payload.get("robot") != robot):
+        raise CheckpointError(
+            f"{path} holds a {payload.get('kind')!r} checkpoint for {payload.get('robot')!r}, not a "
+            f"{JointPathModel.kind!r} for {robot or 'any robot'!r}"
+        )
     try:
         tm = JointPathModel(JointPathConfig.from_dict(payload["config"]))
         state = dict(payload["state_dict"])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -14,7 +15,7 @@ from ..body.robot import Robot
 from ..checks import as_real, check_finite, check_last_dim
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
-from ..data.problem import LIMIT_TOLERANCE, Problem
+from ..data.problem import LIMIT_TOLERANCE, SMALL_BATCH, Problem, positions
 from ..errors import ConfigError, ShapeError
 
 __all__ = ["CHECK_TRAVEL", "DEFAULT_TOLERANCE", "Plan", "PlannerLike", "Tolerance", "judge"]
@@ -302,6 +303,7 @@ def judge(
     tolerance: Tolerance = DEFAULT_TOLERANCE,
     max_travel: float = CHECK_TRAVEL,
     body: BodySpheres | None = None,
+    collision_free=None,
 ) -> Plan:
     """The :class:`Plan` of the joint paths ``joints (..., T+1, dof)`` a planner made for ``problem``,
     judged on the robot itself: the analytic FK gives the end effector, the limits are checked on every
@@ -312,6 +314,14 @@ def judge(
     stand-in path with ``found`` False): ``success`` requires it, and that the path starts at the
     problem's start (within :data:`START_TOLERANCE`). ``body``: the collision spheres to check with
     (default: :func:`~kinlearn.collision.body_spheres` of the robot, built for this call).
+    ``collision_free (...)``: verdicts of this very dense check already computed by the caller (the
+    learned planner checks its candidates with it, and passes the chosen ones'), taken instead of
+    checking again; it is ignored without obstacles.
+
+    Up to :data:`~kinlearn.data.problem.SMALL_BATCH` paths given as a float64 NumPy array ``joints``
+    (or as a tensor) are judged on the fast path: FK and the dense check in the compiled kernels
+    (:mod:`kinlearn.collision.kernel`, the same verdicts), the rest in NumPy, no per-operation dispatch
+    (a batch-1 plan's verdict in microseconds); larger batches in torch. The rule is one.
 
     Raises :class:`ShapeError` for paths or a ``found`` mask of the wrong shape, :class:`ConfigError`
     for a ``max_travel`` that is not a number ≥ :data:`MIN_CHECK_TRAVEL` or a tolerance that is no
@@ -322,7 +332,34 @@ def judge(
         raise ConfigError(f"tolerance must be a kinlearn Tolerance, got {type(tolerance).__name__}")
     max_travel = as_real(max_travel, "max_travel (m of sphere travel)", minimum=MIN_CHECK_TRAVEL)
     robot = problem.robot
+    if isinstance(joints, np.ndarray):
+        if joints.dtype != np.float64 or joints.ndim < 2 or joints.shape[-1] != robot.dof:
+            joints = torch.from_numpy(np.asarray(joints))  # checked (and explained) as a tensor below
+        elif math.prod(joints.shape[:-2]) <= SMALL_BATCH:
+            return _judge_small(
+                problem, joints, waypoints, found, tolerance, max_travel, body, collision_free
+            )
+        else:
+            joints = torch.from_numpy(joints)
     check_last_dim(joints, robot.dof, "joint paths")
+    if isinstance(waypoints, np.ndarray):
+        waypoints = torch.from_numpy(waypoints)
+    if (
+        joints.device.type == "cpu"
+        and joints.ndim >= 2
+        and math.prod(joints.shape[:-2]) <= SMALL_BATCH
+        and joints.shape[:-2] == problem.batch_shape
+    ):
+        return _judge_small(
+            problem,
+            joints.detach().double().numpy(),
+            waypoints,
+            found,
+            tolerance,
+            max_travel,
+            body,
+            collision_free,
+        )
     if joints.ndim < 2 or joints.shape[:-2] != problem.batch_shape or joints.shape[-2] < 2:
         raise ShapeError(
             f"joint paths must have shape {(*problem.batch_shape, 'T+1', robot.dof)} with T ≥ 1 for "
@@ -351,8 +388,11 @@ def judge(
     within = within & ((joints[..., 0, :] - start).abs().amax(-1) <= START_TOLERANCE)
     free = None
     if problem.obstacles is not None:
-        body = body_spheres(robot) if body is None else body
-        free = check_path(body, joints, problem.obstacles, max_travel=max_travel).collision_free
+        if collision_free is not None:
+            free = torch.as_tensor(collision_free, dtype=torch.bool).reshape(problem.batch_shape)
+        else:
+            body = body_spheres(robot) if body is None else body
+            free = check_path(body, joints, problem.obstacles, max_travel=max_travel).collision_free
     state = problem.goal_kind == "state"
     goal = problem.goal if state else torch.cat((joints[..., -1, :], ef[..., -1, :]), dim=-1)
     return Plan.from_joints(
@@ -364,6 +404,90 @@ def judge(
         joint_goal=state,
         within_limits=within,
         collision_free=free,
+        tolerance=tolerance,
+        robot=robot.name,
+    )
+
+
+def _found_array(found, batch: torch.Size) -> np.ndarray | None:
+    if found is None:
+        return None
+    if not isinstance(found, torch.Tensor) or found.dtype != torch.bool or found.shape != batch:
+        what = (
+            f"a {found.dtype} tensor of shape {tuple(found.shape)}"
+            if isinstance(found, torch.Tensor)
+            else (type(found).__name__)
+        )
+        raise ShapeError(
+            f"found must be a bool tensor of the problems' batch shape {tuple(batch)}, got {what}"
+        )
+    return found.cpu().numpy().reshape(-1)
+
+
+def _judge_small(problem, J, waypoints, found, tolerance, max_travel, body, collision_free) -> Plan:
+    """:func:`judge` for at most ``SMALL_BATCH`` float64 paths ``J (..., T+1, dof)``: the same rule, in
+    NumPy and the compiled kernels."""
+    robot, batch = problem.robot, problem.batch_shape
+    dof = robot.dof
+    if J.shape[:-2] != batch or J.shape[-2] < 2:
+        raise ShapeError(
+            f"joint paths must have shape {(*batch, 'T+1', dof)} with T ≥ 1 for "
+            f"problems of batch shape {tuple(batch)}, got {tuple(J.shape)}"
+        )
+    K = J.shape[-2]
+    flat = np.ascontiguousarray(J.reshape(-1, K, dof))
+    n = flat.shape[0]
+    if not np.isfinite(flat).all():
+        check_finite(torch.from_numpy(flat), "joint paths")
+    ef = positions(robot, flat.reshape(-1, dof)).reshape(n, K, 3)
+    lo, hi = robot.lower - LIMIT_TOLERANCE, robot.upper + LIMIT_TOLERANCE
+    within = ((flat >= lo) & (flat <= hi)).all((-1, -2))
+    got = _found_array(found, batch)
+    if got is not None:
+        within &= got
+    start = problem.start.reshape(n, problem.start.shape[-1])[:, :dof].numpy()
+    within &= np.abs(flat[:, 0] - start).max(-1) <= START_TOLERANCE
+    free = None
+    if problem.obstacles is not None:
+        if collision_free is not None:
+            free = np.asarray(collision_free, dtype=bool).reshape(n)
+        else:
+            from ..collision import kernel
+
+            kb = kernel.KernelBody.of(body_spheres(robot) if body is None else body)
+            scene = problem.obstacles
+            unbatched = len(scene.batch_shape) == 0
+            flat_scene = None if unbatched else scene.reshape(n)
+            free = np.empty(n, dtype=bool)
+            for i in range(n):
+                ks = kernel.KernelScene.of(scene) if unbatched else kernel.KernelScene(flat_scene[i])
+                free[i] = kernel.first_free(kb, flat[i : i + 1], ks, max_travel=float(max_travel)) == 0
+    state = problem.goal_kind == "state"
+    goal = (
+        problem.goal.reshape(n, problem.goal.shape[-1]).numpy()
+        if state
+        else np.concatenate((flat[:, -1], ef[:, -1]), -1)
+    )
+    target = problem.target.reshape(n, 3).numpy()
+    wp = None
+    if waypoints is not None:
+        wp = waypoints.detach().double().cpu().numpy() if isinstance(waypoints, torch.Tensor) else waypoints
+        wp = wp.reshape(n, *wp.shape[len(batch) :])
+
+    def shaped(a):
+        if a is None:
+            return None
+        return np.array(a[0]) if batch == () else a.reshape(*batch, *a.shape[1:])
+
+    return Plan.from_joints(
+        shaped(goal),
+        shaped(flat),
+        shaped(ef),
+        waypoints=shaped(wp),
+        target=shaped(target),
+        joint_goal=state,
+        within_limits=shaped(within),
+        collision_free=shaped(free),
         tolerance=tolerance,
         robot=robot.name,
     )

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 import warnings
 from functools import lru_cache
 from pathlib import Path
@@ -36,19 +37,17 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import BUILTIN_ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
-from ..checks import as_int, check_finite, real_array
+from ..checks import as_int
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
-from ..collision.scene import Scene, as_scene
+from ..collision.scene import Scene
 from ..data.babbling import MAX_STEP
-from ..data.problem import LIMIT_TOLERANCE, STATE_EF_TOLERANCE, Problem, state_error
+from ..data.problem import LIMIT_TOLERANCE, SMALL_BATCH, Problem, positions
 from ..errors import (
     ConfigError,
     DomainError,
     DomainWarning,
-    DTypeError,
     NoObstacleModelWarning,
-    ShapeError,
 )
 from ..io import load_checkpoint, resolve_dependency
 from ..models.chain import ChainFM, solve_position, solve_position_arrays
@@ -57,8 +56,8 @@ from ..models.joint_path import JointPathModel, load_path_model
 from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model, scene_primitives
 from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
-from .inference import NumpyFK, NumpyObstacleModel, NumpyPathModel
-from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance
+from .inference import NumpyObstacleModel, NumpyPathModel
+from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance, judge
 
 __all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position"]
 
@@ -83,8 +82,6 @@ def _kernel():
 _LAZY: dict = {}
 
 
-#: Batches up to this many plans run in NumPy (a few microseconds per operation), larger ones in torch.
-SMALL_BATCH = 16
 #: A joint goal this close to the start (rad, every joint) is no move: its plan stays at the start.
 ZERO_MOVE = 1e-9
 #: The most refinement steps a plan may take (each costs milliseconds: a bound on a plan's time).
@@ -102,22 +99,13 @@ POSITION_TOLERANCE = 2e-4
 OBSTACLE_TM = "tm_obstacles.pt"
 
 
-def _as_array(x, what: str) -> tuple[np.ndarray, torch.dtype, torch.device]:
-    """``x`` (tensor, array or nested sequence of numbers) as a float64 array, with the dtype and
-    device the plan's tensors get."""
+def _out_dtype(x) -> tuple[torch.dtype, torch.device]:
+    """The dtype and device a plan of input ``x`` (already checked) is handed back in: a floating tensor's
+    own, float64 for a float64 array, else torch's default dtype; the CPU unless a tensor says otherwise."""
     if isinstance(x, torch.Tensor):
-        if x.dtype == torch.bool or x.is_complex():
-            raise DTypeError(f"{what} must hold real numbers, got a {x.dtype} tensor")
-        dtype = x.dtype if x.is_floating_point() else torch.get_default_dtype()
-        if x.dtype in _NUMPY_FLOATS and x.device.type == "cpu":
-            return x.detach().numpy().astype(np.float64, copy=False), dtype, x.device
-        return x.detach().cpu().double().numpy(), dtype, x.device
-    a = real_array(x, what)
-    dtype = torch.float64 if a.dtype == np.float64 else torch.get_default_dtype()
-    return a.astype(np.float64, copy=False), dtype, torch.device("cpu")
-
-
-_NUMPY_FLOATS = {torch.float32: np.float32, torch.float64: np.float64, torch.float16: np.float16}
+        return (x.dtype if x.is_floating_point() else torch.get_default_dtype()), x.device
+    kind = x.dtype if isinstance(x, np.ndarray) else np.asarray(x).dtype
+    return (torch.float64 if kind == np.float64 else torch.get_default_dtype()), torch.device("cpu")
 
 
 class Planner:
@@ -185,7 +173,6 @@ class Planner:
             if m is not None:
                 m.validate_inputs = False
         self.kin = kinematics(robot)
-        self._fk = NumpyFK(self.kin)
         self._np_tm = NumpyPathModel(tm) if isinstance(tm, JointPathModel) else None
         if obstacle_tm is not None:
             if not isinstance(obstacle_tm, ObstaclePathModel):
@@ -217,6 +204,7 @@ class Planner:
         self._body, self._body64 = body, None
         self.refine_steps = _check_steps(refine_steps)
         self._np_body_cache = None
+        self._small, self._large = _Compiled, _Torch
         self._core = self._rollout
         self._lo, self._hi = robot.limits(torch.float64)
         self._lo_np, self._hi_np = self._lo.numpy(), self._hi.numpy()
@@ -253,7 +241,9 @@ class Planner:
         # One verified read says which kind of TM the folder holds and what it records.
         payload = load_checkpoint(run_dir / "tm.pt", kind=None, robot=name)
         if payload["kind"] == JointPathModel.kind:
-            tm, sources = load_path_model(run_dir / "tm.pt", robot=name, with_dependencies=True)
+            tm, sources = load_path_model(
+                run_dir / "tm.pt", robot=name, with_dependencies=True, payload=payload
+            )
             fm = load_fm(sources["fm"], robot=tm.robot_name) if "fm" in sources else None
             im = load_im(sources["im"], robot=tm.robot_name) if "im" in sources else None
             if "chain" not in options and (run_dir / CHAIN).is_file():
@@ -280,84 +270,25 @@ class Planner:
         return _default_planner(robot)
 
     # ----------------------------------------------------------------------------------------------
-    # Input checks
+    # Input checks: one Problem, made and checked once
     # ----------------------------------------------------------------------------------------------
 
-    def _arrays(self, start, goal, goal_position):
-        """Checked inputs as float64 arrays: θ(0) ``(N, dof)``, the goal ``(N, dof)`` joints or ``(N, 3)``
-        position, whether it is a position, the start/goal states' given ef (or None), the batch shape,
-        and the output dtype and device."""
-        dof, S = self.robot.dof, self.layout.size
-        if (goal is None) == (goal_position is None):
-            raise ConfigError("give exactly one of goal (joints or a state) and goal_position (end effector)")
-        x0, dt0, dev = _as_array(start, "start")
-        if goal_position is not None:
-            xT, dtT, _ = _as_array(goal_position, "goal_position")
-            position = True
-            if xT.ndim == 0 or xT.shape[-1] != 3:
-                raise ShapeError(f"goal_position must have shape (..., 3) (metres), got {tuple(xT.shape)}")
-        else:
-            xT, dtT, _ = _as_array(goal, "goal")
-            position = xT.ndim > 0 and xT.shape[-1] == 3 and dof != 3
-        if x0.ndim == 0 or x0.shape[-1] not in (dof, S):
-            raise ShapeError(
-                f"start must have shape (..., {S}) (a state [θ, ef]) or (..., {dof}) (joint values) for "
-                f"{self.robot.name}; got {tuple(x0.shape)}"
-            )
-        if not position and (xT.ndim == 0 or xT.shape[-1] not in (dof, S)):
-            raise ShapeError(
-                f"goal must have shape (..., {S}) (a state), (..., {dof}) (joint values) or (..., 3) (an "
-                f"end-effector position) for {self.robot.name}; got {tuple(xT.shape)}"
-            )
-        if x0.shape[:-1] == xT.shape[:-1]:
-            batch = x0.shape[:-1]
-        else:
-            try:
-                batch = np.broadcast_shapes(x0.shape[:-1], xT.shape[:-1])
-            except ValueError as exc:
-                raise ShapeError(
-                    f"start {tuple(x0.shape)} and goal {tuple(xT.shape)} do not broadcast"
-                ) from exc
-            x0 = np.broadcast_to(x0, (*batch, x0.shape[-1]))
-            xT = np.broadcast_to(xT, (*batch, xT.shape[-1]))
-        x0, xT = x0.reshape(-1, x0.shape[-1]), xT.reshape(-1, xT.shape[-1])
-        lo, hi = self._lo_tol, self._hi_tol
-        for what, x in (("start", x0), ("goal", xT)):
-            is_joints = not (position and what == "goal")
-            q = x[:, :dof] if is_joints else x
-            # One pass checks finiteness and limits (a comparison with NaN is false); explain on failure.
-            ok = ((q >= lo) & (q <= hi)).all() if is_joints else np.isfinite(q).all()
-            if not ok or (x.shape[-1] > q.shape[-1] and not np.isfinite(x).all()):
-                name = "goal_position" if not is_joints and goal_position is not None else what
-                check_finite(torch.from_numpy(np.ascontiguousarray(x)), name)
-                self.robot.check_joints(
-                    torch.from_numpy(np.ascontiguousarray(q)), tol=LIMIT_TOLERANCE, what=f"{what} joints"
+    def _problem(self, start, goal, goal_position, obstacles) -> tuple[Problem, torch.dtype, torch.device]:
+        """The problem :meth:`plan` was given (a :class:`Problem`, trusted as made) or the one its arguments
+        make (:meth:`Problem.make` checks them, once), with the dtype and device the plan is handed back
+        in: the inputs' (float64 on the CPU for a Problem)."""
+        if isinstance(start, Problem):
+            if goal is not None or goal_position is not None or obstacles is not None:
+                raise ConfigError("a Problem carries its goal and obstacles: pass plan(problem) alone")
+            if start.robot.name != self.robot.name:
+                raise ConfigError(
+                    f"this planner is for {self.robot.name!r}; the problems are for {start.robot.name!r}"
                 )
-        ef_given = [
-            x[:, dof:] if x is not None and x.shape[-1] == S else None for x in (x0, None if position else xT)
-        ]
-        dtype = torch.promote_types(dt0, dtT)
-        return x0[:, :dof], (xT if position else xT[:, :dof]), position, ef_given, batch, dtype, dev
-
-    def _unpack(self, problem: Problem, goal, goal_position, obstacles):
-        """A problem's start, goal (state or position) and obstacles, as :meth:`plan` takes them."""
-        if goal is not None or goal_position is not None or obstacles is not None:
-            raise ConfigError("a Problem carries its goal and obstacles: pass plan(problem) alone")
-        if problem.robot.name != self.robot.name:
-            raise ConfigError(
-                f"this planner is for {self.robot.name!r}; the problems are for {problem.robot.name!r}"
-            )
-        if problem.goal_kind == "position":
-            return problem.start, None, problem.goal, problem.obstacles
-        return problem.start, problem.goal, None, problem.obstacles
-
-    def _check_states(self, ef_given, ef_fk) -> None:
-        for what, given, fk in zip(("start", "goal"), ef_given, ef_fk, strict=False):
-            if given is None:
-                continue
-            err = np.linalg.norm(given - fk, axis=-1)
-            if (err > STATE_EF_TOLERANCE).any():
-                raise state_error(what, float(err.max()))
+            return start, torch.float64, torch.device("cpu")
+        problem = Problem.make(self.robot, start, goal, goal_position=goal_position, obstacles=obstacles)
+        dtype, device = _out_dtype(start)
+        other, _ = _out_dtype(goal_position if goal_position is not None else goal)
+        return problem, torch.promote_types(dtype, other), device
 
     def _check_domain(self, s0: np.ndarray, sT: np.ndarray | None, strict: bool) -> None:
         if self._domain is None:
@@ -377,7 +308,7 @@ class Planner:
                 )
                 if strict:
                     raise DomainError(msg + "; pass strict=False to plan anyway")
-                warnings.warn(msg, DomainWarning, stacklevel=4)
+                warnings.warn(msg, DomainWarning, stacklevel=5)
 
     # ----------------------------------------------------------------------------------------------
     # Planning
@@ -395,53 +326,66 @@ class Planner:
     ) -> Plan:
         """Plan from ``start`` to ``goal``, around ``obstacles`` if given; or plan a
         :class:`~kinlearn.data.problem.Problem` given as ``start`` (the planner protocol,
-        :class:`~kinlearn.planning.plan.PlannerLike`: ``planner.plan(problem)``).
+        :class:`~kinlearn.planning.plan.PlannerLike`: ``planner.plan(problem)``). The convenience form
+        makes one :class:`Problem` of its arguments (:meth:`Problem.make`: every check, the start's and
+        goal's FK, the obstacles as a float64 scene) and plans it.
 
         ``start``: joint values ``(..., dof)`` or a state ``(..., dof + 3)``. ``goal``: likewise — the plan
         ends at its joints — or an end-effector position ``(..., 3)`` (also as ``goal_position=``), reached
         in whatever configuration the learned models find. Tensors, arrays or sequences of numbers;
         leading batch dimensions broadcast. Deterministic: the same input gives the same plan bit for
-        bit. Outputs have the input's floating dtype and device.
+        bit. Outputs have the input's floating dtype and device (a Problem's plan: float64).
 
         ``obstacles``: spheres ``[x, y, z, radius]`` (m, the robot's base frame) as ``(K, 4)`` (one scene
         for every plan) or ``(..., K, 4)`` (a scene per plan), or a :class:`~kinlearn.collision.Scene`
-        (spheres, boxes, a floor) of batch shape ``()`` or the plans'. The obstacle-aware TM proposes
-        several joint paths, the straight joint line joins them, and the shortest (in joint space) that
-        the dense check finds collision-free is the plan; the plan's ``collision_free`` says whether
-        one was (``success`` requires it); if none is, the shortest, flagged. A start or goal that
+        (spheres, boxes, cylinders, a floor) of batch shape ``()`` or the plans'. The obstacle-aware TM
+        proposes several joint paths, the straight joint line joins them, and the shortest (in joint
+        space) that the dense check finds collision-free is the plan; the plan's ``collision_free`` says
+        whether one was (``success`` requires it); if none is, the shortest, flagged. A start or goal that
         already collides gives a plan with ``collision_free`` False. Bad obstacles raise
         :class:`~kinlearn.errors.ObstacleError`. ``refine_steps``: overrides the planner's (see
         :meth:`__init__`) for this call: where no proposal is free, this many gradient steps refine the
         least colliding one (bounded time; 25 lifts the held-out success from 80% to 92%).
+
+        Every plan's verdict is :func:`~kinlearn.planning.plan.judge`'s (the analytic FK of its joint
+        path, the limits, the goal within tolerance, the dense check among obstacles).
 
         Raises :class:`ShapeError`, :class:`DTypeError`, :class:`NonFiniteError`,
         :class:`JointLimitError` or :class:`StateError` for bad input; warns with
         :class:`DomainWarning` (or raises :class:`DomainError` when ``strict``) for input outside
         the training domain. A plan that misses its goal is returned with ``success`` False.
         """
-        if isinstance(start, Problem):
-            start, goal, goal_position, obstacles = self._unpack(start, goal, goal_position, obstacles)
         steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
-        theta0, goal_arr, position, ef_given, batch, dtype, device = self._arrays(start, goal, goal_position)
-        n = theta0.shape[0]
+        problem, dtype, device = self._problem(start, goal, goal_position, obstacles)
+        return self._plan(problem, steps, refine_steps is None, strict, dtype, device)
+
+    __call__ = plan
+
+    def _plan(self, problem: Problem, steps: int, default_steps: bool, strict: bool, dtype, device) -> Plan:
+        """Plan a checked problem: its goal joints (solved first for a position goal), the joint paths
+        (free space: the TM's; among obstacles the stages of :meth:`_plan_around`), one verdict
+        (:func:`judge`), and the plan in the output's dtype and device."""
+        batch = problem.batch_shape
+        dof, S = self.robot.dof, self.layout.size
+        n = math.prod(batch)
+        s0 = problem.start.numpy().reshape(n, S)
+        theta0, ef0 = s0[:, :dof], s0[:, dof:]
+        position = problem.goal_kind == "position"
         if position:
-            ef0 = self._position(theta0)
-            self._check_states(ef_given[:1], [ef0])
-            self._check_domain(np.concatenate((theta0, ef0), -1), None, strict)
-            thetaT = self._reach_position(theta0, ef0, goal_arr)
-            efT = self._position(thetaT)
-            target = goal_arr
+            self._check_domain(s0, None, strict)
+            target = problem.goal.numpy().reshape(n, 3)
+            thetaT = self._reach_position(theta0, ef0, target)
+            efT = positions(self.robot, thetaT)
         else:
-            ef = self._position(np.concatenate((theta0, goal_arr)))
-            ef0, efT = ef[:n], ef[n:]
-            self._check_states(ef_given, [ef0, efT])
-            thetaT, target = goal_arr, efT
-            self._check_domain(np.concatenate((theta0, ef0), -1), np.concatenate((thetaT, efT), -1), strict)
-        free = None
-        if obstacles is not None:
-            scene = self._scene(obstacles, batch, n)
+            sT = problem.goal.numpy().reshape(n, S)
+            self._check_domain(s0, sT, strict)
+            thetaT, efT = sT[:, :dof], sT[:, dof:]
+        free = waypoints = None
+        if problem.obstacles is not None:
+            scene = problem.obstacles
+            scene = scene.reshape(n) if len(scene.batch_shape) > 1 else scene
             if self.obstacle_tm is None:
-                if refine_steps is None:
+                if default_steps:
                     steps = max(steps, NO_MODEL_REFINE_STEPS)
                 how = f"and {steps} steps of gradient refinement" if steps else "alone (refine_steps=0)"
                 warnings.warn(
@@ -449,46 +393,35 @@ class Planner:
                     f"planning with the straight joint line {how}, checked densely; plan.collision_free says "
                     "whether it cleared the obstacles",
                     NoObstacleModelWarning,
-                    stacklevel=3,
+                    stacklevel=4,
                 )
             joints, free = self._plan_around(theta0, ef0, thetaT, efT, scene, steps)
-            ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(n, joints.shape[1], 3)
-            waypoints = ef[:, 1:-1]
         elif self._np_tm is not None:
-            joints, waypoints, ef = self._joint_path(theta0, ef0, thetaT, efT)
+            joints, waypoints = self._joint_path(theta0, ef0, thetaT, efT)
         else:
-            joints, waypoints, ef = self._waypoint_rollout(theta0, ef0, thetaT, efT)
+            joints, waypoints = self._waypoint_rollout(theta0, ef0, thetaT, efT)
         # A move of zero plans as no motion, whatever the TM proposes (a position goal the start
         # already reaches keeps the start's joints).
         still = (np.abs(thetaT - theta0) <= ZERO_MOVE).all(-1)
         if still.any():
             joints[still] = theta0[still, None]
-            ef[still] = ef0[still, None]
-            waypoints[still] = ef0[still, None]
-        within = ((joints >= self._lo_tol) & (joints <= self._hi_tol)).all((-1, -2))
-        single = batch == ()
-
-        np_dtype = _NUMPY_FLOATS.get(dtype)
-
-        def t(a: np.ndarray) -> np.ndarray:
-            # The batch's shape (a single plan's leading dimension goes: np.ascontiguousarray would make
-            # its 0-d per-plan values 1-d), in the output's float type where NumPy has it.
-            a = np.array(a[0]) if single else np.ascontiguousarray(a.reshape((*batch, *a.shape[1:])))
-            return a.astype(np_dtype, copy=False) if np_dtype is not None and a.dtype != bool else a
-
-        plan = Plan.from_joints(
-            t(np.concatenate((thetaT, efT), -1)),
-            t(joints),
-            t(ef),
-            waypoints=t(waypoints),
-            target=t(target),
-            joint_goal=not position,
-            within_limits=t(within),
-            collision_free=None if free is None else t(free),
+            if waypoints is not None:
+                waypoints[still] = ef0[still, None]
+        lead = tuple(batch)
+        plan = judge(
+            problem,
+            joints.reshape(*lead, *joints.shape[1:]),
+            waypoints=None if waypoints is None else waypoints.reshape(*lead, *waypoints.shape[1:]),
             tolerance=self.tolerance,
-            robot=self.robot.name,
+            body=self.body if free is not None else None,
+            collision_free=free,
         )
-        if not (np_dtype is not None and device.type == "cpu"):
+        if position:  # the state the planner chose to reach the target (the waypoint TM may end beside it)
+            goal = np.concatenate((thetaT, efT), -1)
+            plan = dataclasses.replace(
+                plan, goal=torch.from_numpy(goal[0] if lead == () else goal.reshape(*lead, S))
+            )
+        if dtype != torch.float64 or device.type != "cpu":
             plan = dataclasses.replace(
                 plan,
                 **{
@@ -501,10 +434,8 @@ class Planner:
             plan = dataclasses.replace(plan, joints=_inside(plan.joints, self._lo_np, self._hi_np))
         return plan
 
-    __call__ = plan
-
     # ----------------------------------------------------------------------------------------------
-    # Obstacles
+    # Obstacles: stage 1, the learned proposals, checked densely; stage 2, bounded refinement
     # ----------------------------------------------------------------------------------------------
 
     @property
@@ -517,66 +448,57 @@ class Planner:
 
     @property
     def _np_body(self):
-        """The body packed for the compiled batch-1 checks (:class:`~kinlearn.collision.kernel.KernelBody`)."""
+        """The body packed for the compiled checks (:class:`~kinlearn.collision.kernel.KernelBody`)."""
         if self._np_body_cache is None:
             self._np_body_cache = _kernel().KernelBody(self.body)
         return self._np_body_cache
 
-    def _scene(self, obstacles, batch: tuple, n: int) -> Scene:
-        """``obstacles`` as a float64 scene of batch shape ``()`` or ``(n,)``."""
-        scene = as_scene(obstacles, batch).to(dtype=torch.float64, device="cpu")
-        return scene.reshape(n) if len(scene.batch_shape) > 1 else scene
+    def _backend(self, n: int) -> _Backend:
+        """Where a batch of ``n`` plans runs: the compiled kernels and NumPy for a few (no per-operation
+        dispatch), torch for many (its batched products and checks are faster there). The one place
+        the batch size decides anything."""
+        return self._small if n <= SMALL_BATCH else self._large
 
-    def _proposals(
-        self, theta0, ef0, thetaT, efT, rows, mask, floor, steps: int
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def _proposals(self, theta0, ef0, thetaT, efT, scenes, steps: int) -> tuple[np.ndarray, np.ndarray]:
         """The candidate joint paths ``(N, C + 1, K, dof)`` (the straight joint line first, then the
         obstacle-aware TM's; segments halved when refining) and each problem's order of them, shortest
         first (the straight line leads among equals).
 
-        The TM runs on each problem alone, as a batch-1 plan runs it (NumPy FK of its ends, its scene
-        without padding): float32 products of another batch size round differently (up to 3e-5 rad on
-        the held-out set), and a plan must not depend on its batch-mates. About 60 µs a problem, small
-        beside its dense check."""
+        ``scenes``: per problem its scene's model rows ``(P, 7)`` and floor ``(2,)``, without padding. The
+        TM runs on each problem alone, as a batch-1 plan runs it: float32 products of another batch size
+        round differently (up to 3e-5 rad on the held-out set), and a plan must not depend on its
+        batch-mates."""
         n, dof = theta0.shape
         if self.obstacle_tm is None:  # the straight joint line alone
             f = np.linspace(0.0, 1.0, NO_MODEL_KNOTS + 1)[1:-1, None]
             mid = np.zeros((n, 0, NO_MODEL_KNOTS - 1, dof))
-        elif n == 0:
-            mid = self._np_obstacle_tm(theta0, ef0, thetaT, efT, rows.numpy(), mask.numpy(), floor.numpy())
         else:
-            rows_np, mask_np, floor_np = rows.numpy(), mask.numpy(), floor.numpy()
+            tm = self._np_obstacle_tm
+            f = tm.fractions
             parts = []
             for i in range(n):
-                ends = np.concatenate((theta0[i : i + 1], thetaT[i : i + 1]))
-                e0, eT = self._fk.position(ends)
-                keep = mask_np[i]
+                rows, floor = scenes[i]
                 parts.append(
-                    self._np_obstacle_tm(
-                        ends[:1],
-                        e0[None],
-                        ends[1:],
-                        eT[None],
-                        rows_np[i : i + 1, keep],
-                        mask_np[i : i + 1, keep],
-                        floor_np[i : i + 1],
+                    tm(
+                        theta0[i : i + 1],
+                        ef0[i : i + 1],
+                        thetaT[i : i + 1],
+                        efT[i : i + 1],
+                        rows[None],
+                        np.ones((1, rows.shape[0]), dtype=bool),
+                        floor[None],
                     )
                 )
-            mid = np.concatenate(parts)
+            C = self.obstacle_tm.config.candidates
+            mid = np.concatenate(parts) if parts else np.zeros((0, C, f.shape[0], dof))
         np.clip(mid, self._lo_np, self._hi_np, out=mid)
         C = mid.shape[1]
-        if self.obstacle_tm is not None:
-            f = self.obstacle_tm.fractions.double().numpy()[:, None]
         line = theta0[:, None] + f * (thetaT - theta0)[:, None]  # the straight joint line's knots
         inner = np.concatenate((line[:, None], mid), axis=1)  # (N, C + 1, T − 1, dof)
-        paths = np.concatenate(
-            (
-                np.broadcast_to(theta0[:, None, None], (n, C + 1, 1, dof)),
-                inner,
-                np.broadcast_to(thetaT[:, None, None], (n, C + 1, 1, dof)),
-            ),
-            axis=2,
-        )
+        paths = np.empty((n, C + 1, inner.shape[2] + 2, dof))
+        paths[:, :, 0] = theta0[:, None]
+        paths[:, :, 1:-1] = inner
+        paths[:, :, -1] = thetaT[:, None]
         if steps:  # each segment halved (the same paths): the knots a refined path is optimised on
             paths = _halve_segments(paths)
         length = np.linalg.norm(np.diff(paths, axis=2), axis=-1).sum(-1)  # (N, C + 1)
@@ -587,38 +509,24 @@ class Planner:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Joint paths ``(N, K, dof)`` around ``scene`` and whether each is collision-free ``(N,)``.
 
-        Each plan is its problem's alone: its proposals are made as at batch 1 (:meth:`_proposals`), their
-        verdicts are exact, and the optimiser (whose first steps magnify rounding) starts from the very
-        path a batch-1 plan starts from."""
+        Stage 1: the learned proposals (:meth:`_proposals`), each problem's first collision-free one in
+        their order (exact verdicts), else its shortest, flagged. Stage 2 (``steps`` > 0), for the
+        problems stage 1 left colliding: the optimiser from the least colliding proposal
+        (:meth:`_refine`), kept if the dense check finds it free. Each stage takes the problems the one
+        before left unsolved, so a further stage joins as one more step here. Each plan is its
+        problem's alone: proposals are made as at batch 1 and the optimiser starts from the very path a
+        batch-1 plan starts from."""
         n = theta0.shape[0]
-        rows, mask, floor = scene_primitives(scene, n, torch.float64)
-        paths, order = self._proposals(theta0, ef0, thetaT, efT, rows, mask, floor, steps)
-        batched = len(scene.batch_shape) > 0
-        shared = None if batched else _kernel().KernelScene.of(scene)
-        if n <= SMALL_BATCH:
-            free = np.zeros(n, dtype=bool)
-            pick = order[:, 0].copy()  # none free: the shortest, flagged
-            for i in range(n):
-                nscene = _kernel().KernelScene(scene[i]) if batched else shared
-                k = _kernel().first_free(self._np_body, paths[i], nscene, order[i], max_travel=CHECK_TRAVEL)
-                if k >= 0:
-                    pick[i], free[i] = k, True
-        else:
-            check = check_path(
-                self.body,
-                torch.from_numpy(paths),
-                scene.unsqueeze(-1) if batched else scene,
-                max_travel=CHECK_TRAVEL,
-            )
-            ranked_free = np.take_along_axis(check.collision_free.numpy(), order, axis=1)
-            free = ranked_free.any(axis=1)
-            first = np.take_along_axis(order, ranked_free.argmax(axis=1)[:, None], 1)[:, 0]
-            pick = np.where(free, first, order[:, 0])
+        backend = self._backend(n)
+        packed = backend.scenes(scene, n)  # the scene converted once, for the TM and the check
+        paths, order = self._proposals(theta0, ef0, thetaT, efT, backend.rows(packed, scene, n), steps)
+        pick, free = backend.first_free(self, paths, order, scene, packed)
         out = paths[np.arange(n), pick]
         if steps:
+            batched = len(scene.batch_shape) > 0
             for i in np.flatnonzero(~free):
                 one = scene[int(i)] if batched else scene
-                nscene = _kernel().KernelScene(one) if batched else shared
+                nscene = packed[i] if packed is not None else _kernel().KernelScene(one)
                 _, clear, _ = _kernel().check_paths(self._np_body, paths[i], nscene, max_travel=CHECK_TRAVEL)
                 best = paths[i, int(np.argmax(clear))]  # from the least colliding one
                 out[i], free[i] = self._refine(best, one, nscene, steps)
@@ -636,43 +544,27 @@ class Planner:
         refined, _ = trajectory_optimiser(
             p[0], p[-1], scene, steps=steps, config=config, body=self.body, init=p
         )
-        refined = refined.numpy()
-        free, _, _ = _kernel().check_paths(
-            self._np_body, refined[None], nscene, max_travel=CHECK_TRAVEL, exact=False
-        )
-        return (refined, True) if bool(free[0]) else (path, False)
+        refined = np.ascontiguousarray(refined.numpy())
+        free = _kernel().first_free(self._np_body, refined[None], nscene, max_travel=CHECK_TRAVEL) == 0
+        return (refined, True) if free else (path, False)
 
-    def _position(self, q: np.ndarray) -> np.ndarray:
-        """FK of ``(N, dof)`` float64 configurations: NumPy for a few, torch's fast path for many."""
-        if q.shape[0] <= SMALL_BATCH:
-            return self._fk.position(q)
-        return self.kin.position(torch.from_numpy(q), validate=False).numpy()
+    # ----------------------------------------------------------------------------------------------
+    # Free space
+    # ----------------------------------------------------------------------------------------------
 
-    def _tm_forward(self, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
-        """The joint-path TM's waypoints (joints, ef) as float64 arrays: NumPy for small batches, torch
-        (in the TM's dtype) for large ones, where its matrix products are faster."""
-        if theta0.shape[0] <= SMALL_BATCH:
-            return self._np_tm(theta0, ef0, thetaT, efT)
-        dtype = self.tm.in_mean.dtype
-        s0 = torch.from_numpy(np.concatenate((theta0, ef0), -1)).to(dtype)
-        sT = torch.from_numpy(np.concatenate((thetaT, efT), -1)).to(dtype)
-        with torch.no_grad():
-            out = self.tm(s0, sT)
-        return out.joints.double().numpy(), out.ef.double().numpy()
-
-    def _joint_path(self, theta0, ef0, thetaT, efT):
-        """The joint-path TM's plan: knots ``(N, T + 1, dof)``, its ef waypoints and the knots' FK."""
+    def _joint_path(self, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
+        """The joint-path TM's plan: knots ``(N, T + 1, dof)`` (clamped to the limits) and its ef
+        waypoints ``(N, T − 1, 3)``."""
         n, dof = theta0.shape
-        mid, waypoints = self._tm_forward(theta0, ef0, thetaT, efT)
+        mid, waypoints = self._backend(n).tm(self, theta0, ef0, thetaT, efT)
         np.clip(mid, self._lo_np, self._hi_np, out=mid)
-        joints = np.concatenate((theta0[:, None], mid, thetaT[:, None]), axis=1)
-        ef_mid = self._position(mid.reshape(-1, dof)).reshape(n, mid.shape[1], 3)
-        ef = np.concatenate((ef0[:, None], ef_mid, efT[:, None]), axis=1)
-        return joints, waypoints, ef
+        joints = np.empty((n, mid.shape[1] + 2, dof))
+        joints[:, 0], joints[:, 1:-1], joints[:, -1] = theta0, mid, thetaT
+        return joints, waypoints
 
     @torch.no_grad()
-    def _waypoint_rollout(self, theta0, ef0, thetaT, efT):
-        """The waypoint TM's plan (TM waypoints, IM/FM rollout): joints, waypoints and their FK."""
+    def _waypoint_rollout(self, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
+        """The waypoint TM's plan (TM waypoints, IM/FM rollout): joints and waypoints."""
         net_dtype = self.tm.in_mean.dtype
         s0 = torch.from_numpy(np.concatenate((theta0, ef0), -1)).to(net_dtype)
         sT = torch.from_numpy(np.concatenate((thetaT, efT), -1)).to(net_dtype)
@@ -680,8 +572,7 @@ class Planner:
         joints = theta0[:, None] + np.concatenate(
             (np.zeros_like(theta0[:, None]), np.cumsum(actions.double().numpy(), axis=1)), axis=1
         )
-        ef = self._position(joints.reshape(-1, joints.shape[-1])).reshape(*joints.shape[:2], 3)
-        return joints, waypoints.double().numpy(), ef
+        return joints, waypoints.double().numpy()
 
     def _rollout(self, s0: torch.Tensor, sT: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """TM waypoints and the IM/FM rollout's actions for flat ``(N, S)`` states (network dtype)."""
@@ -774,6 +665,81 @@ class Planner:
             refine=self.refine,
             max_step=self.max_step,
         )
+
+
+class _Backend:
+    """What a batch size runs on (:meth:`Planner._backend`): the TM's forward pass, the scenes packed for
+    the check and the TM, and each problem's first collision-free candidate."""
+
+
+class _Compiled(_Backend):
+    """A few plans: the TM in NumPy, scenes packed once for the compiled kernels (which also give the
+    obstacle TM its rows), verdicts by :func:`~kinlearn.collision.kernel.first_free`."""
+
+    @staticmethod
+    def tm(planner: Planner, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
+        return planner._np_tm(theta0, ef0, thetaT, efT)
+
+    @staticmethod
+    def scenes(scene: Scene, n: int) -> list:
+        K = _kernel().KernelScene
+        if len(scene.batch_shape) == 0:
+            return [K.of(scene)] * n
+        return [K(scene[i]) for i in range(n)]
+
+    @staticmethod
+    def rows(packed: list, scene: Scene, n: int) -> list:
+        return [(ks.model_rows(), ks.floor) for ks in packed]
+
+    @staticmethod
+    def first_free(planner: Planner, paths, order, scene: Scene, packed) -> tuple[np.ndarray, np.ndarray]:
+        n = paths.shape[0]
+        free = np.zeros(n, dtype=bool)
+        pick = order[:, 0].copy()  # none free: the shortest, flagged
+        check = _kernel().first_free
+        for i in range(n):
+            k = check(planner._np_body, paths[i], packed[i], order[i], max_travel=CHECK_TRAVEL)
+            if k >= 0:
+                pick[i], free[i] = k, True
+        return pick, free
+
+
+class _Torch(_Backend):
+    """Many plans: the TM in torch (in its dtype), the obstacle TM's rows by
+    :func:`~kinlearn.models.obstacle_path.scene_primitives`, verdicts by torch's
+    :func:`~kinlearn.collision.check_path` on every candidate at once."""
+
+    @staticmethod
+    def tm(planner: Planner, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
+        dtype = planner.tm.in_mean.dtype
+        s0 = torch.from_numpy(np.concatenate((theta0, ef0), -1)).to(dtype)
+        sT = torch.from_numpy(np.concatenate((thetaT, efT), -1)).to(dtype)
+        with torch.no_grad():
+            out = planner.tm(s0, sT)
+        return out.joints.double().numpy(), out.ef.double().numpy()
+
+    @staticmethod
+    def scenes(scene: Scene, n: int) -> None:
+        return None
+
+    @staticmethod
+    def rows(packed, scene: Scene, n: int) -> list:
+        rows, mask, floor = (t.numpy() for t in scene_primitives(scene, n, torch.float64))
+        return [(rows[i, mask[i]], floor[i]) for i in range(n)]
+
+    @staticmethod
+    def first_free(planner: Planner, paths, order, scene: Scene, packed) -> tuple[np.ndarray, np.ndarray]:
+        batched = len(scene.batch_shape) > 0
+        check = check_path(
+            planner.body,
+            torch.from_numpy(paths),
+            scene.unsqueeze(-1) if batched else scene,
+            max_travel=CHECK_TRAVEL,
+        )
+        ranked_free = np.take_along_axis(check.collision_free.numpy(), order, axis=1)
+        free = ranked_free.any(axis=1)
+        first = np.take_along_axis(order, ranked_free.argmax(axis=1)[:, None], 1)[:, 0]
+        return np.where(free, first, order[:, 0]), free
 
 
 @torch.no_grad()
