@@ -466,3 +466,33 @@ def test_doc_blocks_run(doc, reader_files, tmp_path, monkeypatch):
         for name in set(robot_module.ROBOTS) - robots:
             robot_module.unregister_robot(name)
         os.chdir(ROOT)
+
+
+def test_a_drifted_block_fails(tmp_path, monkeypatch):
+    """The runner is no rubber stamp: a renamed option, a missing script, an unknown command, a bad
+    synopsis or a Python name that no longer exists each fail the doc they are in."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "benchmarks").symlink_to(ROOT / "benchmarks")
+    run = DocRun("README.md")
+    drifted = [
+        ("shell", "kinlearn make-endpoints --pairs 10 --run-dir runs/e"),  # the option is --n
+        ("shell", "kinlearn reproduce --quick --workers 0"),  # parsed only, and 0 workers is refused
+        ("shell", "python benchmarks/no_such_benchmark.py --n 3"),
+        ("shell", "python benchmarks/plan_latency.py [--calls 10] [--no-rrt]"),
+        ("shell", "make install"),
+        ("python", "import kinlearn\nkinlearn.no_such_function()"),
+    ]
+    for kind, text in drifted:
+        with pytest.raises((pytest.fail.Exception, AssertionError, AttributeError)):
+            getattr(run, kind)(text, 1)
+    assert tiny_options(["babble", "--transitions", "1000000", "--run-dir", "r"]) == [
+        "babble",
+        "--run-dir",
+        "r",
+        "--transitions",
+        "3000",
+        "--walkers",
+        "50",
+    ]
+    run.shell("kinlearn make-endpoints --n 12000 --heldout 2000 --run-dir runs/e", 1)  # runs, tiny
+    assert (tmp_path / "runs" / "e" / "config.json").is_file()
