@@ -10,8 +10,8 @@ import pytest
 import torch
 
 from kinlearn import CheckpointError, ConfigError, kinematics, load_robot
-from kinlearn.errors import DatasetError
 from kinlearn.data.babbling import BabblingConfig, babble
+from kinlearn.errors import DatasetError
 from kinlearn.models.forward_inverse import (
     AnalyticFM,
     AnalyticIM,
