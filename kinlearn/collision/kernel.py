@@ -232,6 +232,52 @@ def _tip_positions(qs, F, prismatic):
 
 
 @_jit
+def _checked_tips(qs, F, prismatic, lower, upper, tol, ok):
+    """:func:`_tip_positions`, and ``ok (N,)`` filled with whether each configuration is finite and within
+    ``[lower − tol, upper + tol]`` (a comparison with NaN is false)."""
+    n, dof = qs.shape
+    for i in range(n):
+        good = True
+        for j in range(dof):
+            v = qs[i, j]
+            if not (v >= lower[j] - tol and v <= upper[j] + tol):
+                good = False
+        ok[i] = good
+    return _tip_positions(qs, F, prismatic)
+
+
+@_jit
+def _model_rows(spheres, boxes, cylinders):
+    """The obstacle TM's rows ``(K + B + C, 7)`` of packed tables (see :meth:`KernelScene.model_rows`)."""
+    K, B, C = spheres.shape[0], boxes.shape[0], cylinders.shape[0]
+    out = np.empty((K + B + C, 7))
+    for i in range(K):
+        for a in range(3):
+            out[i, a] = spheres[i, a]
+            out[i, 3 + a] = spheres[i, 3]
+        out[i, 6] = 1.0
+    for i in range(B):
+        r = K + i
+        for a in range(3):
+            out[r, a] = boxes[i, a]
+            # Σ_b |R_ab| h_b, summed in the order b = 0, 1, 2 (as torch and NumPy sum three terms)
+            out[r, 3 + a] = (
+                abs(boxes[i, 6 + 3 * a]) * boxes[i, 3]
+                + abs(boxes[i, 7 + 3 * a]) * boxes[i, 4]
+                + abs(boxes[i, 8 + 3 * a]) * boxes[i, 5]
+            )
+        out[r, 6] = 0.0
+    for i in range(C):
+        r = K + B + i
+        for a in range(3):
+            out[r, a] = cylinders[i, a]
+            ax = cylinders[i, 7 + 3 * a]  # the axis: column 2 of R
+            out[r, 3 + a] = cylinders[i, 3] * math.sqrt(max(1.0 - ax * ax, _TINY)) + cylinders[i, 4] * abs(ax)
+        out[r, 6] = 0.0
+    return out
+
+
+@_jit
 def _centres(qs, F, prismatic, link, folded):
     out = np.empty((qs.shape[0], link.shape[0], 3))
     frames = np.empty((qs.shape[1] + 1, 3, 4))
@@ -685,7 +731,7 @@ class KernelChain:
     """A robot's end-effector FK for the kernels: its canonical fixed transforms ``F (dof + 1, 4, 4)`` (the
     last one to the tip) and which joints are prismatic. :meth:`of` packs a robot once."""
 
-    __slots__ = ("F", "__weakref__", "dof", "prismatic")
+    __slots__ = ("F", "__weakref__", "dof", "lower", "prismatic", "upper")
 
     @classmethod
     def of(cls, robot) -> KernelChain:
@@ -703,6 +749,15 @@ class KernelChain:
         self.F = np.ascontiguousarray(np.asarray(kin.F, dtype=np.float64))
         self.prismatic = np.array(kin.prismatic, dtype=np.bool_)
         self.dof = int(robot.dof)
+        self.lower = np.ascontiguousarray(robot.lower, dtype=np.float64)
+        self.upper = np.ascontiguousarray(robot.upper, dtype=np.float64)
+
+    def checked(self, q: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(positions (N, 3), ok (N,))`` of float64 joints ``q (N, dof)``: :meth:`position`, and whether
+        each configuration is finite and within the joint limits widened by ``tol`` (one call)."""
+        ok = np.empty(q.shape[0], dtype=np.bool_)
+        q = q if q.flags.c_contiguous else np.ascontiguousarray(q)
+        return _checked_tips(q, self.F, self.prismatic, self.lower, self.upper, float(tol), ok), ok
 
     def position(self, q: np.ndarray) -> np.ndarray:
         """End-effector positions ``(N, 3)`` of float64 joints ``q (N, dof)`` (the caller's checked
@@ -753,14 +808,7 @@ class KernelScene:
         boxes, then cylinders (the rows of :func:`~kinlearn.models.obstacle_path.scene_primitives`
         without padding, computed from this packing: the scene is converted once)."""
         if self._rows is None:
-            s, b, c = self.spheres, self.boxes, self.cylinders
-            parts = [np.concatenate((s[:, :3], np.repeat(s[:, 3:4], 3, axis=1), np.ones((len(s), 1))), 1)]
-            R = np.abs(b[:, 6:15].reshape(-1, 3, 3))
-            parts.append(np.concatenate((b[:, :3], (R * b[:, None, 3:6]).sum(-1), np.zeros((len(b), 1))), 1))
-            a = c[:, [7, 10, 13]]  # a cylinder's axis: column 2 of its rotation
-            half = c[:, 3:4] * np.sqrt(np.maximum(1.0 - a * a, _TINY)) + c[:, 4:5] * np.abs(a)
-            parts.append(np.concatenate((c[:, :3], half, np.zeros((len(c), 1))), 1))
-            self._rows = np.ascontiguousarray(np.concatenate(parts))
+            self._rows = _model_rows(self.spheres, self.boxes, self.cylinders)
         return self._rows
 
     def args(self) -> tuple:

@@ -273,17 +273,23 @@ def _state(robot: Robot, x: np.ndarray, what: str) -> np.ndarray:
     """Joints or a state ``(..., dof [+ 3])`` (float64) as a checked state: joints within the limits,
     ef = FK (computed once, here)."""
     dof = robot.dof
-    q = x.reshape(-1, x.shape[-1])[:, :dof]
-    # One pass checks finiteness and the limits (a comparison with NaN is false); explain on failure.
-    lo, hi = robot.lower - LIMIT_TOLERANCE, robot.upper + LIMIT_TOLERANCE
-    if not (((q >= lo) & (q <= hi)).all() and (x.shape[-1] == dof or np.isfinite(x).all())):
+    flat = x.reshape(-1, x.shape[-1])
+    q = np.ascontiguousarray(flat[:, :dof])
+    ef = None
+    if q.shape[0] <= SMALL_BATCH:  # limits, finiteness and FK in one compiled call
+        from ..collision.kernel import KernelChain
+
+        ef, ok = KernelChain.of(robot).checked(q, LIMIT_TOLERANCE)
+        good = bool(ok.all())
+    else:  # one pass checks finiteness and the limits (a comparison with NaN is false)
+        good = bool(((q >= robot.lower - LIMIT_TOLERANCE) & (q <= robot.upper + LIMIT_TOLERANCE)).all())
+    if not good or (x.shape[-1] > dof and not np.isfinite(flat).all()):  # explain
         check_finite(torch.from_numpy(np.ascontiguousarray(x)), what)
-        robot.check_joints(
-            torch.from_numpy(np.ascontiguousarray(q)), tol=LIMIT_TOLERANCE, what=f"{what} joints"
-        )
-    ef = positions(robot, np.ascontiguousarray(q))
+        robot.check_joints(torch.from_numpy(q), tol=LIMIT_TOLERANCE, what=f"{what} joints")
+    if ef is None:
+        ef = positions(robot, q)
     if x.shape[-1] > dof:
-        err = np.linalg.norm(x.reshape(-1, x.shape[-1])[:, dof:] - ef, axis=-1)
+        err = np.linalg.norm(flat[:, dof:] - ef, axis=-1)
         if (err > STATE_EF_TOLERANCE).any():
             raise state_error(what, float(err.max()))
     return np.concatenate((q, ef), axis=-1).reshape(*x.shape[:-1], dof + 3)

@@ -15,7 +15,7 @@ from ..body.robot import Robot
 from ..checks import as_real, check_finite, check_last_dim
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.check import check_path
-from ..data.problem import LIMIT_TOLERANCE, SMALL_BATCH, Problem, positions
+from ..data.problem import LIMIT_TOLERANCE, SMALL_BATCH, Problem
 from ..errors import ConfigError, ShapeError
 
 __all__ = ["CHECK_TRAVEL", "DEFAULT_TOLERANCE", "Plan", "PlannerLike", "Tolerance", "judge"]
@@ -73,6 +73,11 @@ class Plan:
             joint path, checked densely (at most 1 cm of body-sphere travel between checked
             configurations, :func:`kinlearn.collision.check_path`), touches the scene or itself;
             ``success`` then requires it. ``None`` where no obstacles were given (not checked).
+        stage: which stage of the planner made each plan (:data:`kinlearn.planning.stages.STAGES`):
+            ``"learned"`` (the learned model's plan or proposals), ``"refine"`` (bounded gradient
+            refinement), ``"rrt"`` (RRT-Connect under a deadline), ``"none"`` (no stage cleared the
+            obstacles: flagged, ``success`` False). A ``str`` for a single plan, an array of them
+            ``(...)`` for a batch; ``None`` for a baseline's plan.
 
     Derived: ``start`` ``(..., dof + 3)`` the start state [θ(0), ef(0)]; ``actions`` ``(..., T, dof)`` the
     joint changes a(0) … a(T−1).
@@ -89,6 +94,7 @@ class Plan:
     tolerance: Tolerance = DEFAULT_TOLERANCE
     robot: str | None = None
     collision_free: torch.Tensor | None = None
+    stage: str | np.ndarray | None = None
 
     #: Fields holding per-plan tensors, indexed with the batch (``collision_free`` too, where set).
     _BATCHED = (
@@ -194,9 +200,11 @@ class Plan:
             probe[idx]
         except (IndexError, TypeError) as exc:
             raise ShapeError(f"index {idx!r} does not fit the plan's batch shape {self.batch_shape}") from exc
-        return dataclasses.replace(
-            self, **{f: getattr(self, f)[idx] for f in self._BATCHED if getattr(self, f) is not None}
-        )
+        fields = {f: getattr(self, f)[idx] for f in self._BATCHED if getattr(self, f) is not None}
+        if isinstance(self.stage, np.ndarray):
+            stage = self.stage[idx]
+            fields["stage"] = str(stage) if np.ndim(stage) == 0 else stage
+        return dataclasses.replace(self, **fields)
 
     def _robot(self, robot):
         from ..body.robot import Robot, load_robot
@@ -437,11 +445,14 @@ def _judge_small(problem, J, waypoints, found, tolerance, max_travel, body, coll
     K = J.shape[-2]
     flat = np.ascontiguousarray(J.reshape(-1, K, dof))
     n = flat.shape[0]
-    if not np.isfinite(flat).all():
+    from ..collision.kernel import KernelChain
+
+    ef, ok = KernelChain.of(robot).checked(flat.reshape(n * K, dof), LIMIT_TOLERANCE)
+    ok = ok.reshape(n, K)
+    if not ok.all() and not np.isfinite(flat).all():
         check_finite(torch.from_numpy(flat), "joint paths")
-    ef = positions(robot, flat.reshape(-1, dof)).reshape(n, K, 3)
-    lo, hi = robot.lower - LIMIT_TOLERANCE, robot.upper + LIMIT_TOLERANCE
-    within = ((flat >= lo) & (flat <= hi)).all((-1, -2))
+    ef = ef.reshape(n, K, 3)
+    within = ok.all(-1)
     got = _found_array(found, batch)
     if got is not None:
         within &= got
