@@ -88,7 +88,7 @@ TINY_PYTHON: dict[str, list[tuple[str, str]]] = {
         ),
         (
             'model_error_sweep("iiwa14", n_goals=2000, seeds=(0, 1, 2), progress=True)',
-            'model_error_sweep("iiwa14", n_goals=16, seeds=(0,), levels=((0.02, 1.0),), calibration_samples=1000)',
+            'model_error_sweep("iiwa14", n_goals=8, seeds=(0,), levels=((0.02, 1.0),), calibration_samples=1000)',
         ),
     ],
 }
