@@ -24,7 +24,8 @@ from _common import header, markdown_table
 
 from kinlearn import load_robot
 from kinlearn.collision import body_spheres
-from kinlearn.data.problems import ProblemSet, RrtChecker, rrt_connect_solve
+from kinlearn.collision.ompl import OmplRrtConnect, RrtChecker
+from kinlearn.data.problems import ProblemSet
 
 HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"
 
@@ -49,9 +50,8 @@ def main() -> None:
         times, solved, checks, busy = [], 0, 0, 0.0
         for i in picks:
             start, goal, scene = problems.problem(i)
-            path, t = rrt_connect_solve(
-                body, scene, start, goal, time_limit=args.time_limit, seed=i, compiled=compiled
-            )
+            rrt = OmplRrtConnect(body.robot, body, scene, compiled=compiled)
+            path, t = rrt.solve(start, goal, time_limit=args.time_limit, seed=i)
             times.append(t)
             solved += path is not None
             # Validity checks per second, on this problem's own kinds of queries.

@@ -158,7 +158,7 @@ def test_typed_errors():
 
 
 def test_rrt_checker_compiled_answers_as_torch():
-    from kinlearn.data.problems import RrtChecker
+    from kinlearn.collision.ompl import RrtChecker
 
     robot = load_robot("iiwa14")
     body = body_spheres(robot).double()

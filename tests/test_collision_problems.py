@@ -9,6 +9,7 @@ import torch
 
 from kinlearn import kinematics
 from kinlearn.collision import Scene, check_path, clearances
+from kinlearn.collision.ompl import OmplRrtConnect
 from kinlearn.data.problems import (
     FAMILIES,
     LEGACY_FAMILIES,
@@ -16,7 +17,6 @@ from kinlearn.data.problems import (
     ProblemSet,
     make_problems,
     problem_seed,
-    rrt_connect_solve,
 )
 from kinlearn.errors import ConfigError, DatasetError
 from kinlearn.io import save_npz
@@ -72,7 +72,7 @@ def test_generation_is_seeded_and_shelf_goals_are_inside(robot, body):
 def test_rrt_connect_path_passes_the_dense_check(body):
     problems = make_problems("barrier", 1, seed=11, config=ProblemConfig(verify=False))
     start, goal, scene = problems.problem(0)
-    path, elapsed = rrt_connect_solve(body, scene, start, goal, time_limit=5.0, seed=0)
+    path, elapsed = OmplRrtConnect(body.robot, body, scene).solve(start, goal, time_limit=5.0, seed=0)
     assert path is not None and elapsed > 0
     assert np.allclose(path[0], start.numpy()) and np.allclose(path[-1], goal.numpy())
     assert bool(check_path(body, torch.as_tensor(path), scene).collision_free)
@@ -80,7 +80,7 @@ def test_rrt_connect_path_passes_the_dense_check(body):
     blocked = Scene.from_spheres(
         torch.cat([body(goal)[-1], torch.tensor([0.1], dtype=torch.float64)]).unsqueeze(0)
     )
-    none, _ = rrt_connect_solve(body, blocked, start, goal, time_limit=0.2, seed=0)
+    none, _ = OmplRrtConnect(body.robot, body, blocked).solve(start, goal, time_limit=0.2, seed=0)
     assert none is None
 
 

@@ -24,7 +24,7 @@ joint configurations found by damped-least-squares IK from random initial joints
 end-effector targets, kept only if they are within the joint limits by ``joint_margin``, at least
 ``min_clearance`` from the scene and from self-collision, and their end effectors are ≥ 0.2 m apart.
 A problem is kept only if OMPL's RRT-Connect finds a path within ``time_limit`` seconds on the same
-checker (:class:`RrtChecker`: a state is valid when its body–scene clearance and self-clearance are
+checker (:class:`~kinlearn.collision.ompl.RrtChecker`: a state is valid when its body–scene clearance and self-clearance are
 > 0; a motion is valid when the dense check of :func:`~kinlearn.collision.check_path` finds it free,
 ≤ 1 cm of sphere travel between checked configurations). ``hard`` marks problems whose straight
 joint-space line from start to goal collides.
@@ -38,7 +38,6 @@ replaced on another.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -48,11 +47,11 @@ import torch
 
 from ..body.kinematics import dls_step, kinematics
 from ..body.robot import Robot, load_robot
-from ..body.state import straight_line
 from ..collision.body import BodySpheres, body_spheres
-from ..collision.check import check_path, clearances, segment_steps
+from ..collision.check import check_path, clearances
+from ..collision.ompl import OmplRrtConnect, import_ompl
 from ..collision.scene import Scene
-from ..errors import ConfigError, DatasetError, MissingDependencyError, ObstacleError, PlanningError
+from ..errors import ConfigError, DatasetError, ObstacleError, PlanningError
 from ..io import load_npz, save_npz
 from .scenes import SCENE_FAMILIES, build_scene, scene_scale
 
@@ -62,10 +61,8 @@ __all__ = [
     "PROBLEM_FORMAT",
     "ProblemConfig",
     "ProblemSet",
-    "RrtChecker",
     "make_problems",
     "problem_seed",
-    "rrt_connect_solve",
 ]
 
 #: The iiwa14's first three families (the shipped obstacle network's training scenes), then the seven
@@ -76,6 +73,8 @@ FAMILIES: tuple[str, ...] = LEGACY_FAMILIES + SCENE_FAMILIES
 PROBLEM_FORMAT = 1
 
 _F64 = torch.float64
+#: What the error without OMPL names as needing it.
+_VERIFY = "verifying problems (pass ProblemConfig(verify=False) to skip it)"
 
 
 @dataclass(frozen=True)
@@ -284,168 +283,6 @@ def _turn(boxes: torch.Tensor, spheres: torch.Tensor, k: int):
 
 
 # --------------------------------------------------------------------------------------------------
-# RRT-Connect on the same checker
-# --------------------------------------------------------------------------------------------------
-
-
-def _import_ompl():
-    try:
-        from ompl import base as ob
-        from ompl import geometric as og
-        from ompl import util as ou
-    except ImportError as exc:
-        raise MissingDependencyError(
-            "verifying problems needs OMPL's Python bindings, which are not installed: `pip install ompl` "
-            "(or `pip install kinlearn[ompl]`), or pass ProblemConfig(verify=False)"
-        ) from exc
-    return ob, og, ou
-
-
-class RrtChecker:
-    """State and motion validity for OMPL on kinlearn's checker: one body, one unbatched scene.
-
-    A state is valid when its body–scene clearance and self-clearance are both > 0; a motion is valid
-    when :func:`~kinlearn.collision.check_path` finds the straight joint-space segment free
-    (``max_travel`` metres of sphere travel at most between checked configurations). ``compiled``
-    (default): answered by the compiled kernels (:mod:`kinlearn.collision.kernel`, the same verdicts);
-    ``False``: by torch, as before them (kept to measure one against the other).
-    """
-
-    def __init__(self, body: BodySpheres, scene: Scene, max_travel: float = 0.01, compiled: bool = True):
-        self.body, self.scene, self.max_travel = body, scene.to(_F64), max_travel
-        self.dof = body.robot.dof
-        self.states = 0
-        self.motions = 0
-        self.compiled = bool(compiled)
-        if self.compiled:
-            from ..collision import kernel
-
-            kb, ks = kernel.KernelBody.of(body), kernel.KernelScene.of(self.scene)
-            # The kernels themselves, their arguments bound once: OMPL calls these thousands of times.
-            self._clear, self._verdict = kernel._clearances, kernel._verdict_packed
-            self._clear_args = (*kb.args(), *ks.args())
-            self._verdict_args = (*kb.packed, ks.packed)
-            self._per = np.empty((1, kb.num_spheres))
-            self._travel = float(max_travel)
-
-    def state_valid(self, q: np.ndarray) -> bool:
-        self.states += 1
-        if self.compiled:
-            d, s = self._clear(np.ascontiguousarray(q, dtype=np.float64)[None], *self._clear_args, self._per)
-            return bool(d[0] > 0) and bool(s[0] > 0)
-        d, s = clearances(self.body, torch.as_tensor(q, dtype=_F64), self.scene, validate=False)
-        return bool(d > 0) and bool(s > 0)
-
-    def motion_valid(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """The configurations :func:`check_path` checks on segment a → b (in torch: every 8th one first,
-        so that a colliding motion is usually rejected without computing the rest)."""
-        self.motions += 1
-        if self.compiled:
-            path = np.stack([a, b]).astype(np.float64)
-            first, _ = self._verdict(path, self._travel, 0.0, *self._verdict_args)
-            return first < 0
-        path = torch.as_tensor(np.stack([a, b]), dtype=_F64)
-        n = int(segment_steps(self.body, path, self.max_travel)[0])
-        q = straight_line(path[0], path[1], n)
-        coarse = torch.zeros(n + 1, dtype=torch.bool)
-        coarse[::8] = True
-        coarse[-1] = True
-        for part in (q[coarse], q[~coarse]):
-            if part.shape[0]:
-                d, s = clearances(self.body, part, self.scene, validate=False)
-                if not (bool((d > 0).all()) and bool((s > 0).all())):
-                    return False
-        return True
-
-
-def rrt_connect_solve(
-    body: BodySpheres,
-    scene: Scene,
-    start: torch.Tensor,
-    goal: torch.Tensor,
-    time_limit: float = 5.0,
-    seed: int | None = 0,
-    max_travel: float = 0.01,
-    simplify: bool = False,
-    simplify_time: float | None = None,
-    compiled: bool = True,
-) -> tuple[np.ndarray | None, float]:
-    """OMPL RRT-Connect from ``start`` to ``goal`` (joints ``(dof,)``) around ``scene``, on :class:`RrtChecker`
-    (``compiled``: its compiled kernels, or torch).
-
-    Returns ``(path (K, dof) or None if no exact path within time_limit, wall time in seconds)``. The
-    path's vertices are joined by motions the checker found free. ``seed`` seeds OMPL's process-wide
-    random generator (``None`` leaves it alone).
-
-    ``simplify``: shorten a found path with OMPL's path simplifier (``SimpleSetup.simplifySolution``:
-    vertex reduction, shortcutting and B-spline smoothing, every new segment accepted only if the same
-    motion check finds it free), for at most ``simplify_time`` seconds: ``None`` gives it what the
-    search left of ``time_limit`` (nothing if the search used it all), so that search and
-    simplification together take ``time_limit``; ``math.inf`` lets it run until it stops on its own.
-    OMPL's simplifier checks that limit only between its steps and does at least one round, so a query
-    may overrun it. The wall time returned includes the simplification.
-    """
-    if simplify_time is not None and not (simplify_time > 0):
-        raise ConfigError(
-            f"simplify_time must be a number of seconds > 0 (or inf, or None), got {simplify_time!r}"
-        )
-    ob, og, ou = _import_ompl()
-    robot = body.robot
-    checker = RrtChecker(body, scene, max_travel, compiled=compiled)
-    dof = robot.dof
-
-    def as_array(state) -> np.ndarray:
-        return np.fromiter((state[j] for j in range(dof)), dtype=np.float64, count=dof)
-
-    class _Valid(ob.StateValidityChecker):
-        def isValid(self, state) -> bool:  # OMPL's method name
-            return checker.state_valid(as_array(state))
-
-    class _Motion(ob.MotionValidator):
-        def checkMotion(self, s1, s2, *rest) -> bool:  # OMPL's method name
-            return checker.motion_valid(as_array(s1), as_array(s2))
-
-    previous = ou.getLogLevel()
-    ou.setLogLevel(ou.LOG_NONE)
-    try:
-        if seed is not None:
-            ou.RNG.setSeed(int(seed) % (1 << 31) or 1)
-        space = ob.RealVectorStateSpace(dof)
-        bounds = ob.RealVectorBounds(dof)
-        for j in range(dof):
-            bounds.setLow(j, float(robot.lower[j]))
-            bounds.setHigh(j, float(robot.upper[j]))
-        space.setBounds(bounds)
-        setup = og.SimpleSetup(space)
-        info = setup.getSpaceInformation()
-        valid, motion = _Valid(info), _Motion(info)
-        setup.setStateValidityChecker(valid)
-        info.setMotionValidator(motion)
-        setup.setPlanner(og.RRTConnect(info))
-        s, g = space.allocState(), space.allocState()
-        q0 = start.detach().double().cpu().numpy()
-        q1 = goal.detach().double().cpu().numpy()
-        for j in range(dof):
-            s[j], g[j] = float(q0[j]), float(q1[j])
-        t0 = time.perf_counter()
-        setup.setStartAndGoalStates(s, g)
-        setup.solve(ob.timedPlannerTerminationCondition(float(time_limit)))
-        if not setup.haveExactSolutionPath():
-            return None, time.perf_counter() - t0
-        if simplify:
-            budget = time_limit - (time.perf_counter() - t0) if simplify_time is None else simplify_time
-            if math.isinf(budget):
-                setup.simplifySolution()
-            elif budget > 0:
-                setup.simplifySolution(ob.timedPlannerTerminationCondition(float(budget)))
-        elapsed = time.perf_counter() - t0
-        path = setup.getSolutionPath()
-        return np.stack([as_array(path.getState(k)) for k in range(path.getStateCount())]), elapsed
-    finally:
-        ou.setLogLevel(previous)
-
-
-# --------------------------------------------------------------------------------------------------
 # Problem sets
 # --------------------------------------------------------------------------------------------------
 
@@ -651,9 +488,8 @@ def _one_problem(family: str, body: BodySpheres, sub_seed: int, cfg: ProblemConf
         line = check_path(body, torch.stack([start, goal]), scene, max_travel=cfg.max_travel)
         solve_time = math.nan
         if cfg.verify:
-            path, solve_time = rrt_connect_solve(
-                body, scene, start, goal, cfg.time_limit, seed=sub_seed + attempt, max_travel=cfg.max_travel
-            )
+            rrt = OmplRrtConnect(body.robot, body, scene, max_travel=cfg.max_travel, why=_VERIFY)
+            path, solve_time = rrt.solve(start, goal, time_limit=cfg.time_limit, seed=sub_seed + attempt)
             if path is None:
                 continue
         return start, goal, scene, not bool(line.collision_free), solve_time, attempt
@@ -695,7 +531,7 @@ def make_problems(
     body = body_spheres(robot, dense=cfg.dense_body).double()
     scale = round(scene_scale(robot), 2)
     if cfg.verify:
-        _import_ompl()
+        import_ompl(_VERIFY)
     starts, goals, scenes, hard, seeds, times = [], [], [], [], [], []
     for i in range(n):
         sub = problem_seed(seed, first + i)

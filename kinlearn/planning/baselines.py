@@ -28,6 +28,7 @@ Old names, kept for one release with a :class:`DeprecationWarning`: ``joint_inte
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from dataclasses import dataclass
@@ -41,8 +42,9 @@ from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout, straight_line
 from ..checks import as_int, as_real, check_finite, check_last_dim
 from ..collision.body import BodySpheres
+from ..collision.ompl import OmplRrtConnect
 from ..data.problem import LIMIT_TOLERANCE, Problem
-from ..errors import ConfigError, MissingDependencyError, ObstaclesIgnoredWarning, PlanningError, ShapeError
+from ..errors import ConfigError, ObstaclesIgnoredWarning, PlanningError, ShapeError
 from .plan import Plan, judge
 
 __all__ = [
@@ -239,19 +241,6 @@ def _dls_path(robot: Robot, theta, ef0, efT, steps: int, iterations: int, dampin
 # --------------------------------------------------------------------------------------------------
 
 
-def _import_ompl():
-    try:
-        from ompl import base as ob
-        from ompl import geometric as og
-        from ompl import util as ou
-    except ImportError as exc:
-        raise MissingDependencyError(
-            "rrt_connect needs OMPL's Python bindings, which are not installed: "
-            "`pip install ompl` (or `pip install kinlearn[ompl]`)"
-        ) from exc
-    return ob, og, ou
-
-
 def _resample(vertices: np.ndarray, count: int) -> np.ndarray:
     """``count`` points evenly spaced by arc length along the polyline ``vertices (M, n)``."""
     seg = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
@@ -278,7 +267,7 @@ def rrt_connect_timed(
     """
     layout = _endpoints(robot, start, goal, steps)
     as_real(time_limit, "time_limit (s)", minimum=0.0, open_minimum=True, maximum=MAX_TIME_LIMIT)
-    ob, og, ou = _import_ompl()
+    rrt = OmplRrtConnect(robot, why="rrt_connect")  # free space: every state valid
     theta0, _ = layout.split(start)
     thetaT, _ = layout.split(goal)
     robot.check_joints(theta0, what="start joints")
@@ -287,52 +276,26 @@ def rrt_connect_timed(
     lo, hi = robot.lower, robot.upper
     q0 = np.clip(theta0.detach().reshape(-1, robot.dof).double().cpu().numpy(), lo, hi)
     qT = np.clip(thetaT.detach().reshape(-1, robot.dof).double().cpu().numpy(), lo, hi)
-
-    previous_level = ou.getLogLevel()
-    ou.setLogLevel(ou.LOG_NONE)  # OMPL logs every query at INFO level, and warns on re-seeding
-    try:
-        if seed is not None:
-            ou.RNG.setSeed(int(seed))
-        space = ob.RealVectorStateSpace(robot.dof)
-        bounds = ob.RealVectorBounds(robot.dof)
-        for j in range(robot.dof):
-            bounds.setLow(j, float(lo[j]))
-            bounds.setHigh(j, float(hi[j]))
-        space.setBounds(bounds)
-        setup = og.SimpleSetup(space)
-        info = setup.getSpaceInformation()
-        setup.setStateValidityChecker(ob.AllValidStateValidityChecker(info))
-        setup.setPlanner(og.RRTConnect(info))
-        s, g = space.allocState(), space.allocState()
-        paths = np.empty((q0.shape[0], steps + 1, robot.dof))
-        times = np.empty(q0.shape[0])
-        for i in range(q0.shape[0]):
-            t0 = time.perf_counter()
-            for j in range(robot.dof):
-                s[j] = float(q0[i, j])
-                g[j] = float(qT[i, j])
-            setup.clear()
-            setup.setStartAndGoalStates(s, g)
-            # A termination condition without a checking interval is tested inline by the planner;
-            # ``solve(seconds)`` would start a watchdog thread per query, whose scheduling under
-            # load adds milliseconds to a query that takes microseconds.
-            setup.solve(ob.timedPlannerTerminationCondition(float(time_limit)))
-            if not setup.haveExactSolutionPath():
-                raise PlanningError(
-                    f"RRT-Connect found no exact path for query {i} within time_limit={time_limit} s; "
-                    "raise time_limit"
-                )
-            if simplify:
-                setup.simplifySolution()
-            path = setup.getSolutionPath()
-            vertices = np.array(
-                [[path.getState(k)[j] for j in range(robot.dof)] for k in range(path.getStateCount())]
+    paths = np.empty((q0.shape[0], steps + 1, robot.dof))
+    times = np.empty(q0.shape[0])
+    for i in range(q0.shape[0]):
+        t0 = time.perf_counter()
+        vertices, _ = rrt.solve(
+            q0[i],
+            qT[i],
+            time_limit=time_limit,
+            seed=seed if i == 0 else None,  # seeded once: the queries draw from one stream
+            simplify=simplify,
+            simplify_time=math.inf,
+        )
+        if vertices is None:
+            raise PlanningError(
+                f"RRT-Connect found no exact path for query {i} within time_limit={time_limit} s; "
+                "raise time_limit"
             )
-            vertices[0], vertices[-1] = q0[i], qT[i]
-            paths[i] = _resample(vertices, steps + 1)
-            times[i] = time.perf_counter() - t0
-    finally:
-        ou.setLogLevel(previous_level)
+        vertices[0], vertices[-1] = q0[i], qT[i]
+        paths[i] = _resample(vertices, steps + 1)
+        times[i] = time.perf_counter() - t0
 
     joints = torch.as_tensor(paths, dtype=start.dtype, device=start.device).reshape(
         *batch, steps + 1, robot.dof

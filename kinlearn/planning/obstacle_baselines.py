@@ -14,7 +14,7 @@ unless one is passed; its robot is the robot planned for.
                                  (:func:`kinlearn.planning.baselines.cartesian_line`), then a straight
                                  joint-space move from the IK's last configuration to the goal joints;
                                  obstacle-unaware.
-:func:`scene_rrt_connect`        OMPL's RRT-Connect on :class:`~kinlearn.data.problems.RrtChecker`
+:func:`scene_rrt_connect`        OMPL's RRT-Connect on :class:`~kinlearn.collision.ompl.RrtChecker`
                                  (the dense 1 cm check), optionally with OMPL's path simplification,
                                  within a time limit that covers both.
 :func:`compiled_rrt_connect`     RRT-Connect compiled with the dense check (:mod:`kinlearn.collision.rrt`),
@@ -59,8 +59,8 @@ from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..checks import as_int
 from ..collision import BodySpheres, Scene, body_obstacle_distance, body_spheres, self_collision_distance
+from ..collision.ompl import OmplRrtConnect
 from ..data.problem import Problem
-from ..data.problems import rrt_connect_solve
 from ..errors import ConfigError, ShapeError, UnknownRobotError
 from . import baselines as _free
 from .baselines import MAX_STEPS, Baseline
@@ -214,7 +214,7 @@ def scene_rrt_connect(
     max_travel: float = 0.01,
     body: BodySpheres | None = None,
 ) -> tuple[torch.Tensor | None, float]:
-    """OMPL RRT-Connect around ``scene`` on the dense checker (:func:`~kinlearn.data.problems.rrt_connect_solve`).
+    """OMPL RRT-Connect around ``scene`` on the dense checker (:class:`~kinlearn.collision.ompl.OmplRrtConnect`).
 
     With ``simplify`` OMPL's path simplifier shortens the path in whatever the search left of
     ``time_limit`` seconds; it checks that limit only between its steps and does at least one round,
@@ -225,9 +225,8 @@ def scene_rrt_connect(
     t0 = time.perf_counter()
     start, goal, body = _inputs(start, goal, body)
     scene = _one_scene(scene)
-    path, _ = rrt_connect_solve(
-        body, scene, start, goal, time_limit=time_limit, seed=seed, max_travel=max_travel, simplify=simplify
-    )
+    rrt = OmplRrtConnect(body.robot, body, scene, max_travel=max_travel)
+    path, _ = rrt.solve(start, goal, time_limit=time_limit, seed=seed, simplify=simplify)
     if path is None:
         return None, time.perf_counter() - t0
     return _pin(torch.from_numpy(np.ascontiguousarray(path)), start, goal), time.perf_counter() - t0
