@@ -254,3 +254,24 @@ def test_arm_without_an_obstacle_network_says_so_and_checks_densely(name, tmp_pa
     assert not bool(plan.collision_free)  # inside a ball that holds the whole arm: flagged, not silent
     with pytest.warns(NoObstacleModelWarning, match=r"alone \(refine_steps=0\)"):
         kinlearn.plan(start, goal, obstacles=scene, robot=name, refine_steps=0)
+
+
+def test_objects_in_different_frames_are_refused_and_one_frame_reads():
+    """Every object in one frame (or none named) reads; an object in another frame is a typed error naming
+    both objects and frames, never silently taken in the first one's frame."""
+    box = {"type": 1, "dimensions": [0.2, 0.2, 0.2]}
+    pose = {"position": {"x": 0.5, "y": 0.0, "z": 0.3}, "orientation": {"w": 1.0}}
+
+    def obj(name, frame):
+        o = {"id": name, "primitives": [box], "primitive_poses": [pose]}
+        if frame is not None:
+            o["header"] = {"frame_id": frame}
+        return o
+
+    same = {"world": {"collision_objects": [obj("a", "world"), obj("b", "/world"), obj("c", None)]}}
+    assert Scene.from_moveit(same).num_boxes == 3
+    mixed = {"world": {"collision_objects": [obj("a", "world"), obj("b", "panda_link0")]}}
+    with pytest.raises(SceneFormatError, match=r"'b'.*'panda_link0'.*'a'.*'world'"):
+        Scene.from_moveit(mixed)
+    with pytest.raises(SceneFormatError, match="frame_id"):
+        Scene.from_moveit({"world": {"collision_objects": [{**obj("a", None), "header": {"frame_id": 3}}]}})

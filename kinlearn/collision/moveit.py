@@ -169,13 +169,29 @@ def _primitive(prim, T: np.ndarray, where: str) -> Primitive:
     )
 
 
+def _frame_id(obj: Mapping, where: str) -> str:
+    """An object's ``header.frame_id`` ('' where it gives none: it is in the scene's frame)."""
+    header = obj.get("header")
+    if header is None:
+        return ""
+    if not isinstance(header, Mapping):
+        raise SceneFormatError(f"{where}: header must be a mapping (frame_id), got {header!r}")
+    frame = header.get("frame_id") or ""
+    if not isinstance(frame, str):
+        raise SceneFormatError(f"{where}: header.frame_id must be a frame name, got {frame!r}")
+    return frame.strip().lstrip("/")  # ROS 1 wrote a leading slash: '/world' is 'world'
+
+
 def primitives_from_moveit(source: str | Path | Mapping, base_pose=None) -> list[Primitive]:
     """The obstacles of a MoveIt ``PlanningScene`` (YAML file or dict) as typed primitives in the robot's
     base frame (:meth:`Scene.from_moveit <kinlearn.collision.Scene.from_moveit>` makes them a scene).
 
     ``base_pose``: the robot base's pose in the scene's frame (4 × 4, ``[x, y, z, qx, qy, qz, qw]`` or a
-    MoveIt pose mapping; default: the base is the scene's frame). The scene may be the whole message or
-    its ``world`` part; objects whose ``operation`` is REMOVE (1) are skipped. Raises
+    MoveIt pose mapping; default: the base is the scene's frame). The scene's frame is its objects'
+    ``header.frame_id`` (an object without one is in it): objects given in different frames are a
+    :class:`~kinlearn.errors.SceneFormatError` naming both (kinlearn holds no transform tree to relate
+    them). The scene may be the whole message or its ``world`` part; objects whose ``operation`` is
+    REMOVE (1) are skipped. Raises
     :class:`~kinlearn.errors.SceneFormatError` for a malformed file or an object holding meshes, planes
     or cones (named by its id).
     """
@@ -188,6 +204,7 @@ def primitives_from_moveit(source: str | Path | Mapping, base_pose=None) -> list
         raise SceneFormatError("world.collision_objects must be a list of collision objects")
     to_base = np.linalg.inv(pose_matrix(base_pose, "base_pose"))
     prims: list[Primitive] = []
+    frame: tuple[str, str] | None = None  # the scene's frame, and the object that named it first
     for i, obj in enumerate(objects):
         if not isinstance(obj, Mapping):
             raise SceneFormatError(f"collision object {i} must be a mapping")
@@ -195,6 +212,16 @@ def primitives_from_moveit(source: str | Path | Mapping, base_pose=None) -> list
         where = f"collision object {name!r}"
         if obj.get("operation", 0) in (1, "REMOVE", "remove"):
             continue
+        given = _frame_id(obj, where)
+        if given:
+            if frame is None:
+                frame = (given, where)
+            elif given != frame[0]:
+                raise SceneFormatError(
+                    f"{where} is given in frame {given!r}, {frame[1]} in {frame[0]!r}: kinlearn reads a scene "
+                    "in one frame (base_pose places the robot's base in it); express every object in that "
+                    "frame first"
+                )
         for field in ("meshes", "planes"):
             if obj.get(field):
                 raise SceneFormatError(
