@@ -58,6 +58,7 @@ from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
 from .inference import NumpyObstacleModel, NumpyPathModel
 from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance, judge
+from .stages import DEADLINE_RESERVE, Deadline, densify
 
 __all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position"]
 
@@ -322,6 +323,7 @@ class Planner:
         goal_position=None,
         obstacles=None,
         refine_steps: int | None = None,
+        deadline: float | None = None,
         strict: bool = False,
     ) -> Plan:
         """Plan from ``start`` to ``goal``, around ``obstacles`` if given; or plan a
@@ -347,6 +349,16 @@ class Planner:
         :meth:`__init__`) for this call: where no proposal is free, this many gradient steps refine the
         least colliding one (bounded time; 25 lifts the held-out success from 80% to 92%).
 
+        ``deadline`` (seconds, from the call): among obstacles, where the learned proposals and the
+        refinement cleared nothing, RRT-Connect with shortcutting on the compiled checker
+        (:mod:`kinlearn.collision.rrt`) gets what is left of it; the plan comes back by the deadline,
+        flagged (``collision_free`` False) where nothing was cleared in time. Without a deadline (the
+        default) plans are fixed-time and bit-reproducible; with one, whether the sampling stage finds
+        a path in time depends on the machine (its path, once found, on the seed alone). Under a
+        deadline an arm without an obstacle network skips the default refinement: sampling clears more
+        in the same time. ``plan.stage`` names the stage that made each plan
+        (:mod:`kinlearn.planning.stages`). Free-space plans ignore the deadline (they are fixed-time).
+
         Every plan's verdict is :func:`~kinlearn.planning.plan.judge`'s (the analytic FK of its joint
         path, the limits, the goal within tolerance, the dense check among obstacles).
 
@@ -355,13 +367,23 @@ class Planner:
         :class:`DomainWarning` (or raises :class:`DomainError` when ``strict``) for input outside
         the training domain. A plan that misses its goal is returned with ``success`` False.
         """
+        timer = Deadline(deadline)  # started before the input is checked: the caller's time
         steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
         problem, dtype, device = self._problem(start, goal, goal_position, obstacles)
-        return self._plan(problem, steps, refine_steps is None, strict, dtype, device)
+        return self._plan(problem, steps, refine_steps is None, strict, dtype, device, timer)
 
     __call__ = plan
 
-    def _plan(self, problem: Problem, steps: int, default_steps: bool, strict: bool, dtype, device) -> Plan:
+    def _plan(
+        self,
+        problem: Problem,
+        steps: int,
+        default_steps: bool,
+        strict: bool,
+        dtype,
+        device,
+        deadline: Deadline | None = None,
+    ) -> Plan:
         """Plan a checked problem: its goal joints (solved first for a position goal), the joint paths
         (free space: the TM's; among obstacles the stages of :meth:`_plan_around`), one verdict
         (:func:`judge`), and the plan in the output's dtype and device."""
@@ -381,13 +403,17 @@ class Planner:
             self._check_domain(s0, sT, strict)
             thetaT, efT = sT[:, :dof], sT[:, dof:]
         free = waypoints = None
+        stage = np.full(n, "learned", dtype=object)
+        timed = deadline is not None and deadline.seconds is not None
         if problem.obstacles is not None:
             scene = problem.obstacles
             scene = scene.reshape(n) if len(scene.batch_shape) > 1 else scene
             if self.obstacle_tm is None:
-                if default_steps:
+                if default_steps and not timed:
                     steps = max(steps, NO_MODEL_REFINE_STEPS)
                 how = f"and {steps} steps of gradient refinement" if steps else "alone (refine_steps=0)"
+                if timed:
+                    how += ", then RRT-Connect within the deadline"
                 warnings.warn(
                     f"{self.robot.name} has no obstacle-trained network in this planner ({OBSTACLE_TM}): "
                     f"planning with the straight joint line {how}, checked densely; plan.collision_free says "
@@ -395,7 +421,7 @@ class Planner:
                     NoObstacleModelWarning,
                     stacklevel=4,
                 )
-            joints, free = self._plan_around(theta0, ef0, thetaT, efT, scene, steps)
+            joints, free, stage = self._plan_around(theta0, ef0, thetaT, efT, scene, steps, deadline)
         elif self._np_tm is not None:
             joints, waypoints = self._joint_path(theta0, ef0, thetaT, efT)
         else:
@@ -415,6 +441,9 @@ class Planner:
             tolerance=self.tolerance,
             body=self.body if free is not None else None,
             collision_free=free,
+        )
+        plan = dataclasses.replace(
+            plan, stage=str(stage[0]) if lead == () else stage.astype(str).reshape(lead)
         )
         if position:  # the state the planner chose to reach the target (the waypoint TM may end beside it)
             goal = np.concatenate((thetaT, efT), -1)
@@ -505,15 +534,17 @@ class Planner:
         return paths, np.argsort(length, axis=1, kind="stable")
 
     def _plan_around(
-        self, theta0, ef0, thetaT, efT, scene: Scene, steps: int
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Joint paths ``(N, K, dof)`` around ``scene`` and whether each is collision-free ``(N,)``.
+        self, theta0, ef0, thetaT, efT, scene: Scene, steps: int, deadline: Deadline | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Joint paths ``(N, K, dof)`` around ``scene``, whether each is collision-free ``(N,)`` and the
+        stage that made it ``(N,)`` (:data:`~kinlearn.planning.stages.STAGES`).
 
         Stage 1: the learned proposals (:meth:`_proposals`), each problem's first collision-free one in
         their order (exact verdicts), else its shortest, flagged. Stage 2 (``steps`` > 0), for the
         problems stage 1 left colliding: the optimiser from the least colliding proposal
-        (:meth:`_refine`), kept if the dense check finds it free. Each stage takes the problems the one
-        before left unsolved, so a further stage joins as one more step here. Each plan is its
+        (:meth:`_refine`), kept if the dense check finds it free. Stage 3 (a ``deadline``), for those
+        still colliding, one after the other while time is left: the compiled RRT-Connect
+        (:meth:`_sample`). Each stage takes the problems the one before left unsolved. Each plan is its
         problem's alone: proposals are made as at batch 1 and the optimiser starts from the very path a
         batch-1 plan starts from."""
         n = theta0.shape[0]
@@ -522,15 +553,64 @@ class Planner:
         paths, order = self._proposals(theta0, ef0, thetaT, efT, backend.rows(packed, scene, n), steps)
         pick, free = backend.first_free(self, paths, order, scene, packed)
         out = paths[np.arange(n), pick]
+        stage = np.where(free, "learned", "none").astype(object)
+        batched = len(scene.batch_shape) > 0
+
+        def kernel_scene(i):
+            return (
+                packed[i]
+                if packed is not None
+                else _kernel().KernelScene(scene[int(i)] if batched else scene)
+            )
+
         if steps:
-            batched = len(scene.batch_shape) > 0
             for i in np.flatnonzero(~free):
-                one = scene[int(i)] if batched else scene
-                nscene = packed[i] if packed is not None else _kernel().KernelScene(one)
+                if deadline is not None and deadline.expired(DEADLINE_RESERVE):
+                    break
+                nscene = kernel_scene(i)
                 _, clear, _ = _kernel().check_paths(self._np_body, paths[i], nscene, max_travel=CHECK_TRAVEL)
                 best = paths[i, int(np.argmax(clear))]  # from the least colliding one
-                out[i], free[i] = self._refine(best, one, nscene, steps)
-        return out, free
+                out[i], free[i] = self._refine(best, scene[int(i)] if batched else scene, nscene, steps)
+                stage[i] = "refine" if free[i] else "none"
+        if deadline is not None and deadline.seconds is not None:
+            found = {}
+            for i in np.flatnonzero(~free):
+                if deadline.expired(DEADLINE_RESERVE):
+                    break
+                path = self._sample(theta0[i], thetaT[i], kernel_scene(i), deadline, seed=int(i))
+                if path is not None:
+                    found[int(i)] = path
+            if found:
+                K = max(out.shape[1], *(p.shape[0] for p in found.values()))
+                if K > out.shape[1]:  # every path to the longest one's knots (the same polylines)
+                    out = np.stack([densify(p, K) for p in out])
+                for i, path in found.items():
+                    dense = densify(path, K)
+                    # The plan's knots are checked as the plan will be judged (sub-steps of its own
+                    # segments), not only the sampler's motions: no plan is called free that the dense
+                    # check of its joints would not call free.
+                    if (
+                        _kernel().first_free(
+                            self._np_body, dense[None], kernel_scene(i), max_travel=CHECK_TRAVEL
+                        )
+                        == 0
+                    ):
+                        out[i], free[i], stage[i] = dense, True, "rrt"
+        return out, free, stage
+
+    def _sample(self, start: np.ndarray, goal: np.ndarray, nscene, deadline: Deadline, seed: int):
+        """Stage 3: the compiled RRT-Connect from ``start`` to ``goal`` for what ``deadline`` leaves (less
+        :data:`~kinlearn.planning.stages.DEADLINE_RESERVE`), shortcut; its path ``(V, dof)`` or None."""
+        from ..collision.rrt import rrt_connect
+
+        left = deadline.left() - DEADLINE_RESERVE
+        if left <= 0:
+            return None
+        path, _, _ = rrt_connect(
+            self._np_body, nscene, start, goal, self._lo_np, self._hi_np, time_limit=left, seed=seed,
+            max_travel=CHECK_TRAVEL, clock=deadline.clock,
+        )  # fmt: skip
+        return path
 
     def _refine(self, path: np.ndarray, scene: Scene, nscene, steps: int) -> tuple[np.ndarray, bool]:
         """``steps`` steps of the gradient trajectory optimiser from ``path`` (if any); the refined path
@@ -832,6 +912,7 @@ def plan(
     goal_position=None,
     obstacles=None,
     refine_steps: int | None = None,
+    deadline: float | None = None,
     robot: str | Robot = "iiwa14",
     strict: bool = False,
 ) -> Plan:
@@ -842,5 +923,6 @@ def plan(
         goal_position=goal_position,
         obstacles=obstacles,
         refine_steps=refine_steps,
+        deadline=deadline,
         strict=strict,
     )

@@ -37,9 +37,10 @@ DEADLINE_RESERVE = 0.002
 class Deadline:
     """A time budget that started when it was made: ``left()`` seconds remain (never below 0),
     ``expired()`` when none do. ``seconds=None`` never expires. ``clock`` (default
-    ``time.perf_counter``) is read for every answer."""
+    ``time.perf_counter``, looked up when the deadline is made) is read for every answer; the stages
+    that run under the deadline read the same clock."""
 
-    def __init__(self, seconds: float | None, clock: Callable[[], float] = time.perf_counter):
+    def __init__(self, seconds: float | None, clock: Callable[[], float] | None = None):
         if seconds is not None and (
             isinstance(seconds, bool)
             or not isinstance(seconds, (int, float))
@@ -48,11 +49,11 @@ class Deadline:
         ):
             raise ConfigError(f"deadline must be a number of seconds > 0 (or None), got {seconds!r}")
         self.seconds = None if seconds is None else float(seconds)
-        self._clock = clock
-        self._start = clock()
+        self.clock = time.perf_counter if clock is None else clock
+        self._start = self.clock()
 
     def elapsed(self) -> float:
-        return self._clock() - self._start
+        return self.clock() - self._start
 
     def left(self) -> float:
         """Seconds left (``inf`` without a deadline)."""

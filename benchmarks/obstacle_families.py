@@ -1,0 +1,187 @@
+"""Planning among the seven scene families, per arm: success per family, the hard subset, batch-1 times,
+and success against a time budget, for kinlearn and the baselines on the same problems and checker.
+
+    python benchmarks/obstacle_families.py --robot panda [--problems benchmarks/data/scene_problems_panda.npz]
+        [--n 140] [--threads 1] [--out benchmarks/results/families_panda]
+
+Problems: a held-out set of ``benchmarks/make_obstacle_problems.py --families scenes`` (seeds 1004–1010,
+verified solvable by OMPL RRT-Connect within 5 s). Every method runs at batch 1 on one thread, one
+untimed warm-up call first, and every path is judged by one rule
+(:func:`kinlearn.evaluation.obstacles.obstacle_outcome`: starts at the start, reaches the goal, within
+the limits, and the dense check finds no collision with the scene, the floor or itself).
+
+Rows: the straight joint line; kinlearn's plan without a deadline (the learned stage and bounded
+refinement, deterministic) and with ``deadline=0.05``; the compiled RRT-Connect and OMPL's RRT-Connect,
+each with time limits; the gradient trajectory optimiser. The success-against-budget figure draws, per
+sampling planner, the share solved within each budget (its 1 s run's solve times) and the fixed-time
+rows as points at their p99 time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+from _common import header, markdown_table
+
+import kinlearn
+from kinlearn import load_robot
+from kinlearn.collision import body_spheres
+from kinlearn.data.problems import FAMILIES, ProblemSet
+from kinlearn.errors import NoObstacleModelWarning
+from kinlearn.evaluation.obstacles import obstacle_outcome
+from kinlearn.planning.obstacle_baselines import (
+    compiled_rrt_connect,
+    joint_line_path,
+    scene_rrt_connect,
+    trajectory_optimiser,
+)
+
+DATA = Path(__file__).parent / "data"
+
+
+def _planner_rows(robot: str) -> dict:
+    """kinlearn's plan as path functions, with and without a deadline (if this kinlearn has it)."""
+    has_deadline = "deadline" in inspect.signature(kinlearn.Planner.plan).parameters
+    planner = kinlearn.Planner.default(robot)
+
+    def run(start, goal, scene, **kw):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NoObstacleModelWarning)
+            plan = planner.plan(start, goal, obstacles=scene, **kw)
+        return torch.as_tensor(plan.joints), getattr(plan, "stage", None)
+
+    rows = {"kinlearn plan (no deadline)": lambda s, g, sc: run(s, g, sc)}
+    if has_deadline:
+        rows["kinlearn plan, deadline 0.05 s"] = lambda s, g, sc: run(s, g, sc, deadline=0.05)
+    return rows
+
+
+def methods(robot: str, body, budgets, ompl_budgets, opt_steps) -> dict:
+    rows = {"joint line": lambda s, g, sc: (joint_line_path(s, g, sc)[0], None)}
+    rows.update(_planner_rows(robot))
+    for b in budgets:
+        rows[f"compiled RRT-Connect, {b:g} s"] = lambda s, g, sc, b=b: (
+            compiled_rrt_connect(s, g, sc, time_limit=b, body=body)[0],
+            None,
+        )
+    for b in ompl_budgets:
+        rows[f"OMPL RRT-Connect, {b:g} s"] = lambda s, g, sc, b=b: (
+            scene_rrt_connect(s, g, sc, time_limit=b, body=body)[0],
+            None,
+        )
+    for k in opt_steps:
+        rows[f"optimiser, {k} steps"] = lambda s, g, sc, k=k: (
+            trajectory_optimiser(s, g, sc, steps=k, body=body)[0],
+            None,
+        )
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--robot", default="panda")
+    ap.add_argument("--problems", type=Path, default=None)
+    ap.add_argument("--n", type=int, default=None, help="first n problems (default: all)")
+    ap.add_argument("--budgets", type=float, nargs="*", default=[0.001, 0.01, 0.05, 1.0])
+    ap.add_argument("--ompl-budgets", type=float, nargs="*", default=[0.05, 1.0])
+    ap.add_argument("--opt-steps", type=int, nargs="*", default=[25])
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    path = args.problems or DATA / f"scene_problems_{args.robot}.npz"
+    out = args.out or Path(__file__).parent / "results" / f"families_{args.robot}"
+    out.mkdir(parents=True, exist_ok=True)
+    print(header(f"Planning among the scene families ({args.robot}, held-out problems)", args.threads))
+    problems = ProblemSet.load(path, robot=args.robot)
+    if args.n:
+        problems = problems[: args.n]
+    robot = load_robot(args.robot)
+    body = body_spheres(robot).double()
+    fams = [f for f in FAMILIES if len(problems.of(f))]
+    print(f"{len(problems)} problems from {path} ({', '.join(f'{f} {len(problems.of(f))}' for f in fams)})")
+    print(f"hard (straight joint line collides): {int(problems.hard.sum())}")
+    rows, summary = [], {}
+    for name, fn in methods(args.robot, body, args.budgets, args.ompl_budgets, args.opt_steps).items():
+        s0, g0, sc0 = problems.problem(0)
+        fn(s0, g0, sc0)  # warm-up: compile, load, caches
+        paths, seconds, stages = [], [], []
+        for i in range(len(problems)):
+            start, goal, scene = problems.problem(i)
+            t0 = time.perf_counter()
+            joints, stage = fn(start, goal, scene)
+            seconds.append(time.perf_counter() - t0)
+            paths.append(joints)
+            stages.append(stage)
+        outcome = obstacle_outcome(body, paths, problems)
+        ok = outcome["success"].numpy()
+        t = np.array(seconds)
+        fam_rate = {f: float(ok[(problems.family == FAMILIES.index(f)).numpy()].mean()) for f in fams}
+        hard = problems.hard.numpy()
+        stage_counts = {str(s): stages.count(s) for s in set(stages)} if stages[0] is not None else None
+        summary[name] = {
+            "success": float(ok.mean()),
+            "hard_success": float(ok[hard].mean()) if hard.any() else None,
+            "by_family": fam_rate,
+            "p50_ms": float(np.median(t) * 1e3),
+            "p99_ms": float(np.quantile(t, 0.99) * 1e3),
+            "max_ms": float(t.max() * 1e3),
+            "solve_ms": [float(x * 1e3) if o else None for x, o in zip(t, ok, strict=True)],
+            "stages": stage_counts,
+            "flagged_free_but_colliding": None,
+        }
+        rows.append(
+            [
+                name,
+                f"{100 * ok.mean():.1f}%",
+                f"{100 * ok[hard].mean():.1f}%" if hard.any() else "",
+                *(f"{100 * fam_rate[f]:.0f}%" for f in fams),
+                f"{np.median(t) * 1e3:.2f}",
+                f"{np.quantile(t, 0.99) * 1e3:.2f}",
+            ]
+        )
+        print(f"  {name}: {100 * ok.mean():.1f}%, p50 {np.median(t) * 1e3:.2f} ms", flush=True)
+    table = markdown_table(["method", "success", "hard", *fams, "p50 ms", "p99 ms"], rows)
+    print()
+    print(table)
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (out / "table.md").write_text(table + "\n")
+    _figure(summary, out / "success_budget.png", args.robot, len(problems))
+    print(f"\nwrote {out}/summary.json, table.md, success_budget.png")
+
+
+def _figure(summary: dict, path: Path, robot: str, n: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    grid = np.logspace(-4, 0, 200)
+    for name, s in summary.items():
+        if ", 1 s" in name:  # a sampling planner's anytime curve: solved within each budget
+            solved = np.array([x for x in s["solve_ms"] if x is not None]) / 1e3
+            ax.plot(
+                grid * 1e3, [100 * (solved <= b).sum() / n for b in grid], label=name.replace(", 1 s", "")
+            )
+        elif "RRT" not in name:
+            ax.scatter([s["p99_ms"]], [100 * s["success"]], label=f"{name} (at its p99)", zorder=3)
+    ax.set_xscale("log")
+    ax.set_xlabel("time budget per problem (ms, batch 1, one core)")
+    ax.set_ylabel("success (%)")
+    ax.set_title(f"{robot}: success against time budget ({n} held-out problems)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+
+
+if __name__ == "__main__":
+    main()
