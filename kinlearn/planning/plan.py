@@ -265,10 +265,12 @@ class Plan:
         je = self.joint_error.reshape(-1)
         ok = self.success.reshape(-1)
         free = None if self.collision_free is None else self.collision_free.reshape(-1)
+        stage = None if free is None or self.stage is None else np.asarray(self.stage).reshape(-1)
         tol = self.tolerance
         lines = [
             f"{'plan':>5}  {'success':>7}  {'goal error (mm)':>15}  {'joint error (rad)':>17}  {'ef path (m)':>11}"
-            + ("  collision-free" if free is not None else ""),
+            + ("  collision-free" if free is not None else "")
+            + ("  stage" if stage is not None else ""),
         ]
         for i in range(ge.numel()):
             jtxt = "—" if bool(torch.isnan(je[i])) else f"{float(je[i]):.4f}"
@@ -276,6 +278,7 @@ class Plan:
                 f"{i:>5}  {'yes' if bool(ok[i]) else 'NO':>7}  {1000 * float(ge[i]):>15.2f}  {jtxt:>17}  "
                 f"{float(length[i]):>11.3f}"
                 + (f"  {'yes' if bool(free[i]) else 'NO':>14}" if free is not None else "")
+                + (f"  {stage[i]}" if stage is not None else "")
             )
         lines.append(
             f"success: end effector within {1000 * tol.position:g} mm of the target"

@@ -1,0 +1,142 @@
+"""Batch-1 planning speed against baselines timed in the same run, interleaved, on one thread.
+
+    python benchmarks/batch1_speed.py [--problems 340] [--threads 1]
+
+On the committed held-out obstacle problems (iiwa14; every k-th of the 1,020, seeded order), one
+call of each row per problem, the rows taking turns problem by problem (so a busy machine slows every
+row alike and the ratios stay meaningful):
+
+- the paper-size TM forward pass (GRU 20 → dense 20 → head 10 → 3, eager torch, batch 1, no grad):
+  the baseline the obstacle plan is measured against;
+- the whole batch-1 obstacle plan, ``Planner.default("iiwa14").plan(start, goal, obstacles=scene)``
+  (refine_steps 0: the learned proposals, the dense check, the verdict);
+- the whole batch-1 free-space plan, ``plan(start, goal)`` (the joint-path TM, judge's fast path);
+- OMPL RRT-Connect without obstacles, one query (``OmplRrtConnect.solve``: setting the query, the search,
+  reading the path back), the space and planner built once: the baseline of the free-space plan.
+
+Times are wall clock per call (µs) and, beside them, the thread's CPU time (``time.thread_time``),
+which a machine shared with other work inflates far less. Printed: p50 and p99 per row, the ratios the
+geometry issue names, and where an obstacle plan's time goes (its stages timed alone, medians).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+import torch
+from _common import header, markdown_table
+
+from kinlearn.collision import kernel
+from kinlearn.collision.ompl import OmplRrtConnect
+from kinlearn.data.problems import ProblemSet
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
+from kinlearn.planning.plan import judge
+from kinlearn.planning.planner import Planner
+
+HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"
+
+
+def _pct(a: np.ndarray) -> tuple[float, float]:
+    return float(np.median(a)), float(np.percentile(a, 99))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--problems", type=int, default=340)
+    ap.add_argument("--threads", type=int, default=1)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    import numba
+
+    numba.set_num_threads(1)
+    print(header("Batch-1 planning speed (iiwa14, held-out problems)", args.threads))
+    print(f"numba {numba.__version__}; 1-minute load average at the start {os.getloadavg()[0]:.1f}")
+    kernel.warm_up()
+    ps = ProblemSet.load(HELDOUT, robot="iiwa14")
+    step = max(1, len(ps) // args.problems)
+    picks = list(range(0, len(ps), step))[: args.problems]
+    problems = [ps.problem(i) for i in picks]
+    planner = Planner.default("iiwa14")
+    robot = planner.robot
+    tm = TrajectoryModel(TMConfig(robot=robot.name, dof=robot.dof, normalize=False)).eval()
+    s_tm = torch.zeros(1, robot.dof + 3)
+    rrt = OmplRrtConnect(robot)
+    rrt.solve(problems[0][0], problems[0][1], seed=0)
+
+    rows = {
+        "paper-size TM forward (GRU, eager torch)": lambda s, g, sc: tm(s_tm, s_tm),
+        "kinlearn obstacle plan (whole call)": lambda s, g, sc: planner.plan(s, g, obstacles=sc),
+        "kinlearn free-space plan (whole call)": lambda s, g, sc: planner.plan(s, g),
+        "OMPL RRT-Connect, no obstacles (one query)": lambda s, g, sc: rrt.solve(s, g),
+    }
+    wall = {k: np.empty(len(problems)) for k in rows}
+    cpu = {k: np.empty(len(problems)) for k in rows}
+    with torch.no_grad():
+        for s, g, sc in problems[:20]:  # warm-up: first calls, caches, compiled kernels loaded
+            for fn in rows.values():
+                fn(s, g, sc)
+        for i, (s, g, sc) in enumerate(problems):
+            for name, fn in rows.items():
+                c0, t0 = time.thread_time(), time.perf_counter()
+                fn(s, g, sc)
+                wall[name][i] = time.perf_counter() - t0
+                cpu[name][i] = time.thread_time() - c0
+    table = []
+    for name in rows:
+        w50, w99 = _pct(1e6 * wall[name])
+        c50, c99 = _pct(1e6 * cpu[name])
+        table.append([name, f"{w50:.1f}", f"{w99:.1f}", f"{c50:.1f}", f"{c99:.1f}"])
+    print(f"\n{len(problems)} held-out problems (every {step}th), each row once per problem, in turn\n")
+    print(markdown_table(["batch 1", "p50 (µs)", "p99 (µs)", "CPU p50 (µs)", "CPU p99 (µs)"], table))
+
+    names = list(rows)
+    tm_name, obs, free, ompl = names
+    print("\nratios (goal in brackets), wall clock | thread CPU time:")
+    for label, a, q, b, goal in (
+        ("obstacle plan p50 / TM forward p50", obs, 50, tm_name, "≤ 2"),
+        ("obstacle plan p99 / TM forward p50", obs, 99, tm_name, "≤ 4"),
+        ("free-space plan p50 / RRT-Connect p50", free, 50, ompl, "≤ 1"),
+    ):
+        r_wall = np.percentile(wall[a], q) / np.median(wall[b])
+        r_cpu = np.percentile(cpu[a], q) / np.median(cpu[b])
+        print(f"  {label}: {r_wall:.2f} | {r_cpu:.2f} ({goal})")
+
+    # Where an obstacle plan's time goes: its stages, each timed alone on the same problems (medians).
+    from kinlearn.data.problem import Problem
+
+    stages = {
+        name: [] for name in ("the Problem (checks, FK)", "proposals (obstacle TM)", "check (first_free)")
+    }
+    stages["judge (verdict, the Plan)"] = []
+    for s, g, sc in problems:
+        t0 = time.perf_counter()
+        problem = Problem.make(robot, s, g, obstacles=sc)
+        t1 = time.perf_counter()
+        st, gl = problem.start.numpy()[None], problem.goal.numpy()[None]
+        d = robot.dof
+        backend = planner._backend(1)
+        packed = backend.scenes(problem.obstacles, 1)
+        paths, order = planner._proposals(
+            st[:, :d], st[:, d:], gl[:, :d], gl[:, d:], backend.rows(packed, problem.obstacles, 1), 0
+        )
+        t2 = time.perf_counter()
+        pick, free_ = backend.first_free(planner, paths, order, problem.obstacles, packed)
+        t3 = time.perf_counter()
+        judge(problem, paths[0, pick[0]], tolerance=planner.tolerance, collision_free=free_[0])
+        t4 = time.perf_counter()
+        for name, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3), strict=True):
+            stages[name].append(dt)
+    print("\nan obstacle plan's stages, each timed alone (median µs):")
+    for name, ts in stages.items():
+        print(f"  {name}: {1e6 * np.median(ts):.1f}")
+    print(f"\n1-minute load average at the end {os.getloadavg()[0]:.1f} (on {os.cpu_count()} logical cores)")
+
+
+if __name__ == "__main__":
+    main()
