@@ -93,3 +93,31 @@ def test_the_deadline_cuts_the_sampling_stage_off(panda, hard, monkeypatch):
     assert clock.reads <= 8  # the deadline was looked at and the stage stopped
     with pytest.raises(ConfigError, match="deadline"):
         _plan(panda, start, goal, obstacles=scene, deadline=-1.0)
+
+
+def test_plan_command_takes_a_deadline(hard, tmp_path, capsys):
+    import yaml
+
+    from kinlearn.cli.main import main
+    from kinlearn.collision import Scene
+    from kinlearn.collision.geometry import Plane
+
+    start, goal, scene = hard.problem(0)
+    # The obstacles without the floor (MoveIt has no floor: written as a box, it would hold the base).
+    objects = Scene.from_primitives([p for p in scene.primitives() if not isinstance(p, Plane)])
+    (tmp_path / "scene.yaml").write_text(yaml.safe_dump(objects.to_moveit(frame_id="panda_link0")))
+    joints = [",".join(f"{v:.17g}" for v in q.tolist()) for q in (start, goal)]
+    args = ["plan", "--robot", "panda", "--scene", str(tmp_path / "scene.yaml"), "--start", joints[0]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NoObstacleModelWarning)
+        assert main([*args, "--goal", joints[1], "--deadline", "30"]) == 0
+        out = capsys.readouterr().out
+        assert "stage" in out and "rrt" in out
+        assert main([*args, "--goal", joints[1]]) == 1  # fixed time alone does not clear this one
+        assert "none" in capsys.readouterr().out
+    no_scene = ["plan", "--robot", "panda", "--start", joints[0], "--goal", joints[1], "--deadline", "1"]
+    assert main(no_scene) == 2
+    assert "--deadline bounds planning around obstacles" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as refused:  # refused as the options are parsed
+        main([*args, "--goal", joints[1], "--deadline", "0"])
+    assert refused.value.code == 2

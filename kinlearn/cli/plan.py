@@ -96,6 +96,15 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
         help="with --obstacles: gradient steps refining the least colliding proposal when none is free "
         "(bounded time; default 0)",
     )
+    p.add_argument(
+        "--deadline",
+        type=number_type(float, low=0, open_low=True),
+        default=None,
+        metavar="SECONDS",
+        help="with obstacles: where the learned proposals (and refinement) clear nothing, RRT-Connect on the "
+        "compiled checker gets what is left of SECONDS; the plan comes back by then (default: none, "
+        "fixed-time and deterministic)",
+    )
 
 
 def plan_from_args(args: argparse.Namespace, strict: bool = False):
@@ -127,7 +136,14 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
         from ..collision.scene import Scene
 
         obstacles = Scene.from_moveit(args.scene, base_pose=args.base_pose)
-    options = {"obstacles": obstacles, "refine_steps": args.refine_steps, "strict": strict}
+    if args.deadline is not None and obstacles is None:
+        raise ConfigError("--deadline bounds planning around obstacles: give --obstacles or --scene too")
+    options = {
+        "obstacles": obstacles,
+        "refine_steps": args.refine_steps,
+        "deadline": args.deadline,
+        "strict": strict,
+    }
     if args.goal_position is not None:
         goal = torch.tensor(args.goal_position, dtype=torch.float64)
         plan = planner.plan(start, goal_position=goal, **options)
