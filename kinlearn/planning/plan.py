@@ -420,6 +420,13 @@ def judge(
     )
 
 
+def _as_numpy(t: torch.Tensor) -> np.ndarray:
+    """A CPU tensor's values as a float64 array (a view where it already is one)."""
+    if t.requires_grad or t.dtype != torch.float64 or t.device.type != "cpu":
+        t = t.detach().double().cpu()
+    return t.numpy()
+
+
 def _found_array(found, batch: torch.Size) -> np.ndarray | None:
     if found is None:
         return None
@@ -459,8 +466,10 @@ def _judge_small(problem, J, waypoints, found, tolerance, max_travel, body, coll
     got = _found_array(found, batch)
     if got is not None:
         within &= got
-    start = problem.start.reshape(n, problem.start.shape[-1])[:, :dof].numpy()
-    within &= np.abs(flat[:, 0] - start).max(-1) <= START_TOLERANCE
+    # The problem's tensors as arrays (views: no torch operation on the fast path).
+    s_np = _as_numpy(problem.start).reshape(n, problem.start.shape[-1])
+    g_np = _as_numpy(problem.goal).reshape(n, problem.goal.shape[-1])
+    within &= np.abs(flat[:, 0] - s_np[:, :dof]).max(-1) <= START_TOLERANCE
     free = None
     if problem.obstacles is not None:
         if collision_free is not None:
@@ -477,12 +486,8 @@ def _judge_small(problem, J, waypoints, found, tolerance, max_travel, body, coll
                 ks = kernel.KernelScene.of(scene) if unbatched else kernel.KernelScene(flat_scene[i])
                 free[i] = kernel.first_free(kb, flat[i : i + 1], ks, max_travel=float(max_travel)) == 0
     state = problem.goal_kind == "state"
-    goal = (
-        problem.goal.reshape(n, problem.goal.shape[-1]).numpy()
-        if state
-        else np.concatenate((flat[:, -1], ef[:, -1]), -1)
-    )
-    target = problem.target.reshape(n, 3).numpy()
+    goal = g_np if state else np.concatenate((flat[:, -1], ef[:, -1]), -1)
+    target = g_np[:, dof:] if state else g_np
     wp = None
     if waypoints is not None:
         wp = waypoints.detach().double().cpu().numpy() if isinstance(waypoints, torch.Tensor) else waypoints
