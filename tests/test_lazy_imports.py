@@ -51,3 +51,18 @@ def test_the_light_help_is_the_full_parsers():
 
     assert _top_level_parser().format_help() == build_parser().format_help()
     assert set(OWN_ROBOTS) == set(BUILTIN_ROBOTS)
+
+
+def test_command_order_does_not_depend_on_what_was_imported_first():
+    """A stage's CLI module imported before the parser is built (as a test or a script may) keeps
+    ``--help``'s order: the full parser orders commands by module, not by import order."""
+    import subprocess
+    import sys
+
+    code = (
+        "import kinlearn.cli.evaluate, kinlearn.cli.export\n"
+        "from kinlearn.cli.main import _top_level_parser, build_parser\n"
+        "assert _top_level_parser().format_help() == build_parser().format_help()\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr

@@ -65,9 +65,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"kinlearn {__version__}")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
     own = (_add_babble, lambda s: _add_train(s, "fm"), lambda s: _add_train(s, "im"), _add_validate)
-    for add in (*own, *_SUBCOMMANDS):
+    for add in (*own, *sorted(_SUBCOMMANDS, key=_module_rank)):
         add(sub)
     return parser
+
+
+def _module_rank(add) -> int:
+    """A subcommand's place: its module's in :data:`SUBCOMMAND_MODULES` (the order of ``--help``),
+    whichever module was imported first; registrations from elsewhere come last, in their order."""
+    module = getattr(add, "__module__", "").rpartition(".")[2]
+    return SUBCOMMAND_MODULES.index(module) if module in SUBCOMMAND_MODULES else len(SUBCOMMAND_MODULES)
 
 
 # --------------------------------------------------------------------------------------------------
