@@ -12,8 +12,10 @@ The success rule (:func:`obstacle_outcome`) is the same for every planner, learn
   base (:func:`~kinlearn.collision.body_spheres`), at most 1 cm of sphere travel between checked
   configurations, finds no body–scene contact (floor included) and no self-collision.
 
-Paths of different lengths are padded by repeating their last configuration, which adds only
-zero-length segments and so checks exactly the same configurations. A method that returned no path
+The verdict is :func:`~kinlearn.planning.plan.judge`'s, the rule every plan is judged by; this module
+adds what a benchmark reports beside it (each criterion apart, clearance, path lengths). Paths of
+different lengths are padded by repeating their last configuration, which adds only zero-length
+segments and so checks exactly the same configurations. A method that returned no path
 (``None``) fails every criterion. matplotlib is imported only when a figure is drawn.
 """
 
@@ -29,11 +31,12 @@ import torch
 from ..body.kinematics import kinematics
 from ..collision import BodySpheres, Scene, check_path
 from ..collision.geometry import box_faces, cylinder_faces
-from ..data.problem import LIMIT_TOLERANCE
+from ..data.problem import LIMIT_TOLERANCE, Problem
 from ..data.problems import FAMILIES, ProblemSet
 from ..errors import ConfigError, ShapeError
 from ..io import atomic_write
-from ..planning.plan import DEFAULT_TOLERANCE, Tolerance
+from ..planning.plan import DEFAULT_TOLERANCE, Tolerance, judge
+from ..planning.plan import START_TOLERANCE as PLAN_START_TOLERANCE
 from .metrics import dense_path_length
 
 __all__ = [
@@ -47,8 +50,9 @@ __all__ = [
     "summarize_outcome",
 ]
 
-#: rad: a path's first configuration must equal the problem's start to this (float32 round-off passes).
-START_TOLERANCE = 1e-5
+#: rad: a path's first configuration must equal the problem's start to this: judge's own tolerance
+#: (:data:`kinlearn.planning.plan.START_TOLERANCE`; float32 round-off of joint angles passes).
+START_TOLERANCE = PLAN_START_TOLERANCE
 #: The per-problem tensors :func:`obstacle_outcome` returns.
 OUTCOME_KEYS = (
     "success",
@@ -173,20 +177,23 @@ def obstacle_outcome(
     if idx.numel() == 0:
         return out
     live = [paths[int(i)] for i in idx]
-    longest = max(p.shape[0] for p in live)
+    longest = max(2, max(p.shape[0] for p in live))  # a single configuration is a path of no motion
     padded = torch.stack([torch.cat((p, p[-1:].expand(longest - p.shape[0], dof))) for p in live])
     s0, sT = start[idx], goal[idx]
 
-    kin = kinematics(robot, "fast")
-    ee = kin.position(torch.stack((padded[:, -1], sT)), validate=False)
-    goal_error = torch.linalg.vector_norm(ee[0] - ee[1], dim=-1)
-    joint_error = (padded[:, -1] - sT).abs().amax(-1)
-    goal_reached = (goal_error <= tolerance.position) & (joint_error <= tolerance.joints)
     starts = (padded[:, 0] - s0).abs().amax(-1) <= START_TOLERANCE
     within = robot.within_limits(padded, LIMIT_TOLERANCE).all(-1)
     sc = scene[idx] if len(scene.batch_shape) else scene
     check = check_path(body, padded, sc, max_travel=max_travel)
     free = check.collision_free.cpu()
+    # The verdict is judge's, the one rule every plan is judged by (given the dense check made here,
+    # whose clearance and self-collision are reported too).
+    kin = kinematics(robot, "fast")
+    ef0, efT = kin.position(s0, validate=False), kin.position(sT, validate=False)
+    problem = Problem.from_states(robot, torch.cat((s0, ef0), -1), torch.cat((sT, efT), -1), obstacles=sc)
+    plan = judge(problem, padded, tolerance=tolerance, max_travel=max_travel, body=body, collision_free=free)
+    goal_error, joint_error = plan.goal_error.to(_F64), plan.joint_error.to(_F64)
+    goal_reached = (goal_error <= tolerance.position) & (joint_error <= tolerance.joints)
 
     out["starts_at_start"][idx] = starts
     out["goal_reached"][idx] = goal_reached
@@ -196,7 +203,7 @@ def obstacle_outcome(
     out["clearance"][idx] = check.clearance.cpu().to(_F64)
     out["goal_error"][idx] = goal_error
     out["joint_error"][idx] = joint_error
-    out["success"][idx] = starts & goal_reached & within & free
+    out["success"][idx] = plan.success
     out["joint_length"][idx] = torch.stack(
         [torch.linalg.vector_norm(p[1:] - p[:-1], dim=-1).sum() for p in live]
     )
