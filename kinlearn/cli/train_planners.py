@@ -34,6 +34,28 @@ from .common import (
 # --------------------------------------------------------------------------------------------------
 
 
+def _add_optimiser_options(p: argparse.ArgumentParser, C) -> None:
+    """``--iterations``, ``--batch-size`` and ``--lr``, their defaults read from the training config ``C``."""
+    p.add_argument(
+        "--iterations",
+        type=POSITIVE_INT,
+        default=C.iterations,
+        help=f"training iterations (default: {C.iterations})",
+    )
+    p.add_argument(
+        "--batch-size",
+        type=POSITIVE_INT,
+        default=C.batch_size,
+        help=f"problems per iteration (default: {C.batch_size})",
+    )
+    p.add_argument(
+        "--lr",
+        type=POSITIVE_FLOAT,
+        default=C.lr,
+        help=f"Adam learning rate, cosine decay (default: {number_text(C.lr)})",
+    )
+
+
 @register_subcommand
 def _add_train_planner(sub) -> None:
     from ..training.joint_path import PLANNER_MODEL
@@ -57,24 +79,7 @@ def _add_train_planner(sub) -> None:
         default=None,
         help="a learned IM kept beside the TM for position goals (im.pt)",
     )
-    p.add_argument(
-        "--iterations",
-        type=POSITIVE_INT,
-        default=C.iterations,
-        help=f"training iterations (default: {C.iterations})",
-    )
-    p.add_argument(
-        "--batch-size",
-        type=POSITIVE_INT,
-        default=C.batch_size,
-        help=f"problems per iteration (default: {C.batch_size})",
-    )
-    p.add_argument(
-        "--lr",
-        type=POSITIVE_FLOAT,
-        default=C.lr,
-        help=f"Adam learning rate, cosine decay (default: {number_text(C.lr)})",
-    )
+    _add_optimiser_options(p, C)
     hidden = PLANNER_MODEL["hidden"]
     p.add_argument(
         "--hidden",
@@ -184,24 +189,7 @@ def _add_train_obstacle_planner(sub) -> None:
         default=None,
         help="train through a learned body model (body.pt) instead of the analytic sphere body",
     )
-    p.add_argument(
-        "--iterations",
-        type=POSITIVE_INT,
-        default=C.iterations,
-        help=f"training iterations (default: {C.iterations})",
-    )
-    p.add_argument(
-        "--batch-size",
-        type=POSITIVE_INT,
-        default=C.batch_size,
-        help=f"problems per iteration (default: {C.batch_size})",
-    )
-    p.add_argument(
-        "--lr",
-        type=POSITIVE_FLOAT,
-        default=C.lr,
-        help=f"Adam learning rate, cosine decay (default: {number_text(C.lr)})",
-    )
+    _add_optimiser_options(p, C)
     candidates = ObstaclePathConfig.candidates
     p.add_argument(
         "--candidates",

@@ -197,14 +197,21 @@ def _bookcase(g, s):
     return prims, start, cell(*goal)
 
 
+def _one_or_two(g, s, half_w, p_two: float, max_gap: float) -> tuple[bool, list[float]]:
+    """Whether a box comes as a pair (chance ``p_two``), and the y of each box's centre: one near the
+    middle, or two side by side with a gap of 5 cm to ``max_gap`` (× ``s``) between them."""
+    two = _chance(g, p_two)
+    gap = s * _u(g, 0.05, max_gap)
+    centre = s * _u(g, -0.1, 0.1)
+    if two:
+        return True, [centre - half_w - gap / 2, centre + half_w + gap / 2]
+    return False, [centre]
+
+
 def _cubby(g, s):
     depth, half_w, height = s * _u(g, 0.25, 0.35), s * _u(g, 0.13, 0.2), s * _u(g, 0.24, 0.36)
     x_open, z0 = s * _u(g, 0.4, 0.6), s * _u(g, 0.0, 0.7)
-    two = _chance(g, 0.5)
-    gap = s * _u(g, 0.05, 0.15)
-    centres = [s * _u(g, -0.1, 0.1)]
-    if two:
-        centres = [centres[0] - half_w - gap / 2, centres[0] + half_w + gap / 2]
+    two, centres = _one_or_two(g, s, half_w, 0.5, 0.15)
     prims = [p for yc in centres for p in _open_box(x_open, yc, z0, depth, half_w, height, "front")]
     m = 0.08 * s
 
@@ -270,11 +277,7 @@ def _cage(g, s):
 def _bin(g, s):
     depth, half_w, height = s * _u(g, 0.3, 0.45), s * _u(g, 0.15, 0.25), s * _u(g, 0.15, 0.3)
     x_open, z0 = s * _u(g, 0.4, 0.6), s * _u(g, 0.0, 0.35)
-    two = _chance(g, 0.6)
-    gap = s * _u(g, 0.05, 0.25)
-    centres = [s * _u(g, -0.1, 0.1)]
-    if two:
-        centres = [centres[0] - half_w - gap / 2, centres[0] + half_w + gap / 2]
+    two, centres = _one_or_two(g, s, half_w, 0.6, 0.25)
     prims = [p for yc in centres for p in _open_box(x_open, yc, z0, depth, half_w, height, "top")]
     m = 0.08 * s
 
