@@ -161,3 +161,23 @@ def test_committed_heldout_set(body):
     assert sorted(summary) == sorted(LEGACY_FAMILIES)
     assert all(0.1 < summary[f]["hard"] < 1.0 and summary[f]["n"] == counts[0] for f in LEGACY_FAMILIES)
     _assert_valid(problems, body)
+
+
+@pytest.mark.parametrize("family", ["tabletop", "shelf", "barrier"])
+def test_the_first_three_families_scale_with_the_arm(family):
+    """The iiwa14-sized families are multiplied by another arm's scale: the same draws give every box,
+    sphere and target scaled exactly (a scale of 1 leaves them as they were, bit for bit)."""
+    from kinlearn.data.problems import _layout
+
+    def draw(scale):
+        scene, start, goal = _layout(family, torch.Generator().manual_seed(7), scale)
+        g = torch.Generator().manual_seed(8)
+        return scene, start(4, g), goal(4, g)
+
+    one, half = draw(1.0), draw(0.5)
+    assert torch.equal(half[0].boxes[:, :6], 0.5 * one[0].boxes[:, :6])  # centres and half extents
+    assert torch.equal(half[0].boxes[:, 6:], one[0].boxes[:, 6:])  # the same rotations
+    assert torch.equal(half[0].spheres, 0.5 * one[0].spheres)
+    assert torch.allclose(half[1], 0.5 * one[1], atol=1e-15) and torch.allclose(
+        half[2], 0.5 * one[2], atol=1e-15
+    )

@@ -6,7 +6,8 @@ Ten scene families (robot base at the origin, z up, a floor at z = 0 in every sc
 ``clutter``: boxes in any orientation, cylinders and spheres, sized to the arm by
 :func:`~kinlearn.data.scenes.scene_scale` and turned to any yaw), and the first three, modelled on the
 MπNets / MotionBenchMaker ones, written for the iiwa14's reach (the shipped iiwa14 obstacle network's
-training scenes; the panda's and the ur5's horizontal reach is within 1% of it):
+training scenes; the panda's and the ur5's horizontal reach is within 1% of it, and another arm's
+scenes and targets are multiplied by its scale, rounded to 0.01, as the seven families' are):
 
 =============  ====================================================================================
 ``tabletop``   a table (a 4 cm slab, top at 0–25 cm) in front of the robot with 2–6 boxes (up to 40 cm
@@ -461,10 +462,14 @@ def _layout(family: str, gen: torch.Generator, scale: float):
     bx = torch.tensor(boxes, dtype=_F64).reshape(-1, 6)
     sp = torch.tensor(spheres, dtype=_F64).reshape(-1, 4)
     bx, sp, R = _turn(bx, sp, turn)
+    if scale != 1.0:  # sized for the iiwa14's reach: every position and size by the arm's scale
+        bx, sp = bx * scale, sp * scale
     scene = Scene(sp, bx, floor=torch.tensor(0.0, dtype=_F64))
 
     def turned(sampler):
-        return lambda n, g: sampler(n, g) @ R.T
+        if scale == 1.0:
+            return lambda n, g: sampler(n, g) @ R.T
+        return lambda n, g: scale * (sampler(n, g) @ R.T)
 
     return scene, turned(start_sampler), turned(goal_sampler)
 
