@@ -123,6 +123,7 @@ class Plan:
         collision_free: torch.Tensor | np.ndarray | None = None,
         tolerance: Tolerance = DEFAULT_TOLERANCE,
         robot: str | None = None,
+        stage: str | np.ndarray | None = None,
     ) -> Plan:
         """A plan of the joint path ``joints (..., T+1, dof)`` whose true end effector is ``ef (..., T+1, 3)``:
         the one way every planner (learned or baseline) makes its :class:`Plan`.
@@ -164,7 +165,7 @@ class Plan:
         )
         if arrays:
             fields = {k: None if v is None else torch.from_numpy(np.asarray(v)) for k, v in fields.items()}
-        return cls(**fields, tolerance=tolerance, robot=robot)
+        return cls(**fields, tolerance=tolerance, robot=robot, stage=stage)
 
     @property
     def start(self) -> torch.Tensor:
@@ -315,6 +316,7 @@ def judge(
     max_travel: float = CHECK_TRAVEL,
     body: BodySpheres | None = None,
     collision_free=None,
+    stage: str | np.ndarray | None = None,
 ) -> Plan:
     """The :class:`Plan` of the joint paths ``joints (..., T+1, dof)`` a planner made for ``problem``,
     judged on the robot itself: the analytic FK gives the end effector, the limits are checked on every
@@ -327,7 +329,7 @@ def judge(
     (default: :func:`~kinlearn.collision.body_spheres` of the robot, built for this call).
     ``collision_free (...)``: verdicts of this very dense check already computed by the caller (the
     learned planner checks its candidates with it, and passes the chosen ones'), taken instead of
-    checking again; it is ignored without obstacles.
+    checking again; it is ignored without obstacles. ``stage``: the plan's :attr:`Plan.stage`.
 
     Up to :data:`~kinlearn.data.problem.SMALL_BATCH` paths given as a float64 NumPy array ``joints``
     (or as a tensor) are judged on the fast path: FK and the dense check in the compiled kernels
@@ -348,7 +350,7 @@ def judge(
             joints = torch.from_numpy(np.asarray(joints))  # checked (and explained) as a tensor below
         elif math.prod(joints.shape[:-2]) <= SMALL_BATCH:
             return _judge_small(
-                problem, joints, waypoints, found, tolerance, max_travel, body, collision_free
+                problem, joints, waypoints, found, tolerance, max_travel, body, collision_free, stage
             )
         else:
             joints = torch.from_numpy(joints)
@@ -370,6 +372,7 @@ def judge(
             max_travel,
             body,
             collision_free,
+            stage,
         )
     if joints.ndim < 2 or joints.shape[:-2] != problem.batch_shape or joints.shape[-2] < 2:
         raise ShapeError(
@@ -417,6 +420,7 @@ def judge(
         collision_free=free,
         tolerance=tolerance,
         robot=robot.name,
+        stage=stage,
     )
 
 
@@ -442,7 +446,9 @@ def _found_array(found, batch: torch.Size) -> np.ndarray | None:
     return found.cpu().numpy().reshape(-1)
 
 
-def _judge_small(problem, J, waypoints, found, tolerance, max_travel, body, collision_free) -> Plan:
+def _judge_small(
+    problem, J, waypoints, found, tolerance, max_travel, body, collision_free, stage=None
+) -> Plan:
     """:func:`judge` for at most ``SMALL_BATCH`` float64 paths ``J (..., T+1, dof)``: the same rule, in
     NumPy and the compiled kernels."""
     robot, batch = problem.robot, problem.batch_shape
@@ -509,4 +515,5 @@ def _judge_small(problem, J, waypoints, found, tolerance, max_travel, body, coll
         collision_free=shaped(free),
         tolerance=tolerance,
         robot=robot.name,
+        stage=stage,
     )

@@ -441,9 +441,7 @@ class Planner:
             tolerance=self.tolerance,
             body=self.body if free is not None else None,
             collision_free=free,
-        )
-        plan = dataclasses.replace(
-            plan, stage=str(stage[0]) if lead == () else stage.astype(str).reshape(lead)
+            stage=str(stage[0]) if lead == () else stage.astype(str).reshape(lead),
         )
         if position:  # the state the planner chose to reach the target (the waypoint TM may end beside it)
             goal = np.concatenate((thetaT, efT), -1)
