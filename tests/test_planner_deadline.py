@@ -113,7 +113,9 @@ def test_plan_command_takes_a_deadline(hard, tmp_path, capsys):
         assert main([*args, "--goal", joints[1], "--deadline", "30"]) == 0
         out = capsys.readouterr().out
         assert "stage" in out and "rrt" in out
-        assert main([*args, "--goal", joints[1]]) == 1  # fixed time alone does not clear this one
+        assert (
+            main([*args, "--goal", joints[1], "--refine-steps", "0"]) == 1
+        )  # the line alone does not clear it
         assert "none" in capsys.readouterr().out
     no_scene = ["plan", "--robot", "panda", "--start", joints[0], "--goal", joints[1], "--deadline", "1"]
     assert main(no_scene) == 2
@@ -121,3 +123,20 @@ def test_plan_command_takes_a_deadline(hard, tmp_path, capsys):
     with pytest.raises(SystemExit) as refused:  # refused as the options are parsed
         main([*args, "--goal", joints[1], "--deadline", "0"])
     assert refused.value.code == 2
+
+
+def test_an_arm_without_an_obstacle_network_samples_by_a_budget_of_iterations(panda, hard):
+    """No deadline, no refine_steps: the panda (no obstacle network) samples for a fixed number of
+    iterations after its straight line, the same plan every call (a budget of work, not of time)."""
+    from kinlearn.planning.planner import NO_MODEL_RRT_ITERATIONS
+
+    assert NO_MODEL_RRT_ITERATIONS > 0
+    start, goal, scene = hard.problem(1)
+    with pytest.warns(NoObstacleModelWarning, match="iterations"):
+        a = panda.plan(start, goal, obstacles=scene)
+    b = _plan(panda, start, goal, obstacles=scene)
+    assert a.stage == b.stage == "rrt" and bool(a.success)
+    assert torch.equal(a.joints, b.joints)
+    assert bool(check_path(panda.body, a.joints, scene).collision_free)
+    line = _plan(panda, start, goal, obstacles=scene, refine_steps=0)  # asked for: no sampling
+    assert line.stage == "none"

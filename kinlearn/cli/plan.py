@@ -92,9 +92,9 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--refine-steps",
         type=NONNEGATIVE_INT,
-        default=0,
-        help="with --obstacles: gradient steps refining the least colliding proposal when none is free "
-        "(bounded time; default 0)",
+        default=None,
+        help="with obstacles: gradient steps refining the least colliding proposal when none is free "
+        "(bounded time; default: the planner's, 0 for the shipped ones)",
     )
     p.add_argument(
         "--deadline",

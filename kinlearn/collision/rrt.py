@@ -267,23 +267,37 @@ def rrt_connect(
     rounds: int = 1,
     shortcut: bool = True,
     clock=None,
+    max_iterations: int | None = None,
     **options,
 ) -> tuple[np.ndarray | None, float, int]:
     """Solve one query with :class:`RrtConnect` for at most ``time_limit`` seconds (checked between
-    rounds of ``rounds`` iterations, each a fraction of a millisecond), shortcutting the path found
-    (4 · V random shortcuts, V at a time, while time is left).
+    rounds of ``rounds`` iterations, each a fraction of a millisecond; ``math.inf`` for no limit) and at
+    most ``max_iterations`` iterations (default: no limit), shortcutting the path found (4 · V random
+    shortcuts, V at a time, while time is left).
+
+    With an iteration budget and no time limit the answer is the machine's speed's no more: the same
+    seed and budget give the same path, or the same failure, everywhere.
 
     Returns ``(path (V, dof) or None, seconds taken, iterations)``. ``clock``: the time source
     (default ``time.perf_counter``). ``options`` go to :class:`RrtConnect`.
     """
-    if not (isinstance(time_limit, (int, float)) and math.isfinite(time_limit) and time_limit > 0):
-        raise ConfigError(f"time_limit must be a number of seconds > 0, got {time_limit!r}")
+    if not (isinstance(time_limit, (int, float)) and time_limit > 0 and not math.isnan(time_limit)):
+        raise ConfigError(f"time_limit must be a number of seconds > 0 (or inf), got {time_limit!r}")
+    if max_iterations is not None and (
+        isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or max_iterations < 1
+    ):
+        raise ConfigError(f"max_iterations must be an integer >= 1 (or None), got {max_iterations!r}")
+    if math.isinf(time_limit) and max_iterations is None:
+        raise ConfigError(
+            "give rrt_connect a time limit or an iteration budget: without either it may not stop"
+        )
     clock = time.perf_counter if clock is None else clock
     t0 = clock()
     rrt = RrtConnect(body, scene, start, goal, lower, upper, seed=seed, **options)
+    budget = math.inf if max_iterations is None else max_iterations
     path = None
-    while path is None and not rrt.exhausted and clock() - t0 < time_limit:
-        path = rrt.run(rounds)
+    while path is None and not rrt.exhausted and rrt.iterations < budget and clock() - t0 < time_limit:
+        path = rrt.run(int(min(rounds, budget - rrt.iterations)))
     if path is not None and shortcut:  # 4 · V random shortcuts, a few at a time while time is left
         for _ in range(4):
             if clock() - t0 >= time_limit:

@@ -69,6 +69,11 @@ DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
 #: taken by default where it collides.
 NO_MODEL_KNOTS = 11
 NO_MODEL_REFINE_STEPS = 25
+#: RRT-Connect iterations a planner without an obstacle network gives a plan its line did not clear
+#: (by default: no deadline, so a fixed budget of iterations, the same path on every machine). On the
+#: panda's held-out scene problems the sampler solves most within a few hundred iterations, where 25
+#: refinement steps (the default before) took about a second for half the success.
+NO_MODEL_RRT_ITERATIONS = 2000
 
 
 def _kernel():
@@ -354,9 +359,12 @@ class Planner:
         (:mod:`kinlearn.collision.rrt`) gets what is left of it; the plan comes back by the deadline,
         flagged (``collision_free`` False) where nothing was cleared in time. Without a deadline (the
         default) plans are fixed-time and bit-reproducible; with one, whether the sampling stage finds
-        a path in time depends on the machine (its path, once found, on the seed alone). Under a
-        deadline an arm without an obstacle network skips the default refinement: sampling clears more
-        in the same time. ``plan.stage`` names the stage that made each plan
+        a path in time depends on the machine (its path, once found, on the seed alone).
+
+        A planner without an obstacle network (its learned stage is the straight joint line alone)
+        samples by default: where ``refine_steps`` is not given, RRT-Connect runs for at most
+        :data:`NO_MODEL_RRT_ITERATIONS` iterations — a budget of work, not of time, so the plan is the
+        same on every machine — or, with a deadline, for the time left. ``plan.stage`` names the stage that made each plan
         (:mod:`kinlearn.planning.stages`). Free-space plans ignore the deadline (they are fixed-time).
 
         Every plan's verdict is :func:`~kinlearn.planning.plan.judge`'s (the analytic FK of its joint
@@ -403,17 +411,24 @@ class Planner:
             self._check_domain(s0, sT, strict)
             thetaT, efT = sT[:, :dof], sT[:, dof:]
         free = waypoints = None
+        iterations = 0  # the sampling stage's iteration budget without a deadline (0: no sampling)
         stage = np.full(n, "learned", dtype=object)
         timed = deadline is not None and deadline.seconds is not None
         if problem.obstacles is not None:
             scene = problem.obstacles
             scene = scene.reshape(n) if len(scene.batch_shape) > 1 else scene
             if self.obstacle_tm is None:
-                if default_steps and not timed:
-                    steps = max(steps, NO_MODEL_REFINE_STEPS)
-                how = f"and {steps} steps of gradient refinement" if steps else "alone (refine_steps=0)"
-                if timed:
-                    how += ", then RRT-Connect within the deadline"
+                if default_steps:
+                    iterations = 0 if timed else NO_MODEL_RRT_ITERATIONS  # a deadline bounds it instead
+                    how = "then RRT-Connect on the compiled checker " + (
+                        "within the deadline"
+                        if timed
+                        else f"for up to {iterations} iterations (deterministic)"
+                    )
+                else:
+                    how = f"and {steps} steps of gradient refinement" if steps else "alone (refine_steps=0)"
+                    if timed:
+                        how += ", then RRT-Connect within the deadline"
                 warnings.warn(
                     f"{self.robot.name} has no obstacle-trained network in this planner ({OBSTACLE_TM}): "
                     f"planning with the straight joint line {how}, checked densely; plan.collision_free says "
@@ -421,7 +436,9 @@ class Planner:
                     NoObstacleModelWarning,
                     stacklevel=4,
                 )
-            joints, free, stage = self._plan_around(theta0, ef0, thetaT, efT, scene, steps, deadline)
+            joints, free, stage = self._plan_around(
+                theta0, ef0, thetaT, efT, scene, steps, deadline, iterations
+            )
         elif self._np_tm is not None:
             joints, waypoints = self._joint_path(theta0, ef0, thetaT, efT)
         else:
@@ -532,7 +549,15 @@ class Planner:
         return paths, np.argsort(length, axis=1, kind="stable")
 
     def _plan_around(
-        self, theta0, ef0, thetaT, efT, scene: Scene, steps: int, deadline: Deadline | None = None
+        self,
+        theta0,
+        ef0,
+        thetaT,
+        efT,
+        scene: Scene,
+        steps: int,
+        deadline: Deadline | None = None,
+        iterations: int = 0,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Joint paths ``(N, K, dof)`` around ``scene``, whether each is collision-free ``(N,)`` and the
         stage that made it ``(N,)`` (:data:`~kinlearn.planning.stages.STAGES`).
@@ -540,9 +565,9 @@ class Planner:
         Stage 1: the learned proposals (:meth:`_proposals`), each problem's first collision-free one in
         their order (exact verdicts), else its shortest, flagged. Stage 2 (``steps`` > 0), for the
         problems stage 1 left colliding: the optimiser from the least colliding proposal
-        (:meth:`_refine`), kept if the dense check finds it free. Stage 3 (a ``deadline``), for those
-        still colliding, one after the other while time is left: the compiled RRT-Connect
-        (:meth:`_sample`). Each stage takes the problems the one before left unsolved. Each plan is its
+        (:meth:`_refine`), kept if the dense check finds it free. Stage 3 (a ``deadline``, or an
+        iteration budget ``iterations``), for those still colliding, one after the other while time is
+        left: the compiled RRT-Connect (:meth:`_sample`). Each stage takes the problems the one before left unsolved. Each plan is its
         problem's alone: proposals are made as at batch 1 and the optimiser starts from the very path a
         batch-1 plan starts from."""
         n = theta0.shape[0]
@@ -570,12 +595,13 @@ class Planner:
                 best = paths[i, int(np.argmax(clear))]  # from the least colliding one
                 out[i], free[i] = self._refine(best, scene[int(i)] if batched else scene, nscene, steps)
                 stage[i] = "refine" if free[i] else "none"
-        if deadline is not None and deadline.seconds is not None:
+        timed = deadline is not None and deadline.seconds is not None
+        if timed or iterations:
             found = {}
             for i in np.flatnonzero(~free):
-                if deadline.expired(DEADLINE_RESERVE):
+                if timed and deadline.expired(DEADLINE_RESERVE):
                     break
-                path = self._sample(theta0[i], thetaT[i], kernel_scene(i), deadline, seed=int(i))
+                path = self._sample(theta0[i], thetaT[i], kernel_scene(i), deadline, int(i), iterations)
                 if path is not None:
                     found[int(i)] = path
             if found:
@@ -596,17 +622,20 @@ class Planner:
                         out[i], free[i], stage[i] = dense, True, "rrt"
         return out, free, stage
 
-    def _sample(self, start: np.ndarray, goal: np.ndarray, nscene, deadline: Deadline, seed: int):
+    def _sample(self, start: np.ndarray, goal: np.ndarray, nscene, deadline, seed: int, iterations: int):
         """Stage 3: the compiled RRT-Connect from ``start`` to ``goal`` for what ``deadline`` leaves (less
-        :data:`~kinlearn.planning.stages.DEADLINE_RESERVE`), shortcut; its path ``(V, dof)`` or None."""
+        :data:`~kinlearn.planning.stages.DEADLINE_RESERVE`) and at most ``iterations`` iterations (0: no
+        budget but the deadline), shortcut; its path ``(V, dof)`` or None."""
         from ..collision.rrt import rrt_connect
 
-        left = deadline.left() - DEADLINE_RESERVE
+        timed = deadline is not None and deadline.seconds is not None
+        left = deadline.left() - DEADLINE_RESERVE if timed else math.inf
         if left <= 0:
             return None
         path, _, _ = rrt_connect(
             self._np_body, nscene, start, goal, self._lo_np, self._hi_np, time_limit=left, seed=seed,
-            max_travel=CHECK_TRAVEL, clock=deadline.clock,
+            max_travel=CHECK_TRAVEL, clock=deadline.clock if timed else None,
+            max_iterations=iterations or None,
         )  # fmt: skip
         return path
 
