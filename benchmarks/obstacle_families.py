@@ -55,7 +55,7 @@ def _planner_rows(robot: str) -> dict:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NoObstacleModelWarning)
             plan = planner.plan(start, goal, obstacles=scene, **kw)
-        return torch.as_tensor(plan.joints), getattr(plan, "stage", None)
+        return torch.as_tensor(plan.joints), (plan.stage, bool(plan.collision_free))
 
     rows = {"kinlearn plan (no deadline)": lambda s, g, sc: run(s, g, sc)}
     if has_deadline:
@@ -64,7 +64,7 @@ def _planner_rows(robot: str) -> dict:
 
 
 def methods(robot: str, body, budgets, ompl_budgets, opt_steps) -> dict:
-    rows = {"joint line": lambda s, g, sc: (joint_line_path(s, g, sc)[0], None)}
+    rows = {"joint line": lambda s, g, sc: (joint_line_path(s, g, sc, body=body)[0], None)}
     rows.update(_planner_rows(robot))
     for b in budgets:
         rows[f"compiled RRT-Connect, {b:g} s"] = lambda s, g, sc, b=b: (
@@ -125,6 +125,12 @@ def main() -> None:
         t = np.array(seconds)
         fam_rate = {f: float(ok[(problems.family == FAMILIES.index(f)).numpy()].mean()) for f in fams}
         hard = problems.hard.numpy()
+        flagged = None
+        if stages[0] is not None:  # kinlearn's rows: the stage and the plan's own collision_free flag
+            flags = np.array([f for _, f in stages])
+            stages = [s for s, _ in stages]
+            # plans the planner called collision-free that the dense check of their joints finds colliding
+            flagged = int((flags & ~outcome["collision_free"].numpy()).sum())
         stage_counts = {str(s): stages.count(s) for s in set(stages)} if stages[0] is not None else None
         summary[name] = {
             "success": float(ok.mean()),
@@ -135,7 +141,7 @@ def main() -> None:
             "max_ms": float(t.max() * 1e3),
             "solve_ms": [float(x * 1e3) if o else None for x, o in zip(t, ok, strict=True)],
             "stages": stage_counts,
-            "flagged_free_but_colliding": None,
+            "flagged_free_but_colliding": flagged,
         }
         rows.append(
             [
@@ -147,7 +153,8 @@ def main() -> None:
                 f"{np.quantile(t, 0.99) * 1e3:.2f}",
             ]
         )
-        print(f"  {name}: {100 * ok.mean():.1f}%, p50 {np.median(t) * 1e3:.2f} ms", flush=True)
+        extra = "" if flagged is None else f", stages {stage_counts}, flagged free but colliding: {flagged}"
+        print(f"  {name}: {100 * ok.mean():.1f}%, p50 {np.median(t) * 1e3:.2f} ms{extra}", flush=True)
     table = markdown_table(["method", "success", "hard", *fams, "p50 ms", "p99 ms"], rows)
     print()
     print(table)
