@@ -112,7 +112,9 @@ def test_shipped_checkpoint_loads_and_plans(pairs, robot):
     assert plan.joints.shape == (64, 12, 7) and plan.waypoints.shape == (64, 10, 3)
     assert torch.equal(plan.joints, kinlearn.plan(pairs.start, pairs.goal).joints)
     assert torch.isfinite(plan.ef).all()
-    m = kinlearn.plan_metrics(plan, robot)
+    from kinlearn.evaluation.metrics import plan_metrics
+
+    m = plan_metrics(plan, robot)
     assert float(m["state_success"].mean()) >= 0.95 and bool(plan.success.all())
     assert float(m["limit_violation"].sum()) == 0
     assert float(m["executed_sharp_turn"].mean()) <= 0.1
