@@ -91,3 +91,24 @@ def test_colliding_ends_and_bad_input_are_refused(wall_problem):
         RrtConnect(kb, K.KernelScene(scene), start[:-1], goal, robot.lower, robot.upper)
     with pytest.raises(ConfigError, match="step"):
         RrtConnect(kb, K.KernelScene(scene), start, goal, robot.lower, robot.upper, step=-1.0)
+
+
+def test_rrt_connect_needs_a_bound_and_refuses_bad_ones(wall_problem):
+    from kinlearn.collision.rrt import rrt_connect
+
+    robot, body, scene, start, goal = wall_problem
+    kb, ks = K.KernelBody(body), K.KernelScene(scene)
+    args = (kb, ks, start, goal, robot.lower, robot.upper)
+    for bad in (0.0, -1.0, float("nan"), "1"):
+        with pytest.raises(ConfigError, match="time_limit"):
+            rrt_connect(*args, time_limit=bad)
+    for bad in (0, -3, 2.5, True):
+        with pytest.raises(ConfigError, match="max_iterations"):
+            rrt_connect(*args, max_iterations=bad)
+    with pytest.raises(ConfigError, match="time limit or an iteration budget"):
+        rrt_connect(*args, time_limit=float("inf"))
+    # An iteration budget alone: the same answer every time, and never more iterations than asked.
+    a = rrt_connect(*args, time_limit=float("inf"), max_iterations=3, seed=2)
+    b = rrt_connect(*args, time_limit=float("inf"), max_iterations=3, seed=2)
+    assert a[2] == b[2] <= 3
+    assert (a[0] is None) == (b[0] is None) and (a[0] is None or np.array_equal(a[0], b[0]))

@@ -171,3 +171,19 @@ def test_train_obstacle_planner_refuses_a_planner_folder_without_a_planner(tmp_p
     assert code == 2
     assert "no tm.pt" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()  # refused before anything was written
+
+
+def test_training_problems_of_the_named_families_only(tmp_path):
+    """make_training_problems writes the families asked for (default: the three the shipped network
+    learned from), with their training seeds, and refuses a family that does not exist."""
+    from kinlearn.data.problems import LEGACY_FAMILIES, ProblemSet
+    from kinlearn.training.obstacle_path import TRAINING_SEEDS, make_training_problems
+
+    assert [TRAINING_SEEDS[f] for f in LEGACY_FAMILIES] == [2001, 2002, 2003]
+    paths = make_training_problems(tmp_path, 1, families=("cage",))
+    assert [p.name for p in paths] == ["cage_00_1.npz"]
+    made = ProblemSet.load(paths[0])
+    assert len(made.of("cage")) == 1 and int(made.seed[0]) != 0
+    for bad in ((), ("kitchen",)):
+        with pytest.raises(ConfigError, match="training families"):
+            make_training_problems(tmp_path, 1, families=bad)
