@@ -203,8 +203,8 @@ def test_judge_refuses_paths_that_do_not_fit(robot, joints):
 
 
 def test_problems_from_endpoint_pairs_and_obstacle_sets(robot):
-    from kinlearn.data.problems import ProblemSet
     from kinlearn.data.endpoints import EndpointConfig, make_endpoints
+    from kinlearn.data.problems import ProblemSet
 
     pairs = make_endpoints(EndpointConfig(robot="iiwa14", n=8, seed=3))
     p = Problem.from_pairs(pairs)
