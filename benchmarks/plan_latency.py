@@ -69,7 +69,10 @@ def breakdown(planner: Planner, s: torch.Tensor, g: torch.Tensor, calls: int) ->
         ("the Problem (checks, FK of start and goal)", lambda: planner._problem(s, g, None, None)),
         ("TM forward (NumPy MLP)", lambda: planner._np_tm(th0, ef0, thT, efT)),
         ("joint path and clamp", lambda: planner._joint_path(th0, ef0, thT, efT)),
-        ("judge (FK of every configuration, limits, goal, the Plan)", lambda: judge(problem, joints[0], waypoints=waypoints[0])),
+        (
+            "judge (FK of every configuration, limits, goal, the Plan)",
+            lambda: judge(problem, joints[0], waypoints=waypoints[0]),
+        ),
     ]
     out = []
     for name, fn in parts:
