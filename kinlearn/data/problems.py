@@ -54,7 +54,7 @@ from ..collision.ompl import OmplRrtConnect, import_ompl
 from ..collision.scene import Scene
 from ..errors import ConfigError, DatasetError, ObstacleError, PlanningError
 from ..io import load_npz, save_npz
-from .scenes import SCENE_FAMILIES, build_scene, scene_scale
+from .scenes import SCENE_FAMILIES, _randint, _u, build_scene, scene_scale
 
 __all__ = [
     "FAMILIES",
@@ -126,17 +126,6 @@ def problem_seed(seed: int, index: int) -> int:
 # Scene families. Each builder returns (boxes, spheres, start-target sampler, goal-target sampler);
 # a sampler maps (n, generator) to (n, 3) end-effector targets. All numbers in metres.
 # --------------------------------------------------------------------------------------------------
-
-
-def _u(gen: torch.Generator, lo: float, hi: float, n: int | None = None):
-    if n is None:
-        return lo + (hi - lo) * float(torch.rand((), generator=gen, dtype=_F64))
-    return lo + (hi - lo) * torch.rand(n, generator=gen, dtype=_F64)
-
-
-def _randint(gen: torch.Generator, lo: int, hi: int) -> int:
-    """An integer in [lo, hi]."""
-    return int(torch.randint(lo, hi + 1, (), generator=gen))
 
 
 def _box(cx, cy, cz, hx, hy, hz) -> list[float]:

@@ -80,11 +80,10 @@ class SceneLayout:
 # --------------------------------------------------------------------------------------------------
 
 
-def _u(g: torch.Generator, lo: float, hi: float) -> float:
-    return lo + (hi - lo) * float(torch.rand((), generator=g, dtype=_F64))
-
-
-def _un(g: torch.Generator, lo, hi, n: int) -> torch.Tensor:
+def _u(g: torch.Generator, lo, hi, n: int | None = None):
+    """A number uniform in [lo, hi) (a float), or ``n`` of them (a float64 tensor)."""
+    if n is None:
+        return lo + (hi - lo) * float(torch.rand((), generator=g, dtype=_F64))
     return lo + (hi - lo) * torch.rand(n, generator=g, dtype=_F64)
 
 
@@ -349,8 +348,8 @@ def _table(g, s):
         away = math.atan2(y - objects[other][1], x - objects[other][0])
 
         def sample(n, gen):
-            ang = away + _un(gen, -math.pi / 3, math.pi / 3, n)
-            off = fr + _un(gen, 0.07 * s, 0.14 * s, n)
+            ang = away + _u(gen, -math.pi / 3, math.pi / 3, n)
+            off = fr + _u(gen, 0.07 * s, 0.14 * s, n)
             z = top + 0.05 * s + (h - top) * torch.rand(n, generator=gen, dtype=_F64)
             return torch.stack([x + off * torch.cos(ang), y + off * torch.sin(ang), z], dim=1)
 
@@ -388,9 +387,9 @@ def _wall(g, s):
         def sample(n, gen):
             local = torch.stack(
                 [
-                    _un(gen, -half_len + 0.05 * s, half_len - 0.05 * s, n),
-                    sign * (thick / 2 + _un(gen, 0.12 * s, 0.3 * s, n)),
-                    _un(gen, 0.1 * s, max(0.15 * s, height - 0.05 * s), n),
+                    _u(gen, -half_len + 0.05 * s, half_len - 0.05 * s, n),
+                    sign * (thick / 2 + _u(gen, 0.12 * s, 0.3 * s, n)),
+                    _u(gen, 0.1 * s, max(0.15 * s, height - 0.05 * s), n),
                 ],
                 dim=1,
             )
