@@ -390,7 +390,7 @@ class Planner:
         strict: bool,
         dtype,
         device,
-        deadline: Deadline | None = None,
+        deadline: Deadline,
     ) -> Plan:
         """Plan a checked problem: its goal joints (solved first for a position goal), the joint paths
         (free space: the TM's; among obstacles the stages of :meth:`_plan_around`), one verdict
@@ -413,7 +413,7 @@ class Planner:
         free = waypoints = None
         iterations = 0  # the sampling stage's iteration budget without a deadline (0: no sampling)
         stage = np.full(n, "learned", dtype=object)
-        timed = deadline is not None and deadline.seconds is not None
+        timed = deadline.seconds is not None
         if problem.obstacles is not None:
             scene = problem.obstacles
             scene = scene.reshape(n) if len(scene.batch_shape) > 1 else scene
@@ -556,7 +556,7 @@ class Planner:
         efT,
         scene: Scene,
         steps: int,
-        deadline: Deadline | None = None,
+        deadline: Deadline,
         iterations: int = 0,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Joint paths ``(N, K, dof)`` around ``scene``, whether each is collision-free ``(N,)`` and the
@@ -588,18 +588,17 @@ class Planner:
 
         if steps:
             for i in np.flatnonzero(~free):
-                if deadline is not None and deadline.expired(DEADLINE_RESERVE):
+                if deadline.expired(DEADLINE_RESERVE):
                     break
                 nscene = kernel_scene(i)
                 _, clear, _ = _kernel().check_paths(self._np_body, paths[i], nscene, max_travel=CHECK_TRAVEL)
                 best = paths[i, int(np.argmax(clear))]  # from the least colliding one
                 out[i], free[i] = self._refine(best, scene[int(i)] if batched else scene, nscene, steps)
                 stage[i] = "refine" if free[i] else "none"
-        timed = deadline is not None and deadline.seconds is not None
-        if timed or iterations:
+        if deadline.seconds is not None or iterations:
             found = {}
             for i in np.flatnonzero(~free):
-                if timed and deadline.expired(DEADLINE_RESERVE):
+                if deadline.expired(DEADLINE_RESERVE):  # never, without a deadline
                     break
                 path = self._sample(theta0[i], thetaT[i], kernel_scene(i), deadline, int(i), iterations)
                 if path is not None:
@@ -622,19 +621,20 @@ class Planner:
                         out[i], free[i], stage[i] = dense, True, "rrt"
         return out, free, stage
 
-    def _sample(self, start: np.ndarray, goal: np.ndarray, nscene, deadline, seed: int, iterations: int):
+    def _sample(
+        self, start: np.ndarray, goal: np.ndarray, nscene, deadline: Deadline, seed: int, iterations: int
+    ):
         """Stage 3: the compiled RRT-Connect from ``start`` to ``goal`` for what ``deadline`` leaves (less
         :data:`~kinlearn.planning.stages.DEADLINE_RESERVE`) and at most ``iterations`` iterations (0: no
         budget but the deadline), shortcut; its path ``(V, dof)`` or None."""
         from ..collision.rrt import rrt_connect
 
-        timed = deadline is not None and deadline.seconds is not None
-        left = deadline.left() - DEADLINE_RESERVE if timed else math.inf
+        left = deadline.left() - DEADLINE_RESERVE  # inf without a deadline
         if left <= 0:
             return None
         path, _, _ = rrt_connect(
             self._np_body, nscene, start, goal, self._lo_np, self._hi_np, time_limit=left, seed=seed,
-            max_travel=CHECK_TRAVEL, clock=deadline.clock if timed else None,
+            max_travel=CHECK_TRAVEL, clock=deadline.clock,
             max_iterations=iterations or None,
         )  # fmt: skip
         return path
