@@ -2,7 +2,7 @@
 and success against a time budget, for kinlearn and the baselines on the same problems and checker.
 
     python benchmarks/obstacle_families.py --robot panda [--problems benchmarks/data/scene_problems_panda.npz]
-        [--n 140] [--threads 1] [--out benchmarks/results/families_panda]
+        [--planner DIR] [--kinlearn-only] [--n 140] [--threads 1] [--out benchmarks/results/families_panda]
 
 Problems: a held-out set of ``benchmarks/make_obstacle_problems.py --families scenes`` (seeds 1004–1010,
 verified solvable by OMPL RRT-Connect within 5 s). Every method runs at batch 1 on one thread, one
@@ -15,6 +15,10 @@ refinement, deterministic) and with ``deadline=0.05``; the compiled RRT-Connect 
 each with time limits; the gradient trajectory optimiser. The success-against-budget figure draws, per
 sampling planner, the share solved within each budget (its 1 s run's solve times) and the fixed-time
 rows as points at their p99 time.
+
+Leave-one-family-out: ``--planner DIR`` plans with that folder's networks; the families its obstacle
+network was not trained on (it records those it was) are marked ``*`` in the table, and the summary
+gives their success apart (``left_out_success``).
 """
 
 from __future__ import annotations
@@ -46,10 +50,9 @@ from kinlearn.planning.obstacle_baselines import (
 DATA = Path(__file__).parent / "data"
 
 
-def _planner_rows(robot: str) -> dict:
+def _planner_rows(planner) -> dict:
     """kinlearn's plan as path functions, with and without a deadline (if this kinlearn has it)."""
     has_deadline = "deadline" in inspect.signature(kinlearn.Planner.plan).parameters
-    planner = kinlearn.Planner.default(robot)
 
     def run(start, goal, scene, **kw):
         with warnings.catch_warnings():
@@ -63,9 +66,9 @@ def _planner_rows(robot: str) -> dict:
     return rows
 
 
-def methods(robot: str, body, budgets, ompl_budgets, opt_steps) -> dict:
+def methods(planner, body, budgets, ompl_budgets, opt_steps) -> dict:
     rows = {"joint line": lambda s, g, sc: (joint_line_path(s, g, sc, body=body)[0], None)}
-    rows.update(_planner_rows(robot))
+    rows.update(_planner_rows(planner))
     for b in budgets:
         rows[f"compiled RRT-Connect, {b:g} s"] = lambda s, g, sc, b=b: (
             compiled_rrt_connect(s, g, sc, time_limit=b, body=body)[0],
@@ -88,6 +91,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--robot", default="panda")
     ap.add_argument("--problems", type=Path, default=None)
+    ap.add_argument(
+        "--planner",
+        type=Path,
+        default=None,
+        help="a planner folder (default: the shipped one), e.g. one holding a leave-one-family-out network",
+    )
+    ap.add_argument("--kinlearn-only", action="store_true", help="only the joint line and kinlearn's rows")
     ap.add_argument("--n", type=int, default=None, help="first n problems (default: all)")
     ap.add_argument("--budgets", type=float, nargs="*", default=[0.001, 0.01, 0.05, 1.0])
     ap.add_argument("--ompl-budgets", type=float, nargs="*", default=[0.05, 1.0])
@@ -108,8 +118,23 @@ def main() -> None:
     fams = [f for f in FAMILIES if len(problems.of(f))]
     print(f"{len(problems)} problems from {path} ({', '.join(f'{f} {len(problems.of(f))}' for f in fams)})")
     print(f"hard (straight joint line collides): {int(problems.hard.sum())}")
-    rows, summary = [], {}
-    for name, fn in methods(args.robot, body, args.budgets, args.ompl_budgets, args.opt_steps).items():
+    planner = kinlearn.Planner.load(args.planner) if args.planner else kinlearn.Planner.default(args.robot)
+    trained = None if planner.obstacle_tm is None else planner.obstacle_tm.families
+    left_out = [f for f in fams if trained is not None and f not in trained]
+    print(
+        "obstacle network: "
+        + (
+            "none"
+            if planner.obstacle_tm is None
+            else f"trained on {', '.join(trained) if trained else 'unrecorded families'}"
+        )
+        + (f"; left out of its training, marked *: {', '.join(left_out)}" if left_out else "")
+    )
+    budgets, ompl_budgets, opt_steps = (
+        ([], [], []) if args.kinlearn_only else (args.budgets, args.ompl_budgets, args.opt_steps)
+    )
+    rows, summary = [], {"_network": {"trained_on": trained, "left_out": left_out}}
+    for name, fn in methods(planner, body, budgets, ompl_budgets, opt_steps).items():
         s0, g0, sc0 = problems.problem(0)
         fn(s0, g0, sc0)  # warm-up: compile, load, caches
         paths, seconds, stages = [], [], []
@@ -136,6 +161,7 @@ def main() -> None:
             "success": float(ok.mean()),
             "hard_success": float(ok[hard].mean()) if hard.any() else None,
             "by_family": fam_rate,
+            "left_out_success": float(np.mean([fam_rate[f] for f in left_out])) if left_out else None,
             "p50_ms": float(np.median(t) * 1e3),
             "p99_ms": float(np.quantile(t, 0.99) * 1e3),
             "max_ms": float(t.max() * 1e3),
@@ -155,7 +181,8 @@ def main() -> None:
         )
         extra = "" if flagged is None else f", stages {stage_counts}, flagged free but colliding: {flagged}"
         print(f"  {name}: {100 * ok.mean():.1f}%, p50 {np.median(t) * 1e3:.2f} ms{extra}", flush=True)
-    table = markdown_table(["method", "success", "hard", *fams, "p50 ms", "p99 ms"], rows)
+    heads = [f"{f}*" if f in left_out else f for f in fams]
+    table = markdown_table(["method", "success", "hard", *heads, "p50 ms", "p99 ms"], rows)
     print()
     print(table)
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
@@ -173,6 +200,8 @@ def _figure(summary: dict, path: Path, robot: str, n: int) -> None:
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     grid = np.logspace(-4, 0, 200)
     for name, s in summary.items():
+        if name.startswith("_"):
+            continue
         if ", 1 s" in name:  # a sampling planner's anytime curve: solved within each budget
             solved = np.array([x for x in s["solve_ms"] if x is not None]) / 1e3
             ax.plot(

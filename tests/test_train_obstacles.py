@@ -12,7 +12,7 @@ from kinlearn.collision import body_obstacle_distance, body_spheres
 from kinlearn.data.problems import ProblemConfig, make_problems
 from kinlearn.errors import CheckpointError, ConfigError
 from kinlearn.io import load_checkpoint
-from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel
+from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel, load_obstacle_model
 from kinlearn.training.obstacle_path import (
     ObstacleLossConfig,
     ObstacleTrainConfig,
@@ -84,6 +84,9 @@ def test_training_lowers_the_loss_and_resumes_bit_identically(problems, tmp_path
     full = train_obstacle_model(cfg, tmp_path / "full", progress=False)
     records = [json.loads(line) for line in (tmp_path / "full" / "metrics.jsonl").read_text().splitlines()]
     assert records[-1]["train/loss"] < records[0]["train/loss"]
+    # The families it saw are recorded in the model and its checkpoint.
+    assert full.families == ("tabletop", "shelf", "barrier")
+    assert load_obstacle_model(tmp_path / "full" / "tm_obstacles.pt").families == full.families
     # The same run, killed in its ninth iteration (after the checkpoint at 8), then resumed.
     import kinlearn.training.obstacle_path as mod
 
@@ -140,7 +143,8 @@ def test_fine_tuning_starts_from_the_given_weights(problems, tmp_path):
 
 
 def test_train_obstacle_planner_command(tmp_path):
-    """The command generates its problems, trains, records its run and copies the model into a planner."""
+    """The command generates its problems (of the families chosen, less the one left out), trains,
+    records its run and copies the model, with the families it saw, into a planner."""
     import shutil
 
     from kinlearn.cli.main import main
@@ -151,14 +155,20 @@ def test_train_obstacle_planner_command(tmp_path):
     (planner_dir / "tm_obstacles.pt").unlink()
     run = tmp_path / "run"
     args = ["train-obstacle-planner", "--problems-per-family", "1", "--iterations", "2", "--batch-size", "3"]
+    args += ["--families", "legacy", "--leave-out", "barrier"]
     code = main(
         [*args, "--candidates", "2", "--run-dir", str(run), "--planner", str(planner_dir), "--no-progress"]
     )
     assert code == 0
     assert (run / "tm_obstacles.pt").is_file() and (run / "config.json").is_file()
-    assert len(list((run / "problems").glob("*.npz"))) == 3
+    assert sorted(p.name for p in (run / "problems").glob("*.npz")) == ["shelf_00_1.npz", "tabletop_00_1.npz"]
+    assert json.loads((run / "config.json").read_text())["obstacle_planner"]["families"] == [
+        "tabletop",
+        "shelf",
+    ]
     planner = Planner.load(planner_dir)
     assert planner.obstacle_tm is not None and planner.obstacle_tm.config.candidates == 2
+    assert planner.obstacle_tm.families == ("tabletop", "shelf")  # barrier left out, and it says so
     # The same run directory is refused without --resume or --overwrite.
     assert main([*args, "--run-dir", str(run), "--no-progress"]) == 2
 
@@ -187,3 +197,27 @@ def test_training_problems_of_the_named_families_only(tmp_path):
     for bad in ((), ("kitchen",)):
         with pytest.raises(ConfigError, match="training families"):
             make_training_problems(tmp_path, 1, families=bad)
+
+
+def test_leave_one_family_out_bookkeeping():
+    """select_families expands groups, keeps order, drops the left-out family, and refuses what it
+    cannot do; the groups are the families the benchmark sets and the generator know."""
+    from kinlearn.data.problems import FAMILIES, FAMILY_GROUPS, LEGACY_FAMILIES, select_families
+    from kinlearn.data.scenes import SCENE_FAMILIES
+
+    assert select_families(["scenes"]) == SCENE_FAMILIES
+    assert select_families("all") == FAMILIES
+    assert select_families(["scenes"], ["cage"]) == tuple(f for f in SCENE_FAMILIES if f != "cage")
+    assert len(select_families(["scenes"], ["cage"])) == len(SCENE_FAMILIES) - 1
+    assert select_families(["cage", "scenes", "legacy"]) == (
+        "cage",
+        *(f for f in SCENE_FAMILIES if f != "cage"),
+        *LEGACY_FAMILIES,
+    )
+    assert set(FAMILY_GROUPS["all"]) == set(LEGACY_FAMILIES) | set(SCENE_FAMILIES)
+    with pytest.raises(ConfigError, match="unknown problem family"):
+        select_families(["kitchen"])
+    with pytest.raises(ConfigError, match="not among"):
+        select_families(["legacy"], ["cage"])
+    with pytest.raises(ConfigError, match="no family left"):
+        select_families(["cage"], ["cage"])

@@ -167,9 +167,25 @@ def _add_train_obstacle_planner(sub) -> None:
         sub,
         "train-obstacle-planner",
         "Train the obstacle-aware TM self-supervised through a frozen body model on generated scenes "
-        "(tabletop, shelf, barrier; seeds apart from the benchmark's); writes tm_obstacles.pt. Copy it into "
-        "a planner folder (or pass --planner) and plan(..., obstacles=...) uses it.",
+        "(the seven scene families by default; seeds apart from the benchmark's); writes tm_obstacles.pt, "
+        "which records the families it saw. Copy it into a planner folder (or pass --planner) and "
+        "plan(..., obstacles=...) uses it.",
         _run_train_obstacle_planner,
+    )
+    p.add_argument(
+        "--families",
+        nargs="+",
+        default=["scenes"],
+        metavar="FAMILY",
+        help="scene families to train on: names, or 'scenes' (the seven of kinlearn.data.scenes), 'legacy' "
+        "(tabletop, shelf, barrier: the shipped iiwa14 network's) or 'all' (default: scenes)",
+    )
+    p.add_argument(
+        "--leave-out",
+        nargs="+",
+        default=[],
+        metavar="FAMILY",
+        help="families to hold out of training (a leave-one-family-out run; the benchmark marks them)",
     )
     p.add_argument(
         "--problems-per-family",
@@ -214,10 +230,12 @@ def _add_train_obstacle_planner(sub) -> None:
 
 
 def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
+    from ..data.problems import select_families
     from ..models.obstacle_path import export_obstacle_model
     from ..training.obstacle_path import ObstacleTrainConfig, make_training_problems, train_obstacle_model
 
     robot = load_robot(args.robot)
+    families = select_families(args.families, args.leave_out)
     if args.planner is not None and not (args.planner / "tm.pt").is_file():
         raise ConfigError(f"--planner {args.planner} is not a planner folder (it holds no tm.pt)")
     # The models named on the command line are read now: a bad one is refused before anything is written.
@@ -234,6 +252,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         ("tm_obstacles.pt", "metrics.jsonl", "tensorboard", "problems"),
         resumable=True,
         obstacle_planner={
+            "families": list(families),
             "problems_per_family": args.problems_per_family,
             "iterations": args.iterations,
             "batch_size": args.batch_size,
@@ -245,8 +264,11 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
     )
     run_dir = run.begin()
     problems_dir = args.problems_dir or run_dir / "problems"
-    print(f"training problems in {problems_dir} ({args.problems_per_family} per family; generated once)")
-    paths = make_training_problems(problems_dir, args.problems_per_family, robot=robot)
+    print(
+        f"training problems in {problems_dir} ({args.problems_per_family} per family of "
+        f"{', '.join(families)}; generated once)"
+    )
+    paths = make_training_problems(problems_dir, args.problems_per_family, robot=robot, families=families)
     cfg = ObstacleTrainConfig(
         robot=robot.name,
         problems=tuple(sorted(str(p) for p in paths)),

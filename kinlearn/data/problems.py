@@ -58,22 +58,53 @@ from .scenes import SCENE_FAMILIES, _randint, _u, build_scene, scene_scale
 
 __all__ = [
     "FAMILIES",
+    "FAMILY_GROUPS",
     "LEGACY_FAMILIES",
     "PROBLEM_FORMAT",
     "ProblemConfig",
     "ProblemSet",
     "make_problems",
     "problem_seed",
+    "select_families",
 ]
 
 #: The iiwa14's first three families (the shipped obstacle network's training scenes), then the seven
 #: of :mod:`kinlearn.data.scenes` (rotated boxes, cylinders; scaled to the arm).
 LEGACY_FAMILIES: tuple[str, ...] = ("tabletop", "shelf", "barrier")
 FAMILIES: tuple[str, ...] = LEGACY_FAMILIES + SCENE_FAMILIES
+#: Names that stand for several families where families are chosen (training, benchmark sets).
+FAMILY_GROUPS: dict[str, tuple[str, ...]] = {
+    "legacy": LEGACY_FAMILIES,
+    "scenes": SCENE_FAMILIES,
+    "all": FAMILIES,
+}
 #: Version of the problem-set ``.npz`` layout written by :meth:`ProblemSet.save`.
 PROBLEM_FORMAT = 1
 
 _F64 = torch.float64
+
+
+def select_families(names, leave_out=()) -> tuple[str, ...]:
+    """The families ``names`` stand for (family names or :data:`FAMILY_GROUPS` keys, in that order,
+    each once), without those in ``leave_out`` (family names): the bookkeeping of a leave-one-family-out
+    run. Raises :class:`~kinlearn.errors.ConfigError` for an unknown name, a left-out family that was not
+    chosen, or nothing left."""
+    names, leave_out = (names,) if isinstance(names, str) else tuple(names), tuple(leave_out)
+    known = ", ".join((*FAMILY_GROUPS, *FAMILIES))
+    chosen: list[str] = []
+    for name in names:
+        if name not in FAMILY_GROUPS and name not in FAMILIES:
+            raise ConfigError(f"unknown problem family {name!r}; choose from {known}")
+        chosen += [f for f in FAMILY_GROUPS.get(name, (name,)) if f not in chosen]
+    for f in leave_out:
+        if f not in chosen:
+            raise ConfigError(f"cannot leave out {f!r}: it is not among the chosen families {chosen}")
+    kept = tuple(f for f in chosen if f not in leave_out)
+    if not kept:
+        raise ConfigError(f"no family left to train on: {chosen} all left out")
+    return kept
+
+
 #: What the error without OMPL names as needing it.
 _VERIFY = "verifying problems (pass ProblemConfig(verify=False) to skip it)"
 

@@ -167,6 +167,9 @@ class ObstaclePathModel(nn.Module):
         self.register_buffer("in_std", torch.ones(self.n_problem_features))
         self.register_buffer("prim_mean", torch.zeros(PRIMITIVE_FEATURES))
         self.register_buffer("prim_std", torch.ones(PRIMITIVE_FEATURES))
+        #: The scene families it was trained on (names of :data:`kinlearn.data.problems.FAMILIES`),
+        #: recorded by its trainer and kept in its checkpoint; None where none was recorded.
+        self.families: tuple[str, ...] | None = None
 
     @property
     def robot_name(self) -> str:
@@ -223,16 +226,29 @@ class ObstaclePathModel(nn.Module):
 def save_obstacle_model(
     tm: ObstaclePathModel, path: str | Path, extra: dict | None = None, depends: dict | None = None
 ) -> Path:
-    """Save an obstacle-aware TM: weights, its config, robot and format version (atomically)."""
+    """Save an obstacle-aware TM: weights, its config, robot, the families it was trained on and format
+    version (atomically)."""
+    extra = dict(extra or {})
+    if tm.families is not None:
+        extra["families"] = list(tm.families)
     return save_checkpoint(
         path,
         kind=ObstaclePathModel.kind,
         robot=tm.robot_name,
         config=tm.config.to_dict(),
         state_dict=tm.state_dict(),
-        extra=extra or {},
+        extra=extra,
         depends=depends,
     )
+
+
+def _families(payload: dict, path) -> tuple[str, ...] | None:
+    families = payload["extra"].get("families")
+    if families is None:
+        return None
+    if not isinstance(families, (list, tuple)) or not all(isinstance(f, str) for f in families):
+        raise CheckpointError(f"{path}: its record of training families is not a list of names: {families!r}")
+    return tuple(families)
 
 
 def load_obstacle_model(path: str | Path, robot: str | None = None) -> ObstaclePathModel:
@@ -245,6 +261,7 @@ def load_obstacle_model(path: str | Path, robot: str | None = None) -> ObstacleP
         raise CheckpointError(
             f"{path}: the obstacle TM checkpoint does not match this kinlearn ({exc})"
         ) from exc
+    tm.families = _families(payload, path)
     return tm.eval()
 
 
@@ -254,7 +271,7 @@ def export_obstacle_model(src: str | Path, dst: str | Path, half: bool = True) -
     ``half``: store the layers' weights as float16 (:func:`kinlearn.io.half_weights`: half the size;
     they load back into float32, changing the plans by rounding only). The exported file is what is judged: measure the exported planner."""
     payload = load_checkpoint(src, kind=ObstaclePathModel.kind)
-    load_obstacle_model(src)  # it must load
+    families = load_obstacle_model(src).families  # it must load
     state = half_weights(payload["state_dict"]) if half else payload["state_dict"]
     return save_checkpoint(
         dst,
@@ -262,4 +279,5 @@ def export_obstacle_model(src: str | Path, dst: str | Path, half: bool = True) -
         robot=payload["robot"],
         config=payload["config"],
         state_dict=state,
+        extra={} if families is None else {"families": list(families)},
     )

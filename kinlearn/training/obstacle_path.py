@@ -56,7 +56,7 @@ __all__ = [
     "train_obstacle_model",
 ]
 
-#: Seeds of the training problems, one per family (the held-out benchmark uses 1001–1003).
+#: Seeds of the training problems, one per family (the held-out benchmark sets use 1001–1010).
 TRAINING_SEEDS = {name: 2001 + k for k, name in enumerate(FAMILIES)}  # tabletop 2001, shelf 2002, …
 
 
@@ -295,6 +295,7 @@ def train_obstacle_model(
     pool = _load_pool(config.problems, robot)
     ef_all = (kin.position(pool.start), kin.position(pool.goal))
     n_pool = len(pool)
+    seen = {f for i, f in enumerate(FAMILIES) if bool((pool.family == i).any())}
     if config.init_checkpoint:
         init = load_obstacle_model(config.init_checkpoint, robot=robot.name)
         if init.config.to_dict() != tm.config.to_dict():
@@ -302,6 +303,7 @@ def train_obstacle_model(
                 f"init_checkpoint {config.init_checkpoint} has another architecture than the run's model"
             )
         tm.load_state_dict(init.state_dict())
+        seen |= set(init.families or ())
     else:  # standardise with both directions, as training draws them
         rows_all, mask_all, floor_all = scene_primitives(pool.scene, n_pool, torch.float64)
         s0_all = torch.cat((pool.start, ef_all[0]), -1)
@@ -313,6 +315,7 @@ def train_obstacle_model(
             mask_all.repeat(2, 1),
             floor_all.repeat(2, 1),
         )
+    tm.families = tuple(f for f in FAMILIES if f in seen)  # recorded in its checkpoints
     loop = iteration_loop(
         tm,
         config,
