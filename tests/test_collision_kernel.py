@@ -174,3 +174,22 @@ def test_rrt_checker_compiled_answers_as_torch():
     motions = [fast.motion_valid(a, b) for a, b in ends]
     ref = [slow.motion_valid(a, b) for a, b in ends]
     assert motions == ref and 0 < sum(motions) < len(motions)
+
+
+def test_near_pairs_finds_exactly_the_pairs_within_the_cut():
+    """The broad phase returns every (configuration, pair) closer than the cut, and nothing else."""
+    from kinlearn import load_robot
+    from kinlearn.collision import body_spheres
+
+    body = body_spheres(load_robot("panda")).double()
+    q = load_robot("panda").sample(40, torch.Generator().manual_seed(3), dtype=torch.float64)
+    c = body(q)
+    i, j = body.pairs[:, 0], body.pairs[:, 1]
+    gap = (c[:, i] - c[:, j]).norm(dim=-1) - body.radii[i] - body.radii[j]
+    for cut in (0.0, 0.03):
+        b, k = K.near_pairs(c.numpy(), body.radii.numpy(), body.pairs.numpy(), cut)
+        want = (gap < cut).nonzero(as_tuple=True)
+        assert np.array_equal(b, want[0].numpy()) and np.array_equal(k, want[1].numpy())
+    assert len(K.near_pairs(c.numpy(), body.radii.numpy(), body.pairs.numpy(), 0.03)[0]) > 0
+    with pytest.raises(ShapeError):
+        K.near_pairs(c.numpy()[0], body.radii.numpy(), body.pairs.numpy(), 0.03)

@@ -112,3 +112,84 @@ def test_bad_config(robot):
         ObstaclePathConfig(dof=7)  # no limits
     with pytest.raises(ConfigError):
         scene_primitives(_scene(3), 2)  # a scene per problem, but for 3 problems
+
+
+def _rot_z(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _mixed_scene(turn: float = 0.6) -> Scene:
+    from kinlearn.collision.geometry import Box, Cylinder, Sphere
+
+    tilt = _rot_z(turn) @ np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    return Scene.from_primitives(
+        [
+            Sphere((0.5, 0.1, 0.4), 0.08),
+            Box((0.55, -0.2, 0.3), (0.3, 0.01, 0.2), _rot_z(turn).ravel()),
+            Cylinder((0.3, 0.4, 0.5), 0.03, 0.25, tilt.ravel()),
+        ],
+        floor=0.0,
+    )
+
+
+def test_shape_rows_tell_which_way_a_primitive_lies():
+    """The extent tensor is one per shape however its frame is written (axes flipped, a cylinder turned
+    about its own axis) and tells apart two plates the bounding box cannot: turned +45° and −45°."""
+    from kinlearn.collision.geometry import Box, Cylinder, shape_tensor
+
+    def rows(prims):
+        return scene_primitives(Scene.from_primitives(prims), 1, torch.float64)[0][0]
+
+    R = _rot_z(0.4)
+    flipped = R @ np.diag([-1.0, -1.0, 1.0])
+    a, b = (
+        rows([Box((0, 0, 0.5), (0.3, 0.01, 0.2), R.ravel())]),
+        rows([Box((0, 0, 0.5), (0.3, 0.01, 0.2), flipped.ravel())]),
+    )
+    assert torch.allclose(a, b, atol=1e-12)
+    c = rows([Cylinder((0, 0, 0.5), 0.05, 0.2, R.ravel())])
+    d = rows([Cylinder((0, 0, 0.5), 0.05, 0.2, np.eye(3).ravel())])
+    assert torch.allclose(c, d, atol=1e-12)  # turned about its own (z) axis
+    assert c[0, 13] == 1.0 and c[0, 6] == 0.0 and a[0, 13] == 0.0
+    plus, minus = (
+        rows([Box((0, 0, 0.5), (0.3, 0.01, 0.2), _rot_z(np.pi / 4).ravel())]),
+        rows([Box((0, 0, 0.5), (0.3, 0.01, 0.2), _rot_z(-np.pi / 4).ravel())]),
+    )
+    assert torch.allclose(plus[0, :7], minus[0, :7], atol=1e-12)  # the same bounding box
+    assert abs(float(plus[0, 10] - minus[0, 10])) > 0.2  # Lxy: opposite diagonals
+    # A box's tensor's eigenvalues are its half extents.
+    box = Box((0, 0, 0), (0.3, 0.01, 0.2), _rot_z(0.7).ravel())
+    L = shape_tensor(Box, torch.tensor(box.row(), dtype=torch.float64))
+    M = torch.tensor([[L[0], L[3], L[4]], [L[3], L[1], L[5]], [L[4], L[5], L[2]]])
+    assert torch.allclose(torch.linalg.eigvalsh(M), torch.tensor([0.01, 0.2, 0.3], dtype=torch.float64))
+
+
+def test_the_kernels_rows_are_scene_primitives_rows_to_the_bit():
+    from kinlearn.collision.kernel import KernelScene
+
+    scene = _mixed_scene()
+    rows = scene_primitives(scene, 1, torch.float64)[0][0].numpy()
+    assert rows.shape == (3, 14)
+    assert np.array_equal(KernelScene(scene).model_rows(), rows)
+
+
+def test_shape_model_numpy_matches_torch_and_old_files_read_boxes(robot, tmp_path):
+    """A model reading extent tensors gives the same knots in NumPy; a checkpoint written before the
+    choice existed (no ``primitives`` in its config) reads bounding boxes, as it was trained to."""
+    tm = _model(robot)
+    assert tm.config.primitives == "shape" and tm.row_columns == 14
+    s0, sT = _states(robot, 3, seed=2)
+    rows, mask, floor = scene_primitives(_mixed_scene().expand(3), 3)
+    with torch.no_grad():
+        ref = tm(s0, sT, rows, mask, floor).double().numpy()
+        turned = tm(s0, sT, *scene_primitives(_mixed_scene(-0.6).expand(3), 3)).double().numpy()
+    assert np.abs(turned - ref).max() > 1e-5  # it sees the turn
+    npm = NumpyObstacleModel(tm, dtype=np.float64)
+    a = [x.double().numpy() for x in (s0[:, :7], s0[:, 7:], sT[:, :7], sT[:, 7:])]
+    assert np.abs(npm(*a, rows.double().numpy(), mask.numpy(), floor.double().numpy()) - ref).max() < 1e-4
+    old = ObstaclePathConfig.for_robot(robot, hidden=(8,), encoder=(8,)).to_dict()
+    del old["primitives"]
+    assert ObstaclePathConfig.from_dict(old).primitives == "aabb"
+    with pytest.raises(ConfigError, match="primitives"):
+        ObstaclePathConfig.for_robot(robot, primitives="mesh")

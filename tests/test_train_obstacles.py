@@ -221,3 +221,53 @@ def test_leave_one_family_out_bookkeeping():
         select_families(["legacy"], ["cage"])
     with pytest.raises(ConfigError, match="no family left"):
         select_families(["cage"], ["cage"])
+
+
+def test_the_sparse_hinges_are_the_dense_ones(problems):
+    """The collision and self-collision terms, measured only where the kernel finds spheres within the
+    margin, equal the hinge over every sphere and pair, in value and gradient."""
+    from kinlearn.collision.distance import self_collision_distance
+    from kinlearn.training.obstacle_path import _batch, build_body
+
+    _, ps = problems
+    robot = load_robot("iiwa14")
+    cfg = _tiny(problems)
+    body = build_body(cfg, robot)
+    tm = ObstaclePathModel(cfg.model_config(robot))
+    from kinlearn.body.kinematics import kinematics
+
+    kin = kinematics(robot)
+    ef = (kin.position(ps.start), kin.position(ps.goal))
+    s0, sT, scene = _batch(ps, ef, torch.arange(len(ps)), torch.zeros(len(ps), dtype=torch.bool))
+    loss_cfg = ObstacleLossConfig(margin=0.1)  # wide: many spheres and pairs within it
+    fr = torch.tensor([0.25, 0.75])
+    _, terms = candidate_losses(tm, body, s0, sT, scene, loss_cfg, fr)
+    grads = torch.autograd.grad(
+        terms["collision"].sum() + terms["self_collision"].sum(), list(tm.parameters())
+    )
+    # The dense reference: every arm sphere against the scene, every pair.
+    from kinlearn.models.obstacle_path import scene_primitives
+    from kinlearn.training.obstacle_path import _dense
+
+    mid = tm(s0, sT, *scene_primitives(scene, len(ps), s0.dtype))
+    n, C = mid.shape[:2]
+    knots = torch.cat(
+        (
+            s0[:, None, None, :7].expand(n, C, 1, 7),
+            mid.clamp(tm.lower, tm.upper),
+            sT[:, None, None, :7].expand(n, C, 1, 7),
+        ),
+        2,
+    )
+    centres = body(_dense(knots, fr), validate=False)
+    arm = body.link > 0
+    d = _scene_clearance(centres[..., arm, :].flatten(1, 2), body.radii[arm], scene, body.floor_mask[arm])
+    collision = torch.relu(0.1 - d).sum(-1).view(n, C, -1).mean(-1)
+    _, pair = self_collision_distance(centres, body.radii, body.pairs, per_pair=True)
+    self_col = torch.relu(0.1 - pair).sum(-1).mean(-1)
+    assert float(collision.detach().sum()) > 0 and float(self_col.detach().sum()) > 0
+    assert torch.allclose(terms["collision"], collision, rtol=1e-5, atol=1e-7)
+    assert torch.allclose(terms["self_collision"], self_col, rtol=1e-5, atol=1e-7)
+    ref = torch.autograd.grad(collision.sum() + self_col.sum(), list(tm.parameters()))
+    for a, b in zip(grads, ref, strict=True):
+        assert torch.allclose(a, b, rtol=1e-4, atol=1e-6 * float(b.abs().max()) + 1e-9)

@@ -323,6 +323,30 @@ def aabb_half_extents(kind: type[Primitive], rows: torch.Tensor) -> torch.Tensor
     raise ObstacleError(f"no bounding box for primitives of kind {kind.kind!r}")
 
 
+def shape_tensor(kind: type[Primitive], rows: torch.Tensor) -> torch.Tensor:
+    """``(..., 6)``: each primitive's extent tensor ``L = R diag(e) Rᵀ`` as ``[Lxx, Lyy, Lzz, Lxy, Lxz,
+    Lyz]`` (m), ``e`` its half extents in its own frame (a sphere's radius three times, a box's half
+    extents, a cylinder's ``(r, r, h)``). One tensor per shape however its frame is written (flipping an
+    axis, or turning a cylinder about its own, leaves it unchanged), where a bounding box forgets which
+    way a rotated box lies. Summed term by term in a fixed order (as the compiled rows are)."""
+    if kind is Sphere:
+        r = rows[..., 3]
+        z = torch.zeros_like(r)
+        return torch.stack((r, r, r, z, z, z), dim=-1)
+    if kind is Box:
+        e, R = rows[..., 3:6], rows[..., 6:15]
+    elif kind is Cylinder:
+        e, R = rows[..., [3, 3, 4]], rows[..., 5:14]
+    else:
+        raise ObstacleError(f"no shape tensor for primitives of kind {kind.kind!r}")
+
+    def L(a: int, b: int) -> torch.Tensor:
+        t = [R[..., 3 * a + k] * e[..., k] * R[..., 3 * b + k] for k in range(3)]
+        return (t[0] + t[1]) + t[2]
+
+    return torch.stack((L(0, 0), L(1, 1), L(2, 2), L(0, 1), L(0, 2), L(1, 2)), dim=-1)
+
+
 def rotation_from_quaternion(q: Sequence[float]) -> np.ndarray:
     """``(3, 3)`` rotation of a quaternion ``[x, y, z, w]`` (normalised first; ROS's order)."""
     x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(np.asarray(q, dtype=np.float64))

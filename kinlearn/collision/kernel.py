@@ -47,6 +47,7 @@ __all__ = [
     "check_paths",
     "clearances",
     "first_free",
+    "near_pairs",
     "warm_up",
 ]
 
@@ -247,14 +248,29 @@ def _checked_tips(qs, F, prismatic, lower, upper, tol, ok):
 
 
 @_jit
+def _extent_tensor(out, r, e0, e1, e2, R, o):
+    """Columns 7–12 of a model row: L = R diag(e) Rᵀ of rotation ``R[o:o + 9]`` (row-major), summed
+    term by term in the order of :func:`~kinlearn.collision.geometry.shape_tensor`."""
+    e = (e0, e1, e2)
+    ab = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+    for m in range(6):
+        a, b = ab[m]
+        t0 = R[o + 3 * a] * e[0] * R[o + 3 * b]
+        t1 = R[o + 3 * a + 1] * e[1] * R[o + 3 * b + 1]
+        t2 = R[o + 3 * a + 2] * e[2] * R[o + 3 * b + 2]
+        out[r, 7 + m] = (t0 + t1) + t2
+
+
+@_jit
 def _model_rows(spheres, boxes, cylinders):
-    """The obstacle TM's rows ``(K + B + C, 7)`` of packed tables (see :meth:`KernelScene.model_rows`)."""
+    """The obstacle TM's rows ``(K + B + C, 14)`` of packed tables (see :meth:`KernelScene.model_rows`)."""
     K, B, C = spheres.shape[0], boxes.shape[0], cylinders.shape[0]
-    out = np.empty((K + B + C, 7))
+    out = np.zeros((K + B + C, 14))
     for i in range(K):
         for a in range(3):
             out[i, a] = spheres[i, a]
             out[i, 3 + a] = spheres[i, 3]
+            out[i, 7 + a] = spheres[i, 3]
         out[i, 6] = 1.0
     for i in range(B):
         r = K + i
@@ -266,14 +282,15 @@ def _model_rows(spheres, boxes, cylinders):
                 + abs(boxes[i, 7 + 3 * a]) * boxes[i, 4]
                 + abs(boxes[i, 8 + 3 * a]) * boxes[i, 5]
             )
-        out[r, 6] = 0.0
+        _extent_tensor(out, r, boxes[i, 3], boxes[i, 4], boxes[i, 5], boxes[i], 6)
     for i in range(C):
         r = K + B + i
         for a in range(3):
             out[r, a] = cylinders[i, a]
             ax = cylinders[i, 7 + 3 * a]  # the axis: column 2 of R
             out[r, 3 + a] = cylinders[i, 3] * math.sqrt(max(1.0 - ax * ax, _TINY)) + cylinders[i, 4] * abs(ax)
-        out[r, 6] = 0.0
+        _extent_tensor(out, r, cylinders[i, 3], cylinders[i, 3], cylinders[i, 4], cylinders[i], 5)
+        out[r, 13] = 1.0
     return out
 
 
@@ -803,10 +820,11 @@ class KernelScene:
         self._buf = self._rows = None
 
     def model_rows(self) -> np.ndarray:
-        """The scene as the obstacle-aware TM reads it, float64 ``(P, 7)``: per primitive its centre, the
-        half extents of its axis-aligned bounding box and whether it is a sphere, spheres first, then
-        boxes, then cylinders (the rows of :func:`~kinlearn.models.obstacle_path.scene_primitives`
-        without padding, computed from this packing: the scene is converted once)."""
+        """The scene as the obstacle-aware TM reads it, float64 ``(P, 14)``: per primitive its centre, the
+        half extents of its axis-aligned bounding box, whether it is a sphere, its extent tensor and
+        whether it is a cylinder; spheres first, then boxes, then cylinders (the rows of
+        :func:`~kinlearn.models.obstacle_path.scene_primitives` without padding, computed from this
+        packing: the scene is converted once)."""
         if self._rows is None:
             self._rows = _model_rows(self.spheres, self.boxes, self.cylinders)
         return self._rows
@@ -905,6 +923,42 @@ def _check_args(body, scene, max_travel, margin) -> None:
 def centres(body: KernelBody, q) -> np.ndarray:
     """World sphere centres ``(N, M, 3)`` of joints ``q (N, dof)``."""
     return _centres(_joints(q, body.dof, "joint values q", 2), *body.fk_args())
+
+
+@_jit
+def _near_pairs(c, radii, pairs, cut):
+    B, P = c.shape[0], pairs.shape[0]
+    count = 0
+    for b in range(B):
+        for k in range(P):
+            i, j = pairs[k, 0], pairs[k, 1]
+            dx, dy, dz = c[b, i, 0] - c[b, j, 0], c[b, i, 1] - c[b, j, 1], c[b, i, 2] - c[b, j, 2]
+            if math.sqrt(dx * dx + dy * dy + dz * dz) - radii[i] - radii[j] < cut:
+                count += 1
+    out_b, out_k = np.empty(count, np.int64), np.empty(count, np.int64)
+    n = 0
+    for b in range(B):
+        for k in range(P):
+            i, j = pairs[k, 0], pairs[k, 1]
+            dx, dy, dz = c[b, i, 0] - c[b, j, 0], c[b, i, 1] - c[b, j, 1], c[b, i, 2] - c[b, j, 2]
+            if math.sqrt(dx * dx + dy * dy + dz * dz) - radii[i] - radii[j] < cut:
+                out_b[n], out_k[n] = b, k
+                n += 1
+    return out_b, out_k
+
+
+def near_pairs(centres, radii, pairs, cut: float) -> tuple[np.ndarray, np.ndarray]:
+    """The sphere pairs closer than ``cut`` (m, signed: centre distance less both radii): for centres
+    ``(B, M, 3)``, radii ``(M,)`` and pairs ``(P, 2)``, the configuration and pair indices ``(A,)`` of each
+    such pair, in order. A broad phase for losses that a pair adds to only within a margin."""
+    c = np.ascontiguousarray(np.asarray(centres, dtype=np.float64))
+    r = np.ascontiguousarray(np.asarray(radii, dtype=np.float64))
+    pr = np.ascontiguousarray(np.asarray(pairs, dtype=np.int64))
+    if c.ndim != 3 or c.shape[-1] != 3 or r.shape != (c.shape[1],) or pr.ndim != 2 or pr.shape[-1] != 2:
+        raise ShapeError(
+            f"near_pairs takes centres (B, M, 3), radii (M,), pairs (P, 2); got {c.shape}, {r.shape}, {pr.shape}"
+        )
+    return _near_pairs(c, r, pr, float(cut))
 
 
 def clearances(body: KernelBody, scene: KernelScene, q, per_sphere: bool = False):

@@ -28,7 +28,7 @@ import torch
 from torch import nn
 
 from ..body.state import StateLayout
-from ..collision.geometry import Sphere, aabb_half_extents
+from ..collision.geometry import Cylinder, Sphere, aabb_half_extents, shape_tensor
 from ..collision.scene import Scene
 from ..errors import CheckpointError, ConfigError
 from ..io import half_weights, load_checkpoint, save_checkpoint
@@ -36,6 +36,7 @@ from .joint_path import RobotModelConfig, mlp_layers, register_path_buffers
 
 __all__ = [
     "PRIMITIVE_FEATURES",
+    "ROW_WIDTH",
     "ObstaclePathConfig",
     "ObstaclePathModel",
     "export_obstacle_model",
@@ -44,9 +45,16 @@ __all__ = [
     "scene_primitives",
 ]
 
-#: Features per scene primitive: centre (3), half extents (3), is-sphere (1), centre − ef(0) (3),
-#: centre − ef(T) (3).
-PRIMITIVE_FEATURES = 13
+#: Columns of a primitive's row (:func:`scene_primitives`): centre (3), the half extents of its
+#: axis-aligned bounding box (3), is-sphere (1), its extent tensor (6,
+#: :func:`~kinlearn.collision.geometry.shape_tensor`), is-cylinder (1).
+ROW_WIDTH = 14
+#: Features per scene primitive the encoder reads, per ``ObstaclePathConfig.primitives``: the row's
+#: first 7 columns (``"aabb"``) or all 14 (``"shape"``), then centre − ef(0) (3) and centre − ef(T) (3).
+PRIMITIVE_FEATURES = {"aabb": 13, "shape": 20}
+#: Row columns of each choice, and the 0/1 flags among them (not standardised).
+_COLUMNS = {"aabb": 7, "shape": ROW_WIDTH}
+_FLAGS = {"aabb": (6,), "shape": (6, 13)}
 
 
 @dataclass(frozen=True)
@@ -56,7 +64,10 @@ class ObstaclePathConfig(RobotModelConfig):
     ``steps``: T (T − 1 intermediate knots). ``modes``: sine modes per joint and candidate.
     ``candidates``: paths proposed per problem. ``encoder``: widths of the per-primitive network (the
     last is the pooled scene embedding's size). ``hidden``: widths of the trunk. ``lower``/``upper``:
-    the joint limits (filled by :meth:`for_robot`).
+    the joint limits (filled by :meth:`for_robot`). ``primitives``: what the encoder reads of each
+    primitive: ``"shape"`` its extent tensor and kind besides its bounding box (which way a rotated box
+    or a cylinder lies), ``"aabb"`` its bounding box alone (what the first shipped network reads; the
+    value of a checkpoint that records none).
     """
 
     robot: str = "iiwa14"
@@ -67,10 +78,17 @@ class ObstaclePathConfig(RobotModelConfig):
     encoder: tuple[int, ...] = (64, 128)
     hidden: tuple[int, ...] = (256, 256, 256)
     activation: Literal["tanh", "silu"] = "silu"
+    primitives: Literal["aabb", "shape"] = "shape"
     lower: tuple[float, ...] = ()
     upper: tuple[float, ...] = ()
 
+    @classmethod
+    def from_dict(cls, d: dict):
+        return super().from_dict({"primitives": "aabb", **d})  # files from before the choice read boxes
+
     def __post_init__(self) -> None:
+        if self.primitives not in _COLUMNS:
+            raise ConfigError(f"primitives must be 'aabb' or 'shape', got {self.primitives!r}")
         for name in ("steps", "dof", "modes", "candidates"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -91,12 +109,14 @@ def scene_primitives(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """A scene as the model's set input for ``batch`` problems.
 
-    Returns ``rows (batch, P, 7)`` [centre, half extents, is-sphere] (spheres first, then boxes, then
-    cylinders), ``mask (batch, P)`` (False for padding) and ``floor (batch, 2)`` [has floor, height]. A
-    box or cylinder enters by the half extents of its axis-aligned bounding box
-    (:func:`~kinlearn.collision.geometry.aabb_half_extents`): an axis-aligned box's own, so the rows of
-    spheres and axis-aligned boxes are those the shipped model was trained on. The scene's batch shape
-    must be ``()`` or ``(batch,)``.
+    Returns ``rows (batch, P, 14)`` [centre, bounding half extents, is-sphere, extent tensor,
+    is-cylinder] (spheres first, then boxes, then cylinders; :data:`ROW_WIDTH`), ``mask (batch, P)``
+    (False for padding) and ``floor (batch, 2)`` [has floor, height]. The bounding half extents are
+    those of the axis-aligned bounding box (:func:`~kinlearn.collision.geometry.aabb_half_extents`: an
+    axis-aligned box's own, so the first 7 columns of spheres and axis-aligned boxes are those the
+    first shipped model was trained on); the extent tensor is
+    :func:`~kinlearn.collision.geometry.shape_tensor`'s. The scene's batch shape must be ``()`` or
+    ``(batch,)``.
     """
     if scene.batch_shape not in ((), (batch,)):
         raise ConfigError(
@@ -112,15 +132,18 @@ def scene_primitives(
         if table.shape[-2] == 0:  # nothing of this kind: no rows (and no work)
             continue
         t = table.to(dtype).expand(batch, *table.shape[-2:])
-        flag = torch.ones_like(t[..., :1]) if kind is Sphere else torch.zeros_like(t[..., :1])
-        parts.append(torch.cat((t[..., :3], aabb_half_extents(kind, t), flag), -1))
+        one, zero = torch.ones_like(t[..., :1]), torch.zeros_like(t[..., :1])
+        sphere, cylinder = (one if kind is Sphere else zero), (one if kind is Cylinder else zero)
+        parts.append(
+            torch.cat((t[..., :3], aabb_half_extents(kind, t), sphere, shape_tensor(kind, t), cylinder), -1)
+        )
         masks.append(
             torch.ones(batch, t.shape[-2], dtype=torch.bool, device=t.device)
             if m is None
             else m.expand(batch, t.shape[-2])
         )
     if not parts:
-        parts.append(torch.zeros(batch, 0, 7, dtype=dtype, device=scene.device))
+        parts.append(torch.zeros(batch, 0, ROW_WIDTH, dtype=dtype, device=scene.device))
         masks.append(torch.zeros(batch, 0, dtype=torch.bool, device=scene.device))
     rows = torch.cat(parts, dim=1) if len(parts) > 1 else parts[0]
     mask = torch.cat(masks, dim=1) if len(masks) > 1 else masks[0]
@@ -149,7 +172,8 @@ class ObstaclePathModel(nn.Module):
         self.config = config
         self.layout = StateLayout(config.dof)
         dof = config.dof
-        self.encoder = nn.Sequential(*mlp_layers((PRIMITIVE_FEATURES, *config.encoder), config.activation))
+        n_prim = PRIMITIVE_FEATURES[config.primitives]
+        self.encoder = nn.Sequential(*mlp_layers((n_prim, *config.encoder), config.activation))
         n_in = self.n_problem_features + config.encoder[-1]
         out = nn.Linear(config.hidden[-1], config.candidates * config.modes * dof)
         gen = torch.Generator().manual_seed(0)
@@ -165,8 +189,8 @@ class ObstaclePathModel(nn.Module):
         register_path_buffers(self, config)
         self.register_buffer("in_mean", torch.zeros(self.n_problem_features))
         self.register_buffer("in_std", torch.ones(self.n_problem_features))
-        self.register_buffer("prim_mean", torch.zeros(PRIMITIVE_FEATURES))
-        self.register_buffer("prim_std", torch.ones(PRIMITIVE_FEATURES))
+        self.register_buffer("prim_mean", torch.zeros(n_prim))
+        self.register_buffer("prim_std", torch.ones(n_prim))
         #: The scene families it was trained on (names of :data:`kinlearn.data.problems.FAMILIES`),
         #: recorded by its trainer and kept in its checkpoint; None where none was recorded.
         self.families: tuple[str, ...] | None = None
@@ -174,6 +198,11 @@ class ObstaclePathModel(nn.Module):
     @property
     def robot_name(self) -> str:
         return self.config.robot
+
+    @property
+    def row_columns(self) -> int:
+        """How many of a primitive row's leading columns the encoder reads (``config.primitives``)."""
+        return _COLUMNS[self.config.primitives]
 
     @property
     def n_problem_features(self) -> int:
@@ -187,7 +216,8 @@ class ObstaclePathModel(nn.Module):
     def primitive_features(self, rows: torch.Tensor, s0: torch.Tensor, sT: torch.Tensor) -> torch.Tensor:
         E = self.layout.ef
         c = rows[..., :3]
-        return torch.cat((rows, c - s0[:, None, E], c - sT[:, None, E]), dim=-1)
+        cols = rows[..., : self.row_columns]
+        return torch.cat((cols, c - s0[:, None, E], c - sT[:, None, E]), dim=-1)
 
     @torch.no_grad()
     def fit_normalization(self, s0, sT, rows, mask, floor) -> None:
@@ -198,7 +228,8 @@ class ObstaclePathModel(nn.Module):
         p = self.primitive_features(rows.double(), s0.double(), sT.double())[mask]
         self.prim_mean.copy_(p.mean(0))
         self.prim_std.copy_(p.std(0).clamp_min(1e-3))
-        self.prim_mean[6], self.prim_std[6] = 0.0, 1.0  # the is-sphere flag stays 0/1
+        for k in _FLAGS[self.config.primitives]:  # the kind flags stay 0/1
+            self.prim_mean[k], self.prim_std[k] = 0.0, 1.0
 
     def scene_embedding(self, s0, sT, rows, mask) -> torch.Tensor:
         """``(N, encoder[-1])``: the masked max over the primitives' embeddings (zeros for no primitive)."""

@@ -140,14 +140,16 @@ class NumpyObstacleModel:
         self.fractions = _arr(tm.fractions)[:, None]
         self.basis = _arr(tm.basis)
         self.emb = c.encoder[-1]
+        self.columns = tm.row_columns
 
     def __call__(self, theta0, ef0, thetaT, efT, rows, mask, floor) -> np.ndarray:
-        """``theta0, thetaT (N, dof)``, ``ef0, efT (N, 3)``, ``rows (N, P, 7)``, ``mask (N, P)``,
+        """``theta0, thetaT (N, dof)``, ``ef0, efT (N, 3)``, ``rows (N, P, 14)``, ``mask (N, P)``,
         ``floor (N, 2)`` (as :func:`~kinlearn.models.obstacle_path.scene_primitives`) → ``(N, C, T − 1, dof)``."""
         n = theta0.shape[0]
         if rows.shape[1]:
             c = rows[..., :3]
-            p = np.concatenate((rows, c - ef0[:, None], c - efT[:, None]), axis=-1).astype(self.dtype)
+            cols = rows[..., : self.columns]
+            p = np.concatenate((cols, c - ef0[:, None], c - efT[:, None]), axis=-1).astype(self.dtype)
             h = _run_mlp(p, self.enc_w, self.enc_b, self.silu, last_active=True)
             h = np.where(mask[..., None], h, -np.inf).max(axis=1)
             emb = np.where(np.isfinite(h), h, 0.0)

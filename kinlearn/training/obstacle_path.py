@@ -34,7 +34,8 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..collision.body import BodySpheres, body_spheres
-from ..collision.distance import body_obstacle_distance
+from ..collision.distance import body_obstacle_distance, self_collision_distance
+from ..collision.geometry import safe_sqrt
 from ..data.problems import FAMILIES, LEGACY_FAMILIES, ProblemConfig, ProblemSet, make_problems
 from ..errors import ConfigError
 from ..models.obstacle_path import (
@@ -202,6 +203,73 @@ def _scene_clearance(centres: torch.Tensor, radii: torch.Tensor, scene, floor_ma
     return per
 
 
+#: Metres added to the margin where the compiled kernel (float64) picks the spheres and configurations
+#: worth measuring again in float32: far above the two's rounding, so nothing with a gradient is missed,
+#: and what is picked beyond the margin adds a hinge of exactly 0.
+_PICK_SLACK = 1e-4
+
+
+def _near_spheres(body, dense, scene, arm, margin):
+    """Which spheres come within ``margin`` of their problem's scene, and which configurations within
+    ``margin`` of self-collision: ``(near (N, R, M_arm) bool, self_near (N, R) bool)`` for
+    configurations ``dense (N, R, dof)``. Found without a graph: by the compiled kernel, one call per
+    problem, for the analytic sphere body; by torch for a learned body."""
+    from ..collision import kernel
+
+    if type(body) is BodySpheres:
+        kb = kernel.KernelBody.of(body)
+        q = dense.detach().double().numpy()
+        near = torch.empty((*dense.shape[:2], int(arm.sum())), dtype=torch.bool)
+        self_near = torch.empty(dense.shape[:2], dtype=torch.bool)
+        cut = margin + _PICK_SLACK
+        for i in range(q.shape[0]):
+            _, s, per = kernel.clearances(kb, kernel.KernelScene(scene[i]), q[i], per_sphere=True)
+            near[i] = torch.from_numpy(per[:, arm.numpy()] < cut)
+            self_near[i] = torch.from_numpy(s < cut)
+        return near, self_near
+    with torch.no_grad():
+        centres = body(dense, validate=False)
+        radii = body.radii_like(centres)
+        near = _scene_clearance(centres[..., arm, :], radii[arm], scene, body.floor_mask[arm]) < margin
+        _, per = self_collision_distance(centres, radii, body.pairs, per_pair=True)
+        return near, (per < margin).any(-1)
+
+
+def _scene_hinge(centres: torch.Tensor, radii: torch.Tensor, scene, floor_mask, near) -> torch.Tensor:
+    """``centres (N, R, M, 3)`` → ``(N, R)``: Σ over spheres of ``max(0, margin − d)``, ``d`` each sphere's
+    signed distance to its problem's scene (batch ``(N,)``), measured only for the spheres ``near``
+    ``(N, R, M)`` picks (:func:`_near_spheres`: the others add 0, with no gradient). A sphere's signed
+    distance is its centre's distance less its radius (the floor's too), so they are measured as points.
+    Returns the per-sphere hinges' sum with ``margin`` applied by the caller: ``(n, r, m, d)``."""
+    n, r, m = near.nonzero(as_tuple=True)
+    d = centres.new_empty(n.shape)
+    fm = floor_mask[m]
+    zero = radii.new_zeros(1)
+    for applies in (True, False):  # the floor applies to a sphere or not: one call for each kind
+        pick = fm == applies
+        if bool(pick.any()):
+            c = centres[n[pick], r[pick], m[pick]].unsqueeze(-2)  # (A, 1, 3): each a one-point body
+            _, per = body_obstacle_distance(
+                c, zero, scene[n[pick]], per_sphere=True, floor_mask=torch.tensor([applies])
+            )
+            d[pick] = per[:, 0] - radii[m[pick]]
+    return n, r, d
+
+
+def _self_gaps(centres: torch.Tensor, radii: torch.Tensor, pairs: torch.Tensor, near, margin: float):
+    """The gaps ``(A,)`` of the sphere pairs within ``margin`` in the configurations ``near (...)`` picks
+    (the others are farther than the margin from self-collision), and their flat configuration indices
+    ``(A,)``: the pairs are found by the compiled broad phase without a graph
+    (:func:`~kinlearn.collision.kernel.near_pairs`), then measured again with one."""
+    from ..collision.kernel import near_pairs
+
+    flat = centres.reshape(-1, *centres.shape[-2:])
+    b = near.reshape(-1).nonzero(as_tuple=True)[0]
+    a, k = near_pairs(flat[b].detach().numpy(), radii.numpy(), pairs.numpy(), margin + _PICK_SLACK)
+    b, i, j = b[torch.from_numpy(a)], pairs[torch.from_numpy(k), 0], pairs[torch.from_numpy(k), 1]
+    return b, safe_sqrt((flat[b, i] - flat[b, j]).square().sum(-1)) - radii[i] - radii[j]
+
+
 def candidate_losses(
     tm: ObstaclePathModel,
     body: BodySpheres,
@@ -228,12 +296,18 @@ def candidate_losses(
     radii = body.radii_like(centres)
     # The base's spheres never move: a path cannot change their clearance, so only the arm's count.
     arm = body.link > 0
-    per = _scene_clearance(centres[..., arm, :].flatten(1, 2), radii[arm], scene, body.floor_mask[arm])
-    collision = torch.relu(config.margin - per).sum(-1).view(n, C, Q).mean(-1)  # (N, C)
-    pairs = body.pairs
-    gap = (centres[..., pairs[:, 0], :] - centres[..., pairs[:, 1], :]).norm(dim=-1)
-    pair = gap - radii[pairs[:, 0]] - radii[pairs[:, 1]]
-    self_col = torch.relu(config.margin - pair).sum(-1).mean(-1)  # (N, C)
+    # The hinges below are 0, with no gradient, for spheres farther than the margin from the scene
+    # and configurations farther from self-collision: those are found first without a graph, and
+    # only the rest are measured with one (the same loss and gradient, a fraction of the work).
+    near, self_near = _near_spheres(body, dense.flatten(1, 2), scene, arm, config.margin)
+    pn, pr, d = _scene_hinge(
+        centres[..., arm, :].flatten(1, 2), radii[arm], scene, body.floor_mask[arm], near
+    )
+    hinge = centres.new_zeros(n, C * Q).index_put((pn, pr), torch.relu(config.margin - d), accumulate=True)
+    collision = hinge.view(n, C, Q).mean(-1)  # (N, C)
+    b, gap = _self_gaps(centres, radii, body.pairs, self_near, config.margin)
+    per_config = centres.new_zeros(n * C * Q).index_add(0, b, torch.relu(config.margin - gap))
+    self_col = per_config.view(n, C, Q).mean(-1)  # (N, C)
     moving = (body.link > 0).to(centres.dtype)
     with torch.no_grad():
         steps = torch.arange(4 * (knots.shape[2] - 1), dtype=s0.dtype) / (4 * (knots.shape[2] - 1))
