@@ -128,9 +128,9 @@ def test_plan_command_takes_a_deadline(hard, tmp_path, capsys):
 def test_an_arm_without_an_obstacle_network_samples_by_a_budget_of_iterations(panda, hard):
     """No deadline, no refine_steps: the panda (no obstacle network) samples for a fixed number of
     iterations after its straight line, the same plan every call (a budget of work, not of time)."""
-    from kinlearn.planning.planner import NO_MODEL_RRT_ITERATIONS
+    from kinlearn.planning.planner import DEFAULT_RRT_ITERATIONS
 
-    assert NO_MODEL_RRT_ITERATIONS > 0
+    assert DEFAULT_RRT_ITERATIONS > 0
     start, goal, scene = hard.problem(1)
     with pytest.warns(NoObstacleModelWarning, match="iterations"):
         a = panda.plan(start, goal, obstacles=scene)
@@ -140,3 +140,30 @@ def test_an_arm_without_an_obstacle_network_samples_by_a_budget_of_iterations(pa
     assert bool(check_path(panda.body, a.joints, scene).collision_free)
     line = _plan(panda, start, goal, obstacles=scene, refine_steps=0)  # asked for: no sampling
     assert line.stage == "none"
+
+
+def test_an_arm_with_an_obstacle_network_samples_what_its_proposals_left():
+    """By default (no deadline, no refine_steps) a plan the network's proposals did not clear gets the
+    same budget of RRT-Connect iterations, with no warning and the same plan every call; refine_steps=0
+    asks for the fixed-time proposals alone."""
+    from kinlearn.planning.planner import DEFAULT_RRT_ITERATIONS
+
+    assert DEFAULT_RRT_ITERATIONS > 0
+    iiwa = Planner.default("iiwa14")
+    assert iiwa.obstacle_tm is not None
+    ps = ProblemSet.load(SCENES.with_name("scene_problems_iiwa14.npz"), robot="iiwa14")
+    hard = ps[ps.hard]
+    for i in range(len(hard)):
+        start, goal, scene = hard.problem(i)
+        fixed = iiwa.plan(start, goal, obstacles=scene, refine_steps=0)
+        if fixed.stage == "none":
+            break
+    else:
+        pytest.fail("the network cleared every hard problem: pick a harder set for this test")
+    assert not bool(fixed.collision_free)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", NoObstacleModelWarning)
+        a = iiwa.plan(start, goal, obstacles=scene)
+    b = iiwa.plan(start, goal, obstacles=scene)
+    assert a.stage == "rrt" and bool(a.success) and torch.equal(a.joints, b.joints)
+    assert bool(check_path(iiwa.body, a.joints, scene).collision_free)

@@ -58,7 +58,7 @@ def test_shipped_planner_batch_one_flags_agree_with_the_dense_check():
     joints, flags, success = [], [], []
     for i in idx.tolist():
         start, goal, scene = ps.problem(i)
-        one = shipped.plan(start, goal, obstacles=scene)
+        one = shipped.plan(start, goal, obstacles=scene, refine_steps=0)  # fixed time: some stay colliding
         joints.append(one.joints)
         flags.append(bool(one.collision_free))
         success.append(bool(one.success))

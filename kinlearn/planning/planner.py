@@ -69,11 +69,11 @@ DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
 #: taken by default where it collides.
 NO_MODEL_KNOTS = 11
 NO_MODEL_REFINE_STEPS = 25
-#: RRT-Connect iterations a planner without an obstacle network gives a plan its line did not clear
-#: (by default: no deadline, so a fixed budget of iterations, the same path on every machine). On the
-#: panda's held-out scene problems the sampler solves most within a few hundred iterations, where 25
-#: refinement steps (the default before) took about a second for half the success.
-NO_MODEL_RRT_ITERATIONS = 2000
+#: RRT-Connect iterations a plan gets by default (no deadline, no ``refine_steps``) where its learned
+#: proposals (or, without an obstacle network, its straight line) cleared nothing: a fixed budget of
+#: work, so the same path on every machine. On the held-out scene problems the sampler solves most
+#: within a few hundred iterations, where 25 refinement steps took about a second for half the success.
+DEFAULT_RRT_ITERATIONS = 2000
 
 
 def _kernel():
@@ -358,14 +358,15 @@ class Planner:
         refinement cleared nothing, RRT-Connect with shortcutting on the compiled checker
         (:mod:`kinlearn.collision.rrt`) gets what is left of it; the plan comes back by the deadline,
         flagged (``collision_free`` False) where nothing was cleared in time. Without a deadline (the
-        default) plans are fixed-time and bit-reproducible; with one, whether the sampling stage finds
-        a path in time depends on the machine (its path, once found, on the seed alone).
+        default) plans are bit-reproducible; with one, whether the sampling stage finds a path in time
+        depends on the machine (its path, once found, on the seed alone).
 
-        A planner without an obstacle network (its learned stage is the straight joint line alone)
-        samples by default: where ``refine_steps`` is not given, RRT-Connect runs for at most
-        :data:`NO_MODEL_RRT_ITERATIONS` iterations — a budget of work, not of time, so the plan is the
-        same on every machine — or, with a deadline, for the time left. ``plan.stage`` names the stage that made each plan
-        (:mod:`kinlearn.planning.stages`). Free-space plans ignore the deadline (they are fixed-time).
+        By default (``refine_steps`` not given) a plan the learned proposals did not clear (without an
+        obstacle network: the straight joint line alone) is sampled for: RRT-Connect runs for at most
+        :data:`DEFAULT_RRT_ITERATIONS` iterations — a budget of work, not of time, so the plan is the
+        same on every machine — or, with a deadline, for the time left. ``refine_steps=k`` (0 too) asks
+        for fixed-time planning instead: the proposals and k refinement steps, no sampling.
+        ``plan.stage`` names the stage that made each plan (:mod:`kinlearn.planning.stages`). Free-space plans ignore the deadline (they are fixed-time).
 
         Every plan's verdict is :func:`~kinlearn.planning.plan.judge`'s (the analytic FK of its joint
         path, the limits, the goal within tolerance, the dense check among obstacles).
@@ -417,9 +418,10 @@ class Planner:
         if problem.obstacles is not None:
             scene = problem.obstacles
             scene = scene.reshape(n) if len(scene.batch_shape) > 1 else scene
+            if default_steps and not timed:  # a budget of work; a deadline bounds the sampling instead
+                iterations = DEFAULT_RRT_ITERATIONS
             if self.obstacle_tm is None:
                 if default_steps:
-                    iterations = 0 if timed else NO_MODEL_RRT_ITERATIONS  # a deadline bounds it instead
                     how = "then RRT-Connect on the compiled checker " + (
                         "within the deadline"
                         if timed
