@@ -71,7 +71,9 @@ def main() -> None:
 
     rows = {
         "paper-size TM forward (GRU, eager torch)": lambda s, g, sc: tm(s_tm, s_tm),
-        "kinlearn obstacle plan (whole call)": lambda s, g, sc: planner.plan(s, g, obstacles=sc),
+        "kinlearn obstacle plan (whole call)": lambda s, g, sc: planner.plan(
+            s, g, obstacles=sc, refine_steps=0
+        ),
         "kinlearn free-space plan (whole call)": lambda s, g, sc: planner.plan(s, g),
         "OMPL RRT-Connect, no obstacles (one query)": lambda s, g, sc: rrt.solve(s, g),
     }

@@ -10,11 +10,13 @@ untimed warm-up call first, and every path is judged by one rule
 (:func:`kinlearn.evaluation.obstacles.obstacle_outcome`: starts at the start, reaches the goal, within
 the limits, and the dense check finds no collision with the scene, the floor or itself).
 
-Rows: the straight joint line; kinlearn's plan without a deadline (the learned stage and bounded
-refinement, deterministic) and with ``deadline=0.05``; the compiled RRT-Connect and OMPL's RRT-Connect,
+Rows: the straight joint line; kinlearn's fixed-time stage alone (``refine_steps=0``: the learned
+proposals, no refinement or sampling), its default plan (the proposals, then a fixed budget of
+RRT-Connect iterations where they cleared nothing; deterministic) and its plan with ``deadline=0.05``; the compiled RRT-Connect and OMPL's RRT-Connect,
 each with time limits; the gradient trajectory optimiser. The success-against-budget figure draws, per
 sampling planner, the share solved within each budget (its 1 s run's solve times) and the fixed-time
-rows as points at their p99 time.
+rows as points at their p99 time. After every call of every row the paper-size TM's forward pass is
+timed once, and each row's p50 and p99 are given over its p50 and p99 (the fixed-time goal's yardstick).
 
 Leave-one-family-out: ``--planner DIR`` plans with that folder's networks; the families its obstacle
 network was not trained on (it records those it was) are marked ``*`` in the table, and the summary
@@ -40,6 +42,7 @@ from kinlearn.collision import body_spheres
 from kinlearn.data.problems import FAMILIES, ProblemSet
 from kinlearn.errors import NoObstacleModelWarning
 from kinlearn.evaluation.obstacles import obstacle_outcome
+from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 from kinlearn.planning.obstacle_baselines import (
     compiled_rrt_connect,
     joint_line_path,
@@ -60,7 +63,10 @@ def _planner_rows(planner) -> dict:
             plan = planner.plan(start, goal, obstacles=scene, **kw)
         return torch.as_tensor(plan.joints), (plan.stage, bool(plan.collision_free))
 
-    rows = {"kinlearn plan (no deadline)": lambda s, g, sc: run(s, g, sc)}
+    rows = {
+        "kinlearn fixed time (refine_steps=0)": lambda s, g, sc: run(s, g, sc, refine_steps=0),
+        "kinlearn plan (default)": lambda s, g, sc: run(s, g, sc),
+    }
     if has_deadline:
         rows["kinlearn plan, deadline 0.05 s"] = lambda s, g, sc: run(s, g, sc, deadline=0.05)
     return rows
@@ -134,10 +140,14 @@ def main() -> None:
         ([], [], []) if args.kinlearn_only else (args.budgets, args.ompl_budgets, args.opt_steps)
     )
     rows, summary = [], {"_network": {"trained_on": trained, "left_out": left_out}}
+    # The paper-size TM (GRU 20 → dense 20 → head 10 → 3, eager torch, batch 1): the fixed-time goal's
+    # yardstick, timed after every call of every row.
+    paper_tm = TrajectoryModel(TMConfig(robot=robot.name, dof=robot.dof, normalize=False)).eval()
+    tm_state = torch.zeros(1, robot.dof + 3)
     for name, fn in methods(planner, body, budgets, ompl_budgets, opt_steps).items():
         s0, g0, sc0 = problems.problem(0)
         fn(s0, g0, sc0)  # warm-up: compile, load, caches
-        paths, seconds, stages = [], [], []
+        paths, seconds, stages, tm_seconds = [], [], [], []
         for i in range(len(problems)):
             start, goal, scene = problems.problem(i)
             t0 = time.perf_counter()
@@ -145,6 +155,10 @@ def main() -> None:
             seconds.append(time.perf_counter() - t0)
             paths.append(joints)
             stages.append(stage)
+            with torch.no_grad():  # the paper-size TM's forward pass, taking turns with the row's calls
+                t0 = time.perf_counter()
+                paper_tm(tm_state, tm_state)
+                tm_seconds.append(time.perf_counter() - t0)
         outcome = obstacle_outcome(body, paths, problems)
         ok = outcome["success"].numpy()
         t = np.array(seconds)
@@ -157,8 +171,12 @@ def main() -> None:
             # plans the planner called collision-free that the dense check of their joints finds colliding
             flagged = int((flags & ~outcome["collision_free"].numpy()).sum())
         stage_counts = {str(s): stages.count(s) for s in set(stages)} if stages[0] is not None else None
+        tm_t = np.array(tm_seconds)
         summary[name] = {
             "success": float(ok.mean()),
+            "p50_over_tm": float(np.median(t) / np.median(tm_t)),
+            "p99_over_tm": float(np.quantile(t, 0.99) / np.quantile(tm_t, 0.99)),
+            "tm_p50_ms": float(np.median(tm_t) * 1e3),
             "hard_success": float(ok[hard].mean()) if hard.any() else None,
             "by_family": fam_rate,
             "left_out_success": float(np.mean([fam_rate[f] for f in left_out])) if left_out else None,
@@ -177,12 +195,15 @@ def main() -> None:
                 *(f"{100 * fam_rate[f]:.0f}%" for f in fams),
                 f"{np.median(t) * 1e3:.2f}",
                 f"{np.quantile(t, 0.99) * 1e3:.2f}",
+                f"{summary[name]['p50_over_tm']:.1f}× / {summary[name]['p99_over_tm']:.1f}×",
             ]
         )
         extra = "" if flagged is None else f", stages {stage_counts}, flagged free but colliding: {flagged}"
         print(f"  {name}: {100 * ok.mean():.1f}%, p50 {np.median(t) * 1e3:.2f} ms{extra}", flush=True)
     heads = [f"{f}*" if f in left_out else f for f in fams]
-    table = markdown_table(["method", "success", "hard", *heads, "p50 ms", "p99 ms"], rows)
+    table = markdown_table(
+        ["method", "success", "hard", *heads, "p50 ms", "p99 ms", "p50 / p99 over the TM forward"], rows
+    )
     print()
     print(table)
     (out / "summary.json").write_text(json.dumps(summary, indent=1))

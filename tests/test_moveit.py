@@ -231,11 +231,15 @@ def test_cli_plans_a_moveit_scene_and_request(tmp_path, capsys):
 
 @pytest.mark.parametrize("name", ["panda", "ur5"])
 def test_arm_without_an_obstacle_network_says_so_and_checks_densely(name, tmp_path):
-    import kinlearn
+    """A planner without an obstacle network (the shipped arm's, its obstacle network left out) says so,
+    plans the straight line and samples, and flags what it could not clear."""
     from kinlearn.collision import body_spheres, check_path
     from kinlearn.errors import NoObstacleModelWarning
+    from kinlearn.planning.planner import Planner
 
     robot = load_robot(name)
+    base = Planner.default(name)
+    plain = Planner(robot, base.tm, base.fm, base.im)
     mid = (robot.lower + robot.upper) / 2
     start = torch.tensor(mid + 0.1 * (robot.upper - mid), dtype=torch.float64)
     goal = torch.tensor(mid - 0.1 * (robot.upper - mid), dtype=torch.float64)
@@ -248,12 +252,12 @@ def test_arm_without_an_obstacle_network_says_so_and_checks_densely(name, tmp_pa
     body = body_spheres(robot).double()
     for scene in (Scene.from_moveit(path), Scene.from_primitives([Sphere((0.0, 0.0, 0.0), 3.0)])):
         with pytest.warns(NoObstacleModelWarning, match="no obstacle-trained network"):
-            plan = kinlearn.plan(start, goal, obstacles=scene, robot=name)
+            plan = plain.plan(start, goal, obstacles=scene)
         dense = check_path(body, plan.joints.double(), scene)
         assert bool(plan.collision_free) == bool(dense.collision_free)
     assert not bool(plan.collision_free)  # inside a ball that holds the whole arm: flagged, not silent
     with pytest.warns(NoObstacleModelWarning, match=r"alone \(refine_steps=0\)"):
-        kinlearn.plan(start, goal, obstacles=scene, robot=name, refine_steps=0)
+        plain.plan(start, goal, obstacles=scene, refine_steps=0)
 
 
 def test_objects_in_different_frames_are_refused_and_one_frame_reads():
