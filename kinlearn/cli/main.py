@@ -467,7 +467,7 @@ COMMANDS = (
     ),
     (
         "train-obstacle-planner",
-        "Train the obstacle-aware TM self-supervised through a frozen body model on generated scenes (tabletop, shelf, barrier; seeds apart from the benchmark's); writes tm_obstacles.pt. Copy it into a planner folder (or pass --planner) and plan(..., obstacles=...) uses it.",
+        "Train the obstacle-aware TM self-supervised through a frozen body model on generated scenes (the seven scene families by default; seeds apart from the benchmark's); writes tm_obstacles.pt, which records the families it saw. Copy it into a planner folder (or pass --planner) and plan(..., obstacles=...) uses it.",
     ),
     (
         "model-error",
