@@ -13,8 +13,9 @@ Rows (the registry :func:`methods`: ``name -> callable(start, goal, scene) -> jo
 the straight joint line and the Cartesian line with DLS IK (both obstacle-unaware), OMPL RRT-Connect
 on the dense 1 cm checker without and with OMPL's path simplification (the ``--rrt-time`` limit covers
 both), the gradient trajectory optimiser at each ``--opt-steps`` (one curve in the figure), and the
-learned planner through ``Planner.default("iiwa14").plan(start, goal, obstacles=scene)`` (skipped with a
-note where that call raises TypeError: a planner without the obstacle argument).
+learned planner through ``Planner.default("iiwa14").plan(start, goal, obstacles=scene, refine_steps=k)``
+(its fixed-time stages: the proposals and k refinement steps, no sampling; skipped with a note where
+that call raises TypeError: a planner without the obstacle argument).
 
 Every path is judged by :func:`kinlearn.evaluation.obstacles.obstacle_outcome`: starts at the start, ends
 within 0.05 rad and 1 cm (analytic FK) of the goal, stays within the joint limits, and passes the dense
@@ -82,7 +83,8 @@ class LearnedPlanner:
             self.planner = Planner(
                 base.robot, base.tm, base.fm, base.im, obstacle_tm=otm, refine_steps=self.refine_steps
             )
-        return self.planner.plan(start, goal, obstacles=scene).joints
+        # refine_steps given: the fixed-time stages alone (without it, a plan left colliding is sampled for)
+        return self.planner.plan(start, goal, obstacles=scene, refine_steps=self.refine_steps).joints
 
 
 def optimiser_name(steps: int) -> str:
