@@ -266,3 +266,25 @@ def test_refined_batches_keep_one_shape_and_agree_with_batch_one(planner, proble
         assert alone.joints.shape == batch.joints.shape[1:]
         assert torch.equal(alone.joints, batch.joints[i])  # made alone in the batch too: bit for bit
         assert bool(alone.collision_free) == bool(batch.collision_free[i])
+
+
+def test_the_problem_the_other_way_round_adds_its_candidates_walked_backwards(planner, problems):
+    """The proposals are the line, the network's C paths for the problem, and its C paths for the problem
+    reversed, walked backwards: so planning b → a proposes exactly a → b's paths reversed."""
+    import numpy as np
+
+    from kinlearn.collision.kernel import KernelScene
+    from kinlearn.data.problem import positions
+
+    start, goal, scene = problems.problem(3)
+    q0, q1 = start.double().numpy()[None], goal.double().numpy()[None]
+    ef = positions(planner.robot, np.concatenate((q0, q1)))
+    ks = KernelScene(scene)
+    rows = [(ks.model_rows(), ks.floor)]
+    ahead, _ = planner._proposals(q0, ef[:1], q1, ef[1:], rows, 0)
+    back, _ = planner._proposals(q1, ef[1:], q0, ef[:1], rows, 0)
+    C = planner.obstacle_tm.config.candidates
+    assert ahead.shape[1] == 2 * C + 1
+    assert np.array_equal(ahead[0, 1 : C + 1], back[0, C + 1 :, ::-1])
+    assert np.array_equal(ahead[0, C + 1 :], back[0, 1 : C + 1, ::-1])
+    assert not np.allclose(ahead[0, 1 : C + 1], ahead[0, C + 1 :])  # more paths, not the same ones twice

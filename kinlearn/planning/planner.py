@@ -507,8 +507,9 @@ class Planner:
 
     def _proposals(self, theta0, ef0, thetaT, efT, scenes, steps: int) -> tuple[np.ndarray, np.ndarray]:
         """The candidate joint paths ``(N, C + 1, K, dof)`` (the straight joint line first, then the
-        obstacle-aware TM's; segments halved when refining) and each problem's order of them, shortest
-        first (the straight line leads among equals).
+        obstacle-aware TM's for the problem, then its paths for the problem the other way round, walked
+        backwards: C twice the network's candidates; segments halved when refining) and each problem's
+        order of them, shortest first (the straight line leads among equals).
 
         ``scenes``: per problem its scene's model rows ``(P, 7)`` and floor ``(2,)``, without padding. The
         TM runs on each problem alone, as a batch-1 plan runs it: float32 products of another batch size
@@ -524,18 +525,14 @@ class Planner:
             parts = []
             for i in range(n):
                 rows, floor = scenes[i]
-                parts.append(
-                    tm(
-                        theta0[i : i + 1],
-                        ef0[i : i + 1],
-                        thetaT[i : i + 1],
-                        efT[i : i + 1],
-                        rows[None],
-                        np.ones((1, rows.shape[0]), dtype=bool),
-                        floor[None],
-                    )
-                )
-            C = self.obstacle_tm.config.candidates
+                mask = np.ones((1, rows.shape[0]), dtype=bool)
+                one = (theta0[i : i + 1], ef0[i : i + 1], thetaT[i : i + 1], efT[i : i + 1])
+                ahead = tm(*one, rows[None], mask, floor[None])
+                # The problem the other way round (the network learned both directions): its paths,
+                # walked backwards, are as many more candidates for one more pass.
+                back = tm(*one[2:], *one[:2], rows[None], mask, floor[None])[:, :, ::-1]
+                parts.append(np.concatenate((ahead, back), axis=1))
+            C = 2 * self.obstacle_tm.config.candidates
             mid = np.concatenate(parts) if parts else np.zeros((0, C, f.shape[0], dof))
         np.clip(mid, self._lo_np, self._hi_np, out=mid)
         C = mid.shape[1]
