@@ -93,8 +93,9 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
         "--refine-steps",
         type=NONNEGATIVE_INT,
         default=None,
-        help="with obstacles: gradient steps refining the least colliding proposal when none is free "
-        "(bounded time; default: the planner's, 0 for the shipped ones)",
+        help="with obstacles: plan in fixed time, with this many gradient steps refining the least colliding "
+        "proposal when none is free (0: the proposals alone); default: not given, so a plan whose "
+        "proposals all collide is sampled for (a fixed budget of RRT-Connect iterations, deterministic)",
     )
     p.add_argument(
         "--deadline",
@@ -102,8 +103,8 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="SECONDS",
         help="with obstacles: where the learned proposals (and refinement) clear nothing, RRT-Connect on the "
-        "compiled checker gets what is left of SECONDS; the plan comes back by then (default: none, "
-        "fixed-time and deterministic)",
+        "compiled checker gets what is left of SECONDS; the plan comes back by then (default: none: "
+        "a budget of iterations instead, deterministic)",
     )
 
 
