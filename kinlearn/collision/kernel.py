@@ -927,24 +927,15 @@ def centres(body: KernelBody, q) -> np.ndarray:
 
 @_jit
 def _near_pairs(c, radii, pairs, cut):
+    """``(B, P)`` bool: pair k of configuration b closer than ``cut`` (signed)."""
     B, P = c.shape[0], pairs.shape[0]
-    count = 0
+    out = np.empty((B, P), dtype=np.bool_)
     for b in range(B):
         for k in range(P):
             i, j = pairs[k, 0], pairs[k, 1]
             dx, dy, dz = c[b, i, 0] - c[b, j, 0], c[b, i, 1] - c[b, j, 1], c[b, i, 2] - c[b, j, 2]
-            if math.sqrt(dx * dx + dy * dy + dz * dz) - radii[i] - radii[j] < cut:
-                count += 1
-    out_b, out_k = np.empty(count, np.int64), np.empty(count, np.int64)
-    n = 0
-    for b in range(B):
-        for k in range(P):
-            i, j = pairs[k, 0], pairs[k, 1]
-            dx, dy, dz = c[b, i, 0] - c[b, j, 0], c[b, i, 1] - c[b, j, 1], c[b, i, 2] - c[b, j, 2]
-            if math.sqrt(dx * dx + dy * dy + dz * dz) - radii[i] - radii[j] < cut:
-                out_b[n], out_k[n] = b, k
-                n += 1
-    return out_b, out_k
+            out[b, k] = math.sqrt(dx * dx + dy * dy + dz * dz) - radii[i] - radii[j] < cut
+    return out
 
 
 def near_pairs(centres, radii, pairs, cut: float) -> tuple[np.ndarray, np.ndarray]:
@@ -958,7 +949,8 @@ def near_pairs(centres, radii, pairs, cut: float) -> tuple[np.ndarray, np.ndarra
         raise ShapeError(
             f"near_pairs takes centres (B, M, 3), radii (M,), pairs (P, 2); got {c.shape}, {r.shape}, {pr.shape}"
         )
-    return _near_pairs(c, r, pr, float(cut))
+    b, k = np.nonzero(_near_pairs(c, r, pr, float(cut)))
+    return b.astype(np.int64), k.astype(np.int64)
 
 
 def clearances(body: KernelBody, scene: KernelScene, q, per_sphere: bool = False):
