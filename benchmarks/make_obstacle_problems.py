@@ -27,8 +27,14 @@ import torch
 from _common import header, markdown_table
 
 from kinlearn import load_robot
-from kinlearn.data.problems import FAMILIES, LEGACY_FAMILIES, ProblemConfig, ProblemSet, make_problems
-from kinlearn.data.scenes import SCENE_FAMILIES
+from kinlearn.data.problems import (
+    FAMILIES,
+    LEGACY_FAMILIES,
+    ProblemConfig,
+    ProblemSet,
+    make_problems,
+    select_families,
+)
 
 #: Held-out seeds, one per family (tabletop 1001, shelf 1002, barrier 1003, bookcase 1004, …). Training
 #: scenes use others (kinlearn.training.obstacle_path.TRAINING_SEEDS: 2001, …).
@@ -50,8 +56,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    groups = {"legacy": LEGACY_FAMILIES, "scenes": SCENE_FAMILIES}
-    families = [f for name in args.families for f in groups.get(name, (name,))]
+    families = list(select_families(args.families))
     if args.out is None:
         legacy = families == list(LEGACY_FAMILIES) and args.robot == "iiwa14"
         name = "obstacle_problems_heldout.npz" if legacy else f"scene_problems_{args.robot}.npz"

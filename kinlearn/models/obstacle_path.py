@@ -51,10 +51,10 @@ __all__ = [
 ROW_WIDTH = 14
 #: Features per scene primitive the encoder reads, per ``ObstaclePathConfig.primitives``: the row's
 #: first 7 columns (``"aabb"``) or all 14 (``"shape"``), then centre − ef(0) (3) and centre − ef(T) (3).
-PRIMITIVE_FEATURES = {"aabb": 13, "shape": 20}
 #: Row columns of each choice, and the 0/1 flags among them (not standardised).
 _COLUMNS = {"aabb": 7, "shape": ROW_WIDTH}
 _FLAGS = {"aabb": (6,), "shape": (6, 13)}
+PRIMITIVE_FEATURES = {k: cols + 6 for k, cols in _COLUMNS.items()}  # aabb 13, shape 20
 
 
 @dataclass(frozen=True)

@@ -65,10 +65,8 @@ __all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position"]
 #: Planners shipped inside the package, one folder per robot (see ``kinlearn/checkpoints/README.md``).
 DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
 
-#: Without an obstacle-trained network: the straight joint line's segments, and the refinement steps
-#: taken by default where it collides.
+#: Without an obstacle-trained network: the straight joint line's segments.
 NO_MODEL_KNOTS = 11
-NO_MODEL_REFINE_STEPS = 25
 #: RRT-Connect iterations a plan gets by default (no deadline, no ``refine_steps``) where its learned
 #: proposals (or, without an obstacle network, its straight line) cleared nothing: a fixed budget of
 #: work, so the same path on every machine. On the held-out scene problems the sampler solves most

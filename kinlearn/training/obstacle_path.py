@@ -221,10 +221,10 @@ def _near_spheres(body, dense, scene, arm, margin):
         q = dense.detach().double().numpy()
         near = torch.empty((*dense.shape[:2], int(arm.sum())), dtype=torch.bool)
         self_near = torch.empty(dense.shape[:2], dtype=torch.bool)
-        cut = margin + _PICK_SLACK
+        cut, moving = margin + _PICK_SLACK, arm.numpy()
         for i in range(q.shape[0]):
             _, s, per = kernel.clearances(kb, kernel.KernelScene(scene[i]), q[i], per_sphere=True)
-            near[i] = torch.from_numpy(per[:, arm.numpy()] < cut)
+            near[i] = torch.from_numpy(per[:, moving] < cut)
             self_near[i] = torch.from_numpy(s < cut)
         return near, self_near
     with torch.no_grad():
@@ -235,12 +235,12 @@ def _near_spheres(body, dense, scene, arm, margin):
         return near, (per < margin).any(-1)
 
 
-def _scene_hinge(centres: torch.Tensor, radii: torch.Tensor, scene, floor_mask, near) -> torch.Tensor:
-    """``centres (N, R, M, 3)`` → ``(N, R)``: Σ over spheres of ``max(0, margin − d)``, ``d`` each sphere's
-    signed distance to its problem's scene (batch ``(N,)``), measured only for the spheres ``near``
-    ``(N, R, M)`` picks (:func:`_near_spheres`: the others add 0, with no gradient). A sphere's signed
-    distance is its centre's distance less its radius (the floor's too), so they are measured as points.
-    Returns the per-sphere hinges' sum with ``margin`` applied by the caller: ``(n, r, m, d)``."""
+def _scene_hinge(centres: torch.Tensor, radii: torch.Tensor, scene, floor_mask, near) -> tuple:
+    """For ``centres (N, R, M, 3)``, the signed distance ``d (A,)`` to its problem's scene (batch
+    ``(N,)``) of each sphere ``near (N, R, M)`` picks (:func:`_near_spheres`; the others' hinges are 0,
+    with no gradient), with its problem and configuration indices: ``(n, r, d)``, the hinge
+    ``max(0, margin − d)`` left to the caller. A sphere's signed distance is its centre's distance less
+    its radius (the floor's too), so they are measured as points."""
     n, r, m = near.nonzero(as_tuple=True)
     d = centres.new_empty(n.shape)
     fm = floor_mask[m]
