@@ -193,3 +193,30 @@ def test_shape_model_numpy_matches_torch_and_old_files_read_boxes(robot, tmp_pat
     assert ObstaclePathConfig.from_dict(old).primitives == "aabb"
     with pytest.raises(ConfigError, match="primitives"):
         ObstaclePathConfig.for_robot(robot, primitives="mesh")
+
+
+def test_a_bad_record_of_training_families_is_refused(robot, tmp_path):
+    """A checkpoint whose families are not a list of names is a CheckpointError, not a model that
+    says it saw something it did not; a good record survives saving and export."""
+    from kinlearn.io import load_checkpoint, save_checkpoint
+    from kinlearn.models.obstacle_path import export_obstacle_model
+
+    tm = _model(robot)
+    tm.families = ("cage", "bin")
+    path = save_obstacle_model(tm, tmp_path / "tm_obstacles.pt")
+    assert load_obstacle_model(path).families == ("cage", "bin")
+    assert load_obstacle_model(export_obstacle_model(path, tmp_path / "exported.pt")).families == (
+        "cage",
+        "bin",
+    )
+    payload = load_checkpoint(path, kind=ObstaclePathModel.kind)
+    save_checkpoint(
+        tmp_path / "bad.pt",
+        kind=ObstaclePathModel.kind,
+        robot=payload["robot"],
+        config=payload["config"],
+        state_dict=payload["state_dict"],
+        extra={"families": "cage"},
+    )
+    with pytest.raises(CheckpointError, match="training families"):
+        load_obstacle_model(tmp_path / "bad.pt")
