@@ -132,6 +132,54 @@ def _lever_arms(robot: Robot, link: np.ndarray, local: np.ndarray) -> np.ndarray
     return lever
 
 
+def _axis_distances(robot: Robot, link: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """``(M, dof)``: an upper bound on sphere m's distance from the axis of each joint j that does *not*
+    move it (j ≥ its link; 0 for the joints that do), over all configurations.
+
+    Why: a sphere A on a link before joint j and a sphere B after it change their distance ‖B − A‖, as
+    θ_j turns, at a rate of at most the distance of A from axis j (write B − p = (B − A) + (A − p), p on
+    the axis: ∂‖B − A‖/∂θ_j = û · (ω × (A − p)), û along B − A), as well as at most B's (``lever``). So
+    a self-collision pair moves towards contact no faster than Σ_j |Δθ_j| min(lever_Bj, this_Aj): a
+    pair whose lower sphere sits on the axes between them keeps its distance, however far its upper
+    sphere swings.
+
+    The joint right after the sphere's link: its exact distance from that axis (both fixed in the
+    link). Further down: the largest distance from the next joint's origin as joint j turns it about
+    its axis (exact: ‖(ρ_c + ρ_o, z_c − z_o)‖ in that joint's frame), plus the origin-to-origin offsets
+    on to joint j's origin (triangle inequality; a prismatic joint between adds its reach). A prismatic
+    joint j changes any distance at most by its displacement: 1.
+    """
+    F = kinematics(robot, "fast").F  # F[i]: fixed transform before joint i, in frames with the axis on z
+    axes = [_z_to_axis(j.axis) for j in robot.joints]
+    reach = [max(abs(j.lower), abs(j.upper)) if j.kind == "prismatic" else 0.0 for j in robot.joints]
+    dof = robot.dof
+    out = np.zeros((len(link), dof))
+    for m, (lk, c) in enumerate(zip(link, local, strict=True)):
+        lk = int(lk)
+        if lk >= dof:
+            continue
+        own = c if lk == 0 else axes[lk - 1].T @ c  # the centre in its link's frame (frame T_lk)
+        # in joint lk's frame (origin on its axis, axis along z)
+        x = F[lk, :3, :3].T @ (own - F[lk, :3, 3])
+        rho_c = float(np.hypot(x[0], x[1]))
+        far = 0.0  # the largest distance from the next joint's origin, as joint lk moves it
+        if lk + 1 < dof:
+            t = F[lk + 1, :3, 3]
+            far = float(np.hypot(rho_c + np.hypot(t[0], t[1]), x[2] - t[2]))
+            if robot.joints[lk].kind == "prismatic":
+                far = float(np.linalg.norm(x - t)) + reach[lk]
+        for j in range(lk, dof):
+            if robot.joints[j].kind == "prismatic":
+                out[m, j] = 1.0
+            elif j == lk:
+                out[m, j] = rho_c
+            else:
+                out[m, j] = far + sum(
+                    float(np.linalg.norm(F[i + 1, :3, 3])) + reach[i] for i in range(lk + 1, j)
+                )
+    return out
+
+
 class BodySpheres(nn.Module):
     """Collision spheres fixed to a robot's links: joints ``(..., dof)`` → centres ``(..., M, 3)``.
 

@@ -60,6 +60,7 @@ _SLACK = 1e-9
 _GROUP_MIN = 4
 #: Share of its budget's span after which an item is recomputed at a configuration evaluated anyway.
 _REFRESH = 0.5
+_REFRESH_SELF = 0.5
 
 #: Metres of slack when a primitive is culled by its bounding ball (far above a distance's rounding).
 _CULL = 1e-9
@@ -366,31 +367,52 @@ def _check(
 
 
 @_jit
-def _expiry(b, k, i, cj, item, lo, hi, steps, offset):
+def _grid_steps(path, max_travel, lever, steps):
+    """Fill ``steps (W − 1,)`` with each segment's number of sub-steps, n_k = max(1, ⌈L_k / max_travel⌉), L_k the
+    largest lever bound Σ_j |Δθ_j| lever_mj over the spheres (summed as :func:`_verdict` sums it)."""
+    W, dof = path.shape
+    M = lever.shape[0]
+    for k in range(W - 1):
+        bound = 0.0
+        for m in range(M):
+            t = 0.0
+            for j in range(dof):
+                t += abs(path[k + 1, j] - path[k, j]) * lever[m, j]
+            bound = max(bound, t)
+        steps[k] = max(1.0, math.ceil(bound / max_travel))
+
+
+@_jit
+def _expiry_lever(b, k, i, absd, left, lever, row, steps, offset):
     """The global sub-step index at which an item with ``b`` metres of budget at sub-step ``i`` of segment
-    ``k`` must be looked at again: where its travel bound per sub-step may have used the budget up
-    (+inf if it lasts to the end of the path). Its bound on segment k is ``cj[k, item, hi] −
-    cj[k, item, lo]`` (``cj`` the segments' Σ_j |Δθ_j| lever_j summed over the joints, cumulatively)."""
-    T = steps.shape[0] if cj.shape[0] else 0
+    ``k`` must be looked at again: where its travel bound may have used the budget up (+inf if it lasts
+    to the path's end). Its bound on segment k is Σ_j |Δθ_kj| · ``lever[row, j]``, spread evenly over the
+    segment's sub-steps; ``left[k, j]``: joint j's travel from segment k on (the whole bound, to see at
+    once that it lasts)."""
+    dof = absd.shape[1]
+    total = 0.0
+    for j in range(dof):
+        total += left[k, j] * lever[row, j]
+    if b > total:
+        return np.inf
+    T = steps.shape[0] if absd.shape[0] else 0
     while k < T:
-        rate = cj[k, item, hi] - cj[k, item, lo]
+        rate = 0.0
+        for j in range(dof):
+            rate += absd[k, j] * lever[row, j]
         if rate > 0.0:
             per = rate / steps[k]
-            left = steps[k] - i
-            if b < left * per:
+            rest = steps[k] - i
+            if b < rest * per:
                 return offset[k] + i + max(1.0, math.floor(b / per))
-            b -= left * per
+            b -= rest * per
         k += 1
         i = 0.0
     return np.inf
 
 
 @_jit
-def _verdict(
-    path, max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs, lever,
-    g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius,
-    spheres, boxes, cylinders, floor,
-):  # fmt: skip
+def _verdict(path, max_travel, margin, body, scene):
     """One path ``(W, dof)``: (first colliding segment or −1, configurations evaluated), the verdict of
     checking every sub-step. Each sphere's clearance and each pair's distance, once computed, is a
     budget that the spheres' travel bounds use up along the path; a configuration is evaluated only
@@ -398,44 +420,31 @@ def _verdict(
     sphere with the spheres of one lower link go as one item, group g: sphere ``g_sphere[g]`` against
     ``g_members[g_start[g]:g_start[g + 1]]``, whose link's ball ``g_ball[g]`` (a sphere of radius
     ``b_radius`` around ``b_folded`` in link ``b_link``'s frame) holds them: its distance to that ball,
-    or where that is not positive the pairs' smallest distance. ``pairs`` are the pairs not grouped."""
+    or where that is not positive the pairs' smallest distance. ``pairs`` are the pairs not grouped.
+    ``body``: the arrays of :func:`_unpack_body`; ``scene``: those of :func:`_unpack_scene`."""
+    F, prismatic, link, folded, radii, on_floor, pairs, lever = body[:8]
+    g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius, p_lever, g_lever, m_lever = body[8:18]
+    spheres, boxes, cylinders, floor = scene
     W, dof = path.shape
     M, P, T = link.shape[0], pairs.shape[0], W - 1
     G, L = g_sphere.shape[0], b_link.shape[0]
     cb = np.empty((L, 3))
     absd = np.empty((T, dof))
-    cj = np.zeros((T, M, dof + 1))  # per segment and sphere: Σ_{j' < j} |Δθ_j'| lever_j'
     steps = np.ones(max(T, 1))
     for k in range(T):
         for j in range(dof):
             absd[k, j] = abs(path[k + 1, j] - path[k, j])
-        bound = 0.0
-        for m in range(M):
-            t = 0.0
-            for j in range(dof):
-                t += absd[k, j] * lever[m, j]
-                cj[k, m, j + 1] = t
-            bound = max(bound, t)
-        steps[k] = max(1.0, math.ceil(bound / max_travel))
+    _grid_steps(path, max_travel, lever, steps)
     offset = np.zeros(max(T, 1) + 1)
     for k in range(T):
         offset[k + 1] = offset[k] + steps[k]
     end = offset[T] if T else 0.0  # the last knot's global index
-    # From each segment to the path's end, how far each sphere can travel (``rest[k, m, j]``: by joints
-    # before j, summed over segments k…T−1): an item whose budget exceeds what is left of its bound
-    # needs no walk along the segments.
-    rest = np.zeros((T + 1, M, dof + 1))
+    # What is left of each joint's travel from each segment on: an item (a sphere, a pair, a group) whose
+    # budget exceeds its bound from there, Σ_j left[k, j] · lever_j, needs no walk along the segments.
+    left = np.zeros((T + 1, dof))
     for k in range(T - 1, -1, -1):
-        for m in range(M):
-            for j in range(dof + 1):
-                rest[k, m, j] = rest[k + 1, m, j] + cj[k, m, j]
-    lo_p = np.empty(P, dtype=np.int64)
-    hi_p = np.empty(P, dtype=np.int64)
-    far_p = np.empty(P, dtype=np.int64)
-    for p in range(P):
-        la, lb = link[pairs[p, 0]], link[pairs[p, 1]]
-        lo_p[p], hi_p[p] = min(la, lb), max(la, lb)
-        far_p[p] = pairs[p, 0] if la >= lb else pairs[p, 1]
+        for j in range(dof):
+            left[k, j] = left[k + 1, j] + absd[k, j]
     due_m = np.zeros(M)  # global sub-step index at which each item must be recomputed
     due_p = np.zeros(P)
     due_g = np.zeros(G)
@@ -471,63 +480,135 @@ def _verdict(
                 )
                 if d <= margin:
                     return k, evaluated
-                budget = d - margin - _SLACK
-                if budget > rest[k, m, dof]:
-                    due_m[m] = np.inf
-                else:
-                    due_m[m] = _expiry(budget, k, i, cj, m, 0, dof, steps, offset)
+                due_m[m] = _expiry_lever(d - margin - _SLACK, k, i, absd, left, lever, m, steps, offset)
             nxt = min(nxt, due_m[m])
         for p in range(P):
-            if due_p[p] <= pos or pos - from_p[p] >= _REFRESH * (due_p[p] - from_p[p]):
+            if due_p[p] <= pos or pos - from_p[p] >= _REFRESH_SELF * (due_p[p] - from_p[p]):
                 from_p[p] = pos
                 a, b = pairs[p, 0], pairs[p, 1]
                 dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
                 d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[a] - radii[b]
                 if d <= 0.0:
                     return k, evaluated
-                f = far_p[p]
-                if d - _SLACK > rest[k, f, hi_p[p]] - rest[k, f, lo_p[p]]:
-                    due_p[p] = np.inf
-                else:
-                    due_p[p] = _expiry(d - _SLACK, k, i, cj, f, lo_p[p], hi_p[p], steps, offset)
+                due_p[p] = _expiry_lever(d - _SLACK, k, i, absd, left, p_lever, p, steps, offset)
             nxt = min(nxt, due_p[p])
         for g in range(G):
-            if due_g[g] <= pos or pos - from_g[g] >= _REFRESH * (due_g[g] - from_g[g]):
+            if due_g[g] <= pos or pos - from_g[g] >= _REFRESH_SELF * (due_g[g] - from_g[g]):
                 from_g[g] = pos
                 x, u = g_sphere[g], g_ball[g]
                 dx, dy, dz = c[x, 0] - cb[u, 0], c[x, 1] - cb[u, 1], c[x, 2] - cb[u, 2]
                 d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - b_radius[u] - radii[x]
-                if d <= 0.0:  # near that link: its spheres one by one
-                    d = np.inf
+                if d > b_radius[u]:  # far from that link: the ball's budget, at its members' fastest rate
+                    due_g[g] = _expiry_lever(d - _SLACK, k, i, absd, left, g_lever, g, steps, offset)
+                else:  # near it (the ball a loose bound): its spheres one by one, each with its own rate
+                    due = np.inf
                     for e in range(g_start[g], g_start[g + 1]):
                         b = g_members[e]
                         dx, dy, dz = c[x, 0] - c[b, 0], c[x, 1] - c[b, 1], c[x, 2] - c[b, 2]
-                        d = min(d, math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[x] - radii[b])
-                    if d <= 0.0:
-                        return k, evaluated
-                lo, hi = b_link[u], link[x]
-                if d - _SLACK > rest[k, x, hi] - rest[k, x, lo]:
-                    due_g[g] = np.inf
-                else:
-                    due_g[g] = _expiry(d - _SLACK, k, i, cj, x, lo, hi, steps, offset)
+                        d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[x] - radii[b]
+                        if d <= 0.0:
+                            return k, evaluated
+                        due = min(due, _expiry_lever(d - _SLACK, k, i, absd, left, m_lever, e, steps, offset))
+                    due_g[g] = due
             nxt = min(nxt, due_g[g])
         if nxt > end:
             return -1, evaluated
         pos = nxt
 
 
+#: How many halvings of each segment the probe looks at: its middle sub-step, then its quarter points.
+_PROBE_LEVELS = 4
+
+
 @_jit
-def _first_free(
-    paths, order, max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs, lever,
-    g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius,
-    spheres, boxes, cylinders, floor,
-):  # fmt: skip
+def _scene_hit(q, margin, F, prismatic, folded, radii, on_floor, l_start, l_folded, l_radius, scene, frames):
+    """Whether some sphere at joints ``q`` is within ``margin`` of the scene (self-collision not looked at).
+    Link by link: a link whose ball (``l_folded``, ``l_radius``: holding its spheres ``l_start[l]`` to
+    ``l_start[l + 1]``) is farther than ``margin`` from the scene has none there, and its spheres are
+    not placed."""
+    spheres, boxes, cylinders, floor = scene
+    _chain(q, F, prismatic, frames)
+    for lk in range(l_start.shape[0] - 1):
+        a, b = l_start[lk], l_start[lk + 1]
+        if a == b:
+            continue
+        x, y, z = _point(frames, lk, l_folded[lk])
+        if _sphere_scene(x, y, z, l_radius[lk], lk > 0, spheres, boxes, cylinders, floor) > margin:
+            continue
+        for m in range(a, b):
+            x, y, z = _point(frames, lk, folded[m])
+            if _sphere_scene(x, y, z, radii[m], on_floor[m], spheres, boxes, cylinders, floor) <= margin:
+                return True
+    return False
+
+
+@_jit
+def _point(frames, k, v):
+    """R_k · v + p_k: a point fixed in link k's frame, placed."""
+    return (
+        frames[k, 0, 0] * v[0] + frames[k, 0, 1] * v[1] + frames[k, 0, 2] * v[2] + frames[k, 0, 3],
+        frames[k, 1, 0] * v[0] + frames[k, 1, 1] * v[1] + frames[k, 1, 2] * v[2] + frames[k, 1, 3],
+        frames[k, 2, 0] * v[0] + frames[k, 2, 1] * v[1] + frames[k, 2, 2] * v[2] + frames[k, 2, 3],
+    )
+
+
+@_jit
+def _probe(path, max_travel, margin, body, scene):
+    """Whether a few configurations of the dense check's grid, spread along ``path (W, dof)``, already hit the
+    scene: the inner knots, then each segment's middle sub-step, then its quarter points
+    (:data:`_PROBE_LEVELS`). Each is a configuration :func:`_verdict` checks (the same sub-step count and
+    interpolation, to the bit), so True means the path collides; False says nothing. Most colliding paths
+    (a planner's candidates, a sampler's long edges) collide somewhere inside, where a walk from the start
+    reaches late: a probe finds it in a few scene checks."""
+    F, prismatic, _, folded, radii, on_floor, _, lever = body[:8]
+    l_start, l_folded, l_radius = body[18:21]
+    W, dof = path.shape
+    if W < 2 or not _all_finite(path):
+        return False
+    frames, q = np.empty((dof + 1, 3, 4)), np.empty(dof)
+    for k in range(1, W - 1):
+        if _scene_hit(
+            path[k], margin, F, prismatic, folded, radii, on_floor, l_start, l_folded, l_radius, scene, frames
+        ):
+            return True
+    steps = np.empty(W - 1)
+    _grid_steps(path, max_travel, lever, steps)
+    parts = 2
+    for _ in range(_PROBE_LEVELS):
+        for k in range(W - 1):
+            n = steps[k]
+            for h in range(1, parts, 2):
+                i = math.floor(n * h / parts)
+                if i <= 0.0 or i >= n or (parts > 2 and i == math.floor(n * 0.5)):
+                    continue
+                frac = i / n
+                for j in range(dof):
+                    q[j] = path[k, j] + frac * (path[k + 1, j] - path[k, j])
+                if _scene_hit(
+                    q,
+                    margin,
+                    F,
+                    prismatic,
+                    folded,
+                    radii,
+                    on_floor,
+                    l_start,
+                    l_folded,
+                    l_radius,
+                    scene,
+                    frames,
+                ):
+                    return True
+        parts *= 2
+    return False
+
+
+@_jit
+def _first_free(paths, order, max_travel, margin, body, scene):
     for i in range(order.shape[0]):
-        first, _ = _verdict(
-            paths[order[i]], max_travel, margin, F, prismatic, link, folded, radii, on_floor, pairs,
-            lever, g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius,
-            spheres, boxes, cylinders, floor,
-        )  # fmt: skip
+        if _probe(paths[order[i]], max_travel, margin, body, scene):
+            continue
+        first, _ = _verdict(paths[order[i]], max_travel, margin, body, scene)
         if first < 0:
             return order[i]
     return -1
@@ -562,6 +643,16 @@ def _unpack_body(f, n):
     b_folded = f[o : o + 3 * L].reshape(L, 3)
     o += 3 * L
     b_radius = f[o : o + L]
+    o += L
+    p_lever = f[o : o + P * dof].reshape(P, dof)
+    o += P * dof
+    g_lever = f[o : o + G * dof].reshape(G, dof)
+    o += G * dof
+    m_lever = f[o : o + E * dof].reshape(E, dof)
+    o += E * dof
+    l_folded = f[o : o + 3 * (dof + 1)].reshape(dof + 1, 3)
+    o += 3 * (dof + 1)
+    l_radius = f[o : o + dof + 1]
     i = 6
     prismatic = n[i : i + dof] != 0
     i += dof
@@ -580,21 +671,29 @@ def _unpack_body(f, n):
     g_members = n[i : i + E]
     i += E
     b_link = n[i : i + L]
+    i += L
+    l_start = n[i : i + dof + 2]
     return (
         F, prismatic, link, folded, radii, on_floor, pairs, lever,
-        g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius,
+        g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius, p_lever, g_lever, m_lever,
+        l_start, l_folded, l_radius,
     )  # fmt: skip
 
 
 @_jit
 def _verdict_packed(path, max_travel, margin, f, n, s):
     """:func:`_verdict` on a packed body and scene (few arguments: each costs a call about 0.25 µs)."""
-    F, pr, link, folded, radii, fl, pairs, lever, gs, gb, gst, gm, bl, bf, br = _unpack_body(f, n)
-    spheres, boxes, cylinders, floor = _unpack_scene(s)
-    return _verdict(
-        path, max_travel, margin, F, pr, link, folded, radii, fl, pairs, lever, gs, gb, gst, gm, bl, bf, br,
-        spheres, boxes, cylinders, floor,
-    )  # fmt: skip
+    return _verdict(path, max_travel, margin, _unpack_body(f, n), _unpack_scene(s))
+
+
+@_jit
+def _free_packed(path, max_travel, margin, f, n, s):
+    """Whether ``path`` is free under the dense check (:func:`_verdict`'s answer), probed first (:func:`_probe`):
+    the verdict alone, for callers that need no first colliding segment (a sampler's motions)."""
+    body, scene = _unpack_body(f, n), _unpack_scene(s)
+    if _probe(path, max_travel, margin, body, scene):
+        return False
+    return _verdict(path, max_travel, margin, body, scene)[0] < 0
 
 
 @_jit
@@ -602,12 +701,7 @@ def _first_free_packed(paths, order, max_travel, margin, f, n, s):
     """:func:`_first_free` on a packed body and scene; −2 if ``paths`` hold NaN or infinity."""
     if not _all_finite(paths):
         return -2
-    F, pr, link, folded, radii, fl, pairs, lever, gs, gb, gst, gm, bl, bf, br = _unpack_body(f, n)
-    spheres, boxes, cylinders, floor = _unpack_scene(s)
-    return _first_free(
-        paths, order, max_travel, margin, F, pr, link, folded, radii, fl, pairs, lever, gs, gb, gst, gm, bl, bf, br,
-        spheres, boxes, cylinders, floor,
-    )  # fmt: skip
+    return _first_free(paths, order, max_travel, margin, _unpack_body(f, n), _unpack_scene(s))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -634,6 +728,7 @@ class KernelBody:
         if not isinstance(body, BodySpheres):
             raise ConfigError(f"KernelBody needs a BodySpheres, got {type(body).__name__}")
         from ..body.kinematics import _z_to_axis
+        from .body import _axis_distances
 
         robot = body.robot
         self.robot, self.name, self.dof = robot, body.name, robot.dof
@@ -688,6 +783,44 @@ class KernelBody:
         self.g_ball = np.array([index[int(l)] for l in keys % (self.dof + 1)], dtype=np.int64)
         self.g_start = np.ascontiguousarray(np.append(starts, len(order)).astype(np.int64))
         self.g_members = np.ascontiguousarray(low[order].astype(np.int64))
+        # How fast each self-collision item can close, per radian of each joint between its links: the
+        # smaller of the upper sphere's lever and the lower sphere's distance from the joint's axis
+        # (:func:`~kinlearn.collision.body._axis_distances`); a group's, the largest over its members.
+        axis = _axis_distances(robot, self.link, local)
+        self.pair_lever = np.ascontiguousarray(self._item_lever(self.other_pairs, axis))
+        g_lever = np.zeros((len(self.g_sphere), self.dof))
+        m_lever = np.zeros((len(self.g_members), self.dof))
+        for g, x in enumerate(self.g_sphere):
+            span = slice(self.g_start[g], self.g_start[g + 1])
+            members = self.g_members[span]
+            m_lever[span] = self._item_lever(np.stack([np.full(len(members), x), members], axis=1), axis)
+            g_lever[g] = m_lever[span].max(axis=0)
+        self.group_lever = np.ascontiguousarray(g_lever)
+        self.member_lever = np.ascontiguousarray(m_lever)
+        # A ball per link around its spheres (centre: their mean, in the link's frame; the spheres are
+        # sorted by link, those of link l are l_start[l] to l_start[l + 1]): the probe's broad phase.
+        self.l_start = np.ascontiguousarray(
+            np.searchsorted(self.link, np.arange(self.dof + 2)).astype(np.int64)
+        )
+        self.l_folded = np.zeros((self.dof + 1, 3))
+        self.l_radius = np.zeros(self.dof + 1)
+        for lk in range(self.dof + 1):
+            a, b = self.l_start[lk], self.l_start[lk + 1]
+            if b > a:
+                self.l_folded[lk] = self.folded[a:b].mean(axis=0)
+                self.l_radius[lk] = float(
+                    (np.linalg.norm(self.folded[a:b] - self.l_folded[lk], axis=1) + self.radii[a:b]).max()
+                )
+
+    def _item_lever(self, pairs: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        """``(P, dof)``: per pair and joint, min(lever of its upper sphere, axis distance of its lower one)
+        for the joints between their links (those that move one and not the other), 0 for the rest."""
+        la, lb = self.link[pairs[:, 0]], self.link[pairs[:, 1]]
+        up = np.where(la > lb, pairs[:, 0], pairs[:, 1])
+        low = np.where(la > lb, pairs[:, 1], pairs[:, 0])
+        j = np.arange(self.dof)
+        between = (j[None] >= self.link[low][:, None]) & (j[None] < self.link[up][:, None])
+        return np.where(between, np.minimum(self.lever[up], axis[low]), 0.0)
 
     @property
     def num_spheres(self) -> int:
@@ -713,6 +846,11 @@ class KernelBody:
                     self.lever.ravel(),
                     self.b_folded.ravel(),
                     self.b_radius,
+                    self.pair_lever.ravel(),
+                    self.group_lever.ravel(),
+                    self.member_lever.ravel(),
+                    self.l_folded.ravel(),
+                    self.l_radius,
                 ]
             )
             n = np.concatenate(
@@ -727,18 +865,11 @@ class KernelBody:
                     self.g_start,
                     self.g_members,
                     self.b_link,
+                    self.l_start,
                 ]
             ).astype(np.int64)
             self._packed = (np.ascontiguousarray(f), np.ascontiguousarray(n))
         return self._packed
-
-    def verdict_args(self) -> tuple:
-        """The body's arguments of the verdict kernels."""
-        return (
-            self.F, self.prismatic, self.link, self.folded, self.radii, self.on_floor, self.other_pairs,
-            self.lever, self.g_sphere, self.g_ball, self.g_start, self.g_members, self.b_link, self.b_folded,
-            self.b_radius,
-        )  # fmt: skip
 
     def __repr__(self) -> str:
         return f"KernelBody(robot={self.robot.name!r}, set={self.name!r}, spheres={self.num_spheres}, pairs={len(self.pairs)})"

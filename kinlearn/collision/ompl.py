@@ -75,7 +75,7 @@ class RrtChecker:
 
             kb, ks = kernel.KernelBody.of(body), kernel.KernelScene.of(self.scene)
             # The kernels themselves, their arguments bound once: OMPL calls these thousands of times.
-            self._clear, self._verdict = kernel._clearances, kernel._verdict_packed
+            self._clear, self._free = kernel._clearances, kernel._free_packed
             self._clear_args = (*kb.args(), *ks.args())
             self._verdict_args = (*kb.packed, ks.packed)
             self._per = np.empty((1, kb.num_spheres))
@@ -95,8 +95,7 @@ class RrtChecker:
         self.motions += 1
         if self.compiled:
             path = np.stack([a, b]).astype(np.float64)
-            first, _ = self._verdict(path, self._travel, 0.0, *self._verdict_args)
-            return first < 0
+            return bool(self._free(path, self._travel, 0.0, *self._verdict_args))
         path = torch.as_tensor(np.stack([a, b]), dtype=_F64)
         n = int(segment_steps(self.body, path, self.max_travel)[0])
         q = straight_line(path[0], path[1], n)

@@ -58,8 +58,7 @@ def _uniform(state) -> float:
 def _free(a, b, seg, max_travel, f, n, s) -> bool:
     for j in range(a.shape[0]):
         seg[0, j], seg[1, j] = a[j], b[j]
-    first, _ = kernel._verdict_packed(seg, max_travel, 0.0, f, n, s)
-    return first < 0
+    return kernel._free_packed(seg, max_travel, 0.0, f, n, s)
 
 
 @_jit
