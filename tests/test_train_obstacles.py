@@ -271,3 +271,49 @@ def test_the_sparse_hinges_are_the_dense_ones(problems):
     ref = torch.autograd.grad(collision.sum() + self_col.sum(), list(tm.parameters()))
     for a, b in zip(grads, ref, strict=True):
         assert torch.allclose(a, b, rtol=1e-4, atol=1e-6 * float(b.abs().max()) + 1e-9)
+
+
+def test_expert_paths_solve_start_to_goal_and_are_cached(problems, tmp_path):
+    """The offline sampler's targets: from each start to its goal, the same on a second call (read from
+    the cache beside the set), made again for another number of knots; resampled by arc length."""
+    import shutil
+
+    import numpy as np
+
+    from kinlearn.training.obstacle_path import _resample, expert_paths
+
+    path = tmp_path / "train.npz"
+    shutil.copy(problems[0], path)
+    robot = load_robot("iiwa14")
+    paths, found = expert_paths(path, robot, 6)
+    pset = problems[1]
+    assert paths.shape == (len(pset), 7, 7) and found.dtype == torch.bool and int(found.sum()) >= 4
+    assert torch.allclose(paths[found, 0], pset.start[found].double())
+    assert torch.allclose(paths[found, -1], pset.goal[found].double())
+    cache = tmp_path / "train.experts6.npz"
+    assert cache.is_file()
+    again, found2 = expert_paths(path, robot, 6)
+    assert torch.equal(again, paths) and torch.equal(found2, found)
+    assert expert_paths(path, robot, 4)[0].shape[1] == 5 and (tmp_path / "train.experts4.npz").is_file()
+    # resampling by arc length keeps the ends and spaces the points equally along the polyline
+    poly = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 3.0]])
+    r = _resample(poly, 4)
+    assert np.allclose(r, [[0, 0], [1, 0], [1, 1], [1, 2], [1, 3]])
+
+
+def test_distillation_pulls_the_nearest_candidate_and_is_recorded(problems, tmp_path):
+    """With imitation > 0 training logs the nearest candidate's knot difference to the sampler's path,
+    lowers it, and the checkpoint (and its export) say the network was distilled; without it they do
+    not."""
+    from kinlearn.models.obstacle_path import export_obstacle_model
+
+    cfg = _tiny(problems, iterations=30, loss=ObstacleLossConfig(imitation=50.0))
+    tm = train_obstacle_model(cfg, tmp_path / "d", progress=False)
+    logs = [json.loads(x) for x in (tmp_path / "d" / "metrics.jsonl").read_text().splitlines()]
+    imit = [x["train/imitation"] for x in logs if "train/imitation" in x]
+    assert len(imit) >= 2 and imit[-1] < imit[0]
+    assert tm.distilled and load_obstacle_model(tmp_path / "d" / "tm_obstacles.pt").distilled
+    export_obstacle_model(tmp_path / "d" / "tm_obstacles.pt", tmp_path / "exported.pt")
+    assert load_obstacle_model(tmp_path / "exported.pt").distilled
+    plain = train_obstacle_model(_tiny(problems, iterations=2), tmp_path / "p", progress=False)
+    assert not plain.distilled and not load_obstacle_model(tmp_path / "p" / "tm_obstacles.pt").distilled

@@ -16,6 +16,7 @@ from ..models.forward_inverse import load_fm, load_im
 from ..planning.planner import Planner
 from .common import (
     EXISTING_FILE,
+    NONNEGATIVE_FLOAT,
     NONNEGATIVE_INT,
     OUTPUT_DIR,
     POSITIVE_FLOAT,
@@ -214,6 +215,15 @@ def _add_train_obstacle_planner(sub) -> None:
         help=f"paths proposed per problem (default: {candidates})",
     )
     p.add_argument(
+        "--imitation",
+        type=NONNEGATIVE_FLOAT,
+        default=0.0,
+        metavar="WEIGHT",
+        help="distil: the compiled RRT-Connect solves each training problem once (cached beside the problems) "
+        "and the nearest candidate is pulled towards its path with this weight, besides the self-supervised "
+        "loss (default: 0, self-supervised alone; 10 is a good start)",
+    )
+    p.add_argument(
         "--init-checkpoint",
         type=EXISTING_FILE,
         default=None,
@@ -232,7 +242,12 @@ def _add_train_obstacle_planner(sub) -> None:
 def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
     from ..data.problems import select_families
     from ..models.obstacle_path import export_obstacle_model
-    from ..training.obstacle_path import ObstacleTrainConfig, make_training_problems, train_obstacle_model
+    from ..training.obstacle_path import (
+        ObstacleLossConfig,
+        ObstacleTrainConfig,
+        make_training_problems,
+        train_obstacle_model,
+    )
 
     robot = load_robot(args.robot)
     families = select_families(args.families, args.leave_out)
@@ -258,6 +273,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
             "batch_size": args.batch_size,
             "lr": args.lr,
             "candidates": args.candidates,
+            "imitation": args.imitation,
             "body": file_identity(args.body_checkpoint) if args.body_checkpoint else "analytic",
             "init": file_identity(args.init_checkpoint) if args.init_checkpoint else None,
         },
@@ -278,6 +294,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         batch_size=args.batch_size,
         lr=args.lr,
         model={"candidates": args.candidates},
+        loss=ObstacleLossConfig(imitation=args.imitation),
         init_checkpoint=str(args.init_checkpoint) if args.init_checkpoint else None,
         seed=args.seed,
     )

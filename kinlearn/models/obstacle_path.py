@@ -194,6 +194,9 @@ class ObstaclePathModel(nn.Module):
         #: The scene families it was trained on (names of :data:`kinlearn.data.problems.FAMILIES`),
         #: recorded by its trainer and kept in its checkpoint; None where none was recorded.
         self.families: tuple[str, ...] | None = None
+        #: Whether its training also pulled a candidate towards the offline sampler's paths
+        #: (:mod:`kinlearn.training.obstacle_path`, distillation); kept in its checkpoint.
+        self.distilled: bool = False
 
     @property
     def robot_name(self) -> str:
@@ -262,6 +265,8 @@ def save_obstacle_model(
     extra = dict(extra or {})
     if tm.families is not None:
         extra["families"] = list(tm.families)
+    if tm.distilled:
+        extra["distilled"] = True
     return save_checkpoint(
         path,
         kind=ObstaclePathModel.kind,
@@ -293,6 +298,7 @@ def load_obstacle_model(path: str | Path, robot: str | None = None) -> ObstacleP
             f"{path}: the obstacle TM checkpoint does not match this kinlearn ({exc})"
         ) from exc
     tm.families = _families(payload, path)
+    tm.distilled = payload["extra"].get("distilled", False) is True
     return tm.eval()
 
 
@@ -302,13 +308,16 @@ def export_obstacle_model(src: str | Path, dst: str | Path, half: bool = True) -
     ``half``: store the layers' weights as float16 (:func:`kinlearn.io.half_weights`: half the size;
     they load back into float32, changing the plans by rounding only). The exported file is what is judged: measure the exported planner."""
     payload = load_checkpoint(src, kind=ObstaclePathModel.kind)
-    families = load_obstacle_model(src).families  # it must load
+    tm = load_obstacle_model(src)  # it must load
     state = half_weights(payload["state_dict"]) if half else payload["state_dict"]
+    extra = {} if tm.families is None else {"families": list(tm.families)}
+    if tm.distilled:
+        extra["distilled"] = True
     return save_checkpoint(
         dst,
         kind=ObstaclePathModel.kind,
         robot=payload["robot"],
         config=payload["config"],
         state_dict=state,
-        extra={} if families is None else {"families": list(families)},
+        extra=extra,
     )

@@ -19,6 +19,14 @@ The problem's loss is the best candidate's plus ``spread`` times the candidates'
 (winner-takes-all, relaxed so no candidate is abandoned): the candidates learn different ways
 around, and the planner keeps whichever its check finds free. Resumable bit-identically, like the
 other trainers.
+
+Distillation (an option, off by default: ``ObstacleLossConfig.imitation`` > 0). The compiled
+RRT-Connect solves each training problem once, offline (:func:`expert_paths`: a fixed iteration
+budget, so the same paths on every machine; cached beside the problems), and its shortcut path,
+resampled to the model's knots by arc length, is a target: the candidate nearest to it (in joint
+ranges) is pulled towards it by ``imitation`` times the mean squared knot difference, on top of the
+self-supervised loss every candidate keeps. The sampler shows the way out of a cell; the body's
+hinges still decide what is free. A network trained so is marked as distilled in its checkpoint.
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
 import torch
 
 from ..body.kinematics import kinematics
@@ -37,7 +46,7 @@ from ..collision.body import BodySpheres, body_spheres
 from ..collision.distance import body_obstacle_distance, self_collision_distance
 from ..collision.geometry import safe_sqrt
 from ..data.problems import FAMILIES, LEGACY_FAMILIES, ProblemConfig, ProblemSet, make_problems
-from ..errors import ConfigError
+from ..errors import ConfigError, DatasetError
 from ..models.obstacle_path import (
     ObstaclePathConfig,
     ObstaclePathModel,
@@ -53,6 +62,7 @@ __all__ = [
     "ObstacleTrainConfig",
     "build_body",
     "candidate_losses",
+    "expert_paths",
     "make_training_problems",
     "train_obstacle_model",
 ]
@@ -72,6 +82,7 @@ class ObstacleLossConfig:
     joint_smoothness: float = 0.05
     limits: float = 10.0
     spread: float = 0.05
+    imitation: float = 0.0  # > 0: distil the compiled RRT-Connect's paths (see the module docstring)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -167,6 +178,63 @@ def make_training_problems(
             if progress is not None:
                 progress(len(paths))
     return paths
+
+
+#: The offline sampler's iteration budget per training problem (a budget of work: the same paths on
+#: every machine); a problem it leaves unsolved has no target.
+EXPERT_ITERATIONS = 20000
+#: Kind of the cached expert-path files (:func:`expert_paths`).
+EXPERT_KIND = "expert_paths"
+
+
+def _resample(path: np.ndarray, knots: int) -> np.ndarray:
+    """``path (V, dof)`` → ``(knots + 1, dof)``: points equally spaced by joint-space arc length."""
+    s = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))))
+    if s[-1] <= 0.0:
+        return np.repeat(path[:1], knots + 1, axis=0)
+    u = np.linspace(0.0, s[-1], knots + 1)
+    return np.stack([np.interp(u, s, path[:, j]) for j in range(path.shape[1])], axis=1)
+
+
+def expert_paths(
+    problems: str | Path, robot: Robot, knots: int, progress=None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The compiled RRT-Connect's path of every problem of the set in ``problems`` (``.npz``), shortcut
+    and resampled to ``knots + 1`` points by arc length: ``(paths (N, knots + 1, dof) float64, found (N,)
+    bool)``. Each problem gets :data:`EXPERT_ITERATIONS` iterations with its index as the seed (no time
+    limit: the same paths everywhere). Made once and cached beside the set (``NAME.experts{knots}.npz``,
+    written atomically); a cache of another set, robot or size is made again."""
+    from ..collision import kernel
+    from ..collision.rrt import rrt_connect
+    from ..io import load_npz, save_npz
+
+    problems = Path(problems)
+    cache = problems.with_name(f"{problems.stem}.experts{knots}.npz")
+    pset = ProblemSet.load(problems, robot=robot.name)
+    want = {"problems": problems.name, "knots": knots, "iterations": EXPERT_ITERATIONS, "n": len(pset)}
+    if cache.is_file():
+        try:
+            meta, arrays = load_npz(cache, kind=EXPERT_KIND, robot=robot.name)
+            if meta.get("config") == want:
+                return torch.from_numpy(arrays["paths"]), torch.from_numpy(arrays["found"])
+        except DatasetError:
+            pass  # unreadable: made again below
+    body = kernel.KernelBody.of(body_spheres(robot).double())
+    lo, hi = np.asarray(robot.lower, np.float64), np.asarray(robot.upper, np.float64)
+    paths = np.zeros((len(pset), knots + 1, robot.dof))
+    found = np.zeros(len(pset), dtype=bool)
+    for i in range(len(pset)):
+        start, goal, scene = pset.problem(i)
+        path, _, _ = rrt_connect(
+            body, kernel.KernelScene.of(scene.to(torch.float64)), start.double().numpy(), goal.double().numpy(),
+            lo, hi, time_limit=math.inf, seed=i, max_iterations=EXPERT_ITERATIONS,
+        )  # fmt: skip
+        if path is not None:
+            paths[i], found[i] = _resample(path, knots), True
+        if progress is not None:
+            progress(i + 1)
+    save_npz(cache, kind=EXPERT_KIND, robot=robot.name, config=want, arrays={"paths": paths, "found": found})
+    return torch.from_numpy(paths), torch.from_numpy(found)
 
 
 def build_body(config: ObstacleTrainConfig, robot: Robot):
@@ -278,10 +346,13 @@ def candidate_losses(
     scene,
     config: ObstacleLossConfig,
     fractions: torch.Tensor,
+    expert: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Each candidate's loss ``(N, C)`` for problems ``(s0, sT)`` in ``scene`` (batch ``(N,)``), and the
     terms (per candidate, not reduced). The body is looked at in every segment at ``fractions`` (in
-    [0, 1)) of the way, and at the goal."""
+    [0, 1)) of the way, and at the goal. ``expert`` ``(N, T − 1, dof)``: target inner knots; its term
+    ``imitation`` (each candidate's mean squared knot difference, in half joint ranges) is returned
+    with the terms and not added to the loss (the caller takes its minimum over the candidates)."""
     J = tm.layout.joints
     n = s0.shape[0]
     rows, mask, floor = scene_primitives(scene, n, s0.dtype)
@@ -332,6 +403,8 @@ def candidate_losses(
         "joint_smoothness": joint_smooth,
         "limits": limits,
     }
+    if expert is not None:
+        terms["imitation"] = ((mid - expert[:, None]) / tm.half_range).square().mean((-1, -2))
     return loss, terms
 
 
@@ -390,6 +463,12 @@ def train_obstacle_model(
             floor_all.repeat(2, 1),
         )
     tm.families = tuple(f for f in FAMILIES if f in seen)  # recorded in its checkpoints
+    experts = found = None
+    if config.loss.imitation > 0:  # the offline sampler's paths, in the pool's order
+        parts = [expert_paths(p, robot, tm.config.steps) for p in config.problems]
+        experts = torch.cat([e for e, _ in parts])[:, 1:-1].float()
+        found = torch.cat([f for _, f in parts])
+        tm.distilled = True
     loop = iteration_loop(
         tm,
         config,
@@ -412,13 +491,23 @@ def train_obstacle_model(
         s0, sT, scene = _batch(pool, ef_all, idx, swap)
         # Stratified: each segment is looked at once per stretch of 1/points, at a random place in it.
         fractions = (torch.arange(config.points) + torch.rand(config.points, generator=gen)) / config.points
-        per, terms = candidate_losses(tm, body, s0, sT, scene, config.loss, fractions)
+        target = None
+        if experts is not None:  # walked the other way where the problem is
+            target = torch.where(swap[:, None, None], experts[idx].flip(1), experts[idx])
+        per, terms = candidate_losses(tm, body, s0, sT, scene, config.loss, fractions, expert=target)
         best = per.min(dim=1)
-        loss = loop.step(best.values.mean() + config.loss.spread * per.mean(), check=True)
+        total = best.values.mean() + config.loss.spread * per.mean()
+        imitated = {}
+        if target is not None:
+            has = found[idx].to(per.dtype)
+            nearest = terms.pop("imitation").min(dim=1).values
+            total = total + config.loss.imitation * (nearest * has).sum() / has.sum().clamp_min(1.0)
+            imitated = {"train/imitation": float((nearest.detach() * has).sum() / has.sum().clamp_min(1.0))}
+        loss = loop.step(total, check=True)
         rows = torch.arange(per.shape[0])
         logged = {f"train/best_{k}": float(v.detach()[rows, best.indices].mean()) for k, v in terms.items()}
         free = (terms["collision"].detach()[rows, best.indices] == 0).float().mean()
-        return {"train/loss": float(loss), **logged, "train/best_free": float(free)}
+        return {"train/loss": float(loss), **logged, "train/best_free": float(free), **imitated}
 
     loop.run(step)
     return tm

@@ -1,0 +1,181 @@
+"""Leave one family out, every family: train the obstacle network without it, plan its held-out problems.
+
+    python benchmarks/leave_one_out.py --robot iiwa14 [--families bookcase cubby …] [--iterations 3000]
+        [--candidates 8] [--problems-per-family 200] [--base all] [--run-root runs/loo/iiwa14] [--problems-dir DIR]
+        [--problems benchmarks/data/scene_problems_iiwa14.npz] [--out benchmarks/results/loo_iiwa14]
+
+For each family F of ``--families`` (default: the seven scene families) a network is trained with
+``kinlearn train-obstacle-planner --families BASE --leave-out F`` (the same problems, seeds, iterations
+and candidates as the network trained on every family; a run already in ``RUN_ROOT/without-F`` is
+reused, an interrupted one resumed), put into a copy of the shipped planner's folder, and asked for
+fixed-time plans (``refine_steps=0``: the learned proposals alone) and plans with ``deadline=0.05`` on
+the held-out problems of ``--problems`` (seeds apart from every training seed; verified solvable).
+Every plan is judged by :func:`kinlearn.evaluation.obstacles.obstacle_outcome`.
+
+The table gives per left-out family its fixed-time success (the network never saw it), the same
+network's success on the families it saw, the straight line's on the left-out family, the reference
+network's (``--reference``: a planner folder whose network saw every family; default the shipped one)
+on it, and the deadline's. Batch 1, one thread. Training takes minutes per family on the iiwa14 and
+longer on the arms with many body spheres (see ``kinlearn/checkpoints/README.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+from _common import header, markdown_table
+
+import kinlearn
+from kinlearn.collision import body_spheres
+from kinlearn.data.problems import FAMILIES, ProblemSet, select_families
+from kinlearn.errors import NoObstacleModelWarning
+from kinlearn.evaluation.obstacles import obstacle_outcome
+from kinlearn.planning.obstacle_baselines import joint_line_path
+
+DATA = Path(__file__).parent / "data"
+SCENE_FAMILIES = select_families("scenes")
+
+
+def train(robot: str, family: str, args, run: Path) -> Path:
+    """The network trained without ``family`` (trained now unless ``run`` already holds it)."""
+    out = run / "tm_obstacles.pt"
+    if out.exists():
+        print(f"  without {family}: reusing {out}", flush=True)
+        return out
+    cmd = [
+        sys.executable, "-m", "kinlearn", "train-obstacle-planner", "--robot", robot,
+        "--families", *args.base, "--leave-out", family,
+        "--problems-per-family", str(args.problems_per_family), "--iterations", str(args.iterations),
+        "--candidates", str(args.candidates), "--problems-dir", str(args.problems_dir),
+        "--run-dir", str(run), "--no-progress",
+    ]  # fmt: skip
+    if (run / "config.json").exists():
+        cmd.append("--resume")
+    print("  " + " ".join(cmd[2:]), flush=True)
+    subprocess.run(cmd, check=True)
+    return out
+
+
+def planner_with(network: Path, robot: str, folder: Path) -> kinlearn.Planner:
+    """The shipped planner of ``robot`` with ``network`` as its obstacle network (a folder copy)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    shipped = Path(kinlearn.__file__).parent / "checkpoints" / robot
+    for f in shipped.glob("*.pt"):
+        shutil.copy2(f, folder / f.name)
+    shutil.copy2(network, folder / "tm_obstacles.pt")
+    return kinlearn.Planner.load(folder)
+
+
+def success(planner, problems, body, **kw) -> np.ndarray:
+    paths = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NoObstacleModelWarning)
+        for i in range(len(problems)):
+            start, goal, scene = problems.problem(i)
+            paths.append(torch.as_tensor(planner.plan(start, goal, obstacles=scene, **kw).joints))
+    return obstacle_outcome(body, paths, problems)["success"].numpy()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--robot", default="iiwa14")
+    ap.add_argument(
+        "--families", nargs="*", default=list(SCENE_FAMILIES), help="families to leave out in turn"
+    )
+    ap.add_argument(
+        "--base", nargs="*", default=["all"], help="what every network trains on, less the one left out"
+    )
+    ap.add_argument("--iterations", type=int, default=3000)
+    ap.add_argument("--candidates", type=int, default=8)
+    ap.add_argument("--problems-per-family", type=int, default=200)
+    ap.add_argument("--run-root", type=Path, default=None)
+    ap.add_argument(
+        "--problems-dir", type=Path, default=None, help="training problems (default RUN_ROOT/problems)"
+    )
+    ap.add_argument("--problems", type=Path, default=None)
+    ap.add_argument(
+        "--reference", type=Path, default=None, help="planner folder of a network that saw every family"
+    )
+    ap.add_argument("--deadline", type=float, default=0.05)
+    ap.add_argument("--out", type=Path, default=None)
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    args.run_root = args.run_root or Path("runs") / "loo" / args.robot
+    args.problems_dir = args.problems_dir or args.run_root / "problems"
+    out = args.out or Path(__file__).parent / "results" / f"loo_{args.robot}"
+    out.mkdir(parents=True, exist_ok=True)
+    print(header(f"Leave one family out ({args.robot})", 1))
+    problems = ProblemSet.load(args.problems or DATA / f"scene_problems_{args.robot}.npz", robot=args.robot)
+    robot = kinlearn.load_robot(args.robot)
+    body = body_spheres(robot).double()
+    fam = problems.family.numpy()
+    reference = (
+        kinlearn.Planner.load(args.reference) if args.reference else kinlearn.Planner.default(args.robot)
+    )
+    ref_ok = success(reference, problems, body, refine_steps=0)
+    line_ok = obstacle_outcome(
+        body, [joint_line_path(*problems.problem(i), body=body)[0] for i in range(len(problems))], problems
+    )["success"].numpy()
+    rows, summary = [], {}
+    for f in args.families:
+        if f not in FAMILIES:
+            raise SystemExit(f"unknown family {f!r}")
+        mine = fam == FAMILIES.index(f)
+        net = train(args.robot, f, args, args.run_root / f"without-{f}")
+        planner = planner_with(net, args.robot, args.run_root / f"planner-without-{f}")
+        assert f not in planner.obstacle_tm.families, planner.obstacle_tm.families
+        fixed = success(planner, problems, body, refine_steps=0)
+        timed = success(planner, problems, body, deadline=args.deadline)
+        summary[f] = {
+            "left_out_fixed": float(fixed[mine].mean()),
+            "seen_fixed": float(fixed[~mine].mean()),
+            "line": float(line_ok[mine].mean()),
+            "reference_fixed": float(ref_ok[mine].mean()),
+            "left_out_deadline": float(timed[mine].mean()),
+            "trained_on": list(planner.obstacle_tm.families),
+            "n": int(mine.sum()),
+        }
+        s = summary[f]
+        rows.append(
+            [
+                f,
+                f"{100 * s['left_out_fixed']:.0f}%",
+                f"{100 * s['seen_fixed']:.1f}%",
+                f"{100 * s['line']:.0f}%",
+                f"{100 * s['reference_fixed']:.0f}%",
+                f"{100 * s['left_out_deadline']:.0f}%",
+            ]
+        )
+        print(f"  {f}: left out {rows[-1][1]}, seen {rows[-1][2]}, deadline {rows[-1][5]}", flush=True)
+    mean = {k: float(np.mean([s[k] for s in summary.values()])) for k in ("left_out_fixed", "seen_fixed")}
+    summary["_mean"] = mean
+    table = markdown_table(
+        [
+            "left-out family",
+            "fixed time, left out",
+            "fixed time, the families it saw",
+            "joint line",
+            "network that saw it",
+            f"deadline {args.deadline:g} s, left out",
+        ],
+        rows,
+    )
+    print()
+    print(table)
+    print(f"\nmean over the left-out families: {100 * mean['left_out_fixed']:.1f}% (left out), "
+          f"{100 * mean['seen_fixed']:.1f}% (seen)")  # fmt: skip
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (out / "table.md").write_text(table + "\n")
+    print(f"wrote {out}/summary.json, table.md")
+
+
+if __name__ == "__main__":
+    main()
