@@ -14,8 +14,9 @@ Rows: the straight joint line; kinlearn's fixed-time stage alone (``refine_steps
 proposals, no refinement or sampling), its default plan (the proposals, then a fixed budget of
 RRT-Connect iterations where they cleared nothing; deterministic) and its plan with ``deadline=0.05``; the compiled RRT-Connect and OMPL's RRT-Connect,
 each with time limits; the gradient trajectory optimiser. The success-against-budget figure draws, per
-sampling planner, the share solved within each budget (its 1 s run's solve times) and the fixed-time
-rows as points at their p99 time. After every call of every row the paper-size TM's forward pass is
+sampling planner, the share solved within each budget (its 1 s run's solve times), the kinlearn rows
+as points at their p99 time, and the fixed-time row also as the share of problems it solved within each
+budget (its plans' own times, dashed). After every call of every row the paper-size TM's forward pass is
 timed once, and each row's p50 and p99 are given over its p50 and p99 (the fixed-time goal's yardstick).
 
 Leave-one-family-out: ``--planner DIR`` plans with that folder's networks; the families its obstacle
@@ -220,16 +221,23 @@ def _figure(summary: dict, path: Path, robot: str, n: int) -> None:
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     grid = np.logspace(-4, 0, 200)
-    for name, s in summary.items():
+    for k, (name, s) in enumerate(summary.items()):
         if name.startswith("_"):
             continue
-        if ", 1 s" in name:  # a sampling planner's anytime curve: solved within each budget
+        color = f"C{k % 10}"
+        if ", 1 s" in name or "fixed time" in name:  # solved within each budget (a sampler: its 1 s run)
             solved = np.array([x for x in s["solve_ms"] if x is not None]) / 1e3
             ax.plot(
-                grid * 1e3, [100 * (solved <= b).sum() / n for b in grid], label=name.replace(", 1 s", "")
+                grid * 1e3,
+                [100 * (solved <= b).sum() / n for b in grid],
+                label=name.replace(", 1 s", "") + (" (each plan's own time)" if "fixed time" in name else ""),
+                linestyle="--" if "fixed time" in name else "-",
+                color=color,
             )
         elif "RRT" not in name:
-            ax.scatter([s["p99_ms"]], [100 * s["success"]], label=f"{name} (at its p99)", zorder=3)
+            ax.scatter(
+                [s["p99_ms"]], [100 * s["success"]], label=f"{name} (at its p99)", zorder=3, color=color
+            )
     ax.set_xscale("log")
     ax.set_xlabel("time budget per problem (ms, batch 1, one core)")
     ax.set_ylabel("success (%)")
