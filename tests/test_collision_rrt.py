@@ -91,6 +91,28 @@ def test_colliding_ends_and_bad_input_are_refused(wall_problem):
         RrtConnect(kb, K.KernelScene(scene), start[:-1], goal, robot.lower, robot.upper)
     with pytest.raises(ConfigError, match="step"):
         RrtConnect(kb, K.KernelScene(scene), start, goal, robot.lower, robot.upper, step=-1.0)
+    with pytest.raises(ConfigError, match="local_step"):
+        RrtConnect(kb, K.KernelScene(scene), start, goal, robot.lower, robot.upper, local_step=float("nan"))
+
+
+def test_samples_near_the_root_extend_by_their_own_step(wall_problem):
+    """A sample drawn near the extended tree's root moves that tree by at most ``local_step`` (a short
+    step finds the way out of a cell that the long one jumps across); the connection still takes long
+    steps, and a path found with a short local step is free."""
+    robot, body, scene, start, goal = wall_problem
+    kb, ks = K.KernelBody(body), K.KernelScene(scene)
+    first = {}
+    for local_step in (1e-3, None):
+        rrt = RrtConnect(
+            kb, ks, start, goal, robot.lower, robot.upper, seed=2, local=1.0, local_step=local_step
+        )
+        rrt.run(1)  # round 0 extends the start's tree towards a sample near the start
+        assert int(rrt.state[0]) == 2
+        first[local_step] = float(np.linalg.norm(rrt.nodes[0, 1] - start))
+    assert first[1e-3] <= 1e-3 + 1e-12 < first[None]
+    rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=3, local_step=0.3)
+    path = next(p for p in (rrt.run(25) for _ in range(400)) if p is not None)
+    assert bool(check_path(body, torch.from_numpy(path), scene).collision_free)
 
 
 def test_rrt_connect_needs_a_bound_and_refuses_bad_ones(wall_problem):

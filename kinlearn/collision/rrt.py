@@ -90,7 +90,7 @@ def _extend(nodes, parent, count, t, q, step, seg, max_travel, f, n, s, out):
 
 
 @_jit
-def _grow(nodes, parent, state, lo, hi, step, local, sigma, iterations, max_travel, f, n, s):
+def _grow(nodes, parent, state, lo, hi, step, local, sigma, local_step, iterations, max_travel, f, n, s):
     """Up to ``iterations`` rounds of RRT-Connect on the trees in ``nodes``/``parent``; a share
     ``local`` of the samples is drawn near the extended tree's root (Gaussian, ``sigma`` rad per joint)."""
     dof = lo.shape[0]
@@ -101,7 +101,8 @@ def _grow(nodes, parent, state, lo, hi, step, local, sigma, iterations, max_trav
             return
         a = int(state[_ROUND] % 2)
         state[_ROUND] += 1
-        if _uniform(state) < local:  # near the root: out of the cell, from under the table
+        near = _uniform(state) < local
+        if near:  # near the root: out of the cell, from under the table
             for j in range(dof):
                 u1, u2 = max(_uniform(state), 1e-300), _uniform(state)
                 g = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
@@ -109,7 +110,9 @@ def _grow(nodes, parent, state, lo, hi, step, local, sigma, iterations, max_trav
         else:
             for j in range(dof):
                 q[j] = lo[j] + _uniform(state) * (hi[j] - lo[j])
-        st, i = _extend(nodes, parent, count, a, q, step, seg, max_travel, f, n, s, new)
+        st, i = _extend(
+            nodes, parent, count, a, q, local_step if near else step, seg, max_travel, f, n, s, new
+        )
         if st == _TRAPPED:
             if count[a] >= nodes.shape[1]:
                 state[_STATUS] = -1
@@ -158,6 +161,11 @@ class RrtConnect:
     per joint (the rest uniform in the limits): starts and goals inside shelves, cubbies and cages sit
     in narrow cells whose way out uniform samples rarely find. On 140 generated iiwa14 problems of the
     seven families (50 ms each): 86% with uniform samples alone, 97% with the defaults.
+    ``local_step``: the largest extension towards a sample near the root (default: ``step``). A short one
+    lets a tree creep out of a deep cell that long steps jump across: on 140 tuning problems of the
+    panda (seeds 3004–3010, 4 seeds each) 0.5 rad solved 97.3% within 50 ms against 96.6%, and the three
+    hardest cubby and cage problems 78% against 44–61%; on the iiwa14's it cost time (mean 2.3 against
+    1.4 ms) and on the ur5's it changed nothing, so it is not the default.
 
     ``run(iterations)`` grows the trees for that many more rounds and returns the path ``(V, dof)``
     once found (``None`` while not); ``valid_ends`` says whether start and goal are free at all.
@@ -177,6 +185,7 @@ class RrtConnect:
         max_travel: float = 0.01,
         local: float = 0.5,
         sigma: float = 0.8,
+        local_step: float | None = None,
     ):
         lo, hi = np.ascontiguousarray(lower, np.float64), np.ascontiguousarray(upper, np.float64)
         q0, q1 = np.ascontiguousarray(start, np.float64), np.ascontiguousarray(goal, np.float64)
@@ -189,6 +198,9 @@ class RrtConnect:
         self.step = 0.2 * float(np.linalg.norm(hi - lo)) if step is None else float(step)
         if not (math.isfinite(self.step) and self.step > 0):
             raise ConfigError(f"step must be a number of radians > 0, got {step!r}")
+        self.local_step = self.step if local_step is None else float(local_step)
+        if not (math.isfinite(self.local_step) and self.local_step > 0):
+            raise ConfigError(f"local_step must be a number of radians > 0, got {local_step!r}")
         self.lo, self.hi, self.max_travel = lo, hi, float(max_travel)
         self.local, self.sigma = float(local), float(sigma)
         self._f, self._n = body.packed
@@ -229,7 +241,7 @@ class RrtConnect:
             self._path = self.nodes[:, 0].copy()
             return self._path
         _grow(
-            self.nodes, self.parent, self.state, self.lo, self.hi, self.step, self.local, self.sigma, int(iterations),
+            self.nodes, self.parent, self.state, self.lo, self.hi, self.step, self.local, self.sigma, self.local_step, int(iterations),
             self.max_travel, self._f, self._n, self._s,
         )  # fmt: skip
         self.iterations += int(iterations)
