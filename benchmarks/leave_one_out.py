@@ -7,7 +7,7 @@
 For each family F of ``--families`` (default: the seven scene families) a network is trained with
 ``kinlearn train-obstacle-planner --families BASE --leave-out F`` (the same problems, seeds, iterations
 and candidates as the network trained on every family; a run already in ``RUN_ROOT/without-F`` is
-reused, an interrupted one resumed), put into a copy of the shipped planner's folder, and asked for
+resumed: a finished one returns at once), put into a copy of the shipped planner's folder, and asked for
 fixed-time plans (``refine_steps=0``: the learned proposals alone) and plans with ``deadline=0.05`` on
 the held-out problems of ``--problems`` (seeds apart from every training seed; verified solvable).
 Every plan is judged by :func:`kinlearn.evaluation.obstacles.obstacle_outcome`.
@@ -47,9 +47,6 @@ SCENE_FAMILIES = select_families("scenes")
 def train(robot: str, family: str, args, run: Path) -> Path:
     """The network trained without ``family`` (trained now unless ``run`` already holds it)."""
     out = run / "tm_obstacles.pt"
-    if out.exists():
-        print(f"  without {family}: reusing {out}", flush=True)
-        return out
     cmd = [
         sys.executable, "-m", "kinlearn", "train-obstacle-planner", "--robot", robot,
         "--families", *args.base, "--leave-out", family,
@@ -57,7 +54,7 @@ def train(robot: str, family: str, args, run: Path) -> Path:
         "--candidates", str(args.candidates), "--problems-dir", str(args.problems_dir),
         "--run-dir", str(run), "--no-progress",
     ]  # fmt: skip
-    if (run / "config.json").exists():
+    if (run / "config.json").exists():  # finished: returns at once; interrupted: goes on
         cmd.append("--resume")
     print("  " + " ".join(cmd[2:]), flush=True)
     subprocess.run(cmd, check=True)

@@ -317,3 +317,7 @@ def test_distillation_pulls_the_nearest_candidate_and_is_recorded(problems, tmp_
     assert load_obstacle_model(tmp_path / "exported.pt").distilled
     plain = train_obstacle_model(_tiny(problems, iterations=2), tmp_path / "p", progress=False)
     assert not plain.distilled and not load_obstacle_model(tmp_path / "p" / "tm_obstacles.pt").distilled
+    # A self-supervised run's record is what it was before distillation existed (runs made then resume).
+    assert "imitation" not in _tiny(problems).to_dict()["loss"]
+    assert cfg.to_dict()["loss"]["imitation"] == 50.0
+    assert ObstacleTrainConfig.from_dict(_tiny(problems).to_dict()) == _tiny(problems)

@@ -273,7 +273,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
             "batch_size": args.batch_size,
             "lr": args.lr,
             "candidates": args.candidates,
-            "imitation": args.imitation,
+            **({"imitation": args.imitation} if args.imitation else {}),  # absent: self-supervised, as before
             "body": file_identity(args.body_checkpoint) if args.body_checkpoint else "analytic",
             "init": file_identity(args.init_checkpoint) if args.init_checkpoint else None,
         },

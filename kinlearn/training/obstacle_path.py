@@ -134,6 +134,8 @@ class ObstacleTrainConfig:
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
         d["problems"] = list(self.problems)
+        if not self.loss.imitation:  # a self-supervised run's record, as before distillation existed
+            del d["loss"]["imitation"]
         return d
 
     @classmethod
