@@ -7,7 +7,7 @@
 For each family F of ``--families`` (default: the seven scene families) a network is trained with
 ``kinlearn train-obstacle-planner --families BASE --leave-out F`` (the same problems, seeds, iterations
 and candidates as the network trained on every family; a run already in ``RUN_ROOT/without-F`` is
-resumed: a finished one returns at once), put into a copy of the shipped planner's folder, and asked for
+used if its log says it finished, resumed if not), put into a copy of the shipped planner's folder, and asked for
 fixed-time plans (``refine_steps=0``: the learned proposals alone) and plans with ``deadline=0.05`` on
 the held-out problems of ``--problems`` (seeds apart from every training seed; verified solvable).
 Every plan is judged by :func:`kinlearn.evaluation.obstacles.obstacle_outcome`.
@@ -47,6 +47,12 @@ SCENE_FAMILIES = select_families("scenes")
 def train(robot: str, family: str, args, run: Path) -> Path:
     """The network trained without ``family`` (trained now unless ``run`` already holds it)."""
     out = run / "tm_obstacles.pt"
+    log = run / "metrics.jsonl"
+    if out.exists() and log.exists():
+        lines = log.read_text().splitlines()
+        if lines and json.loads(lines[-1]).get("iteration", 0) >= args.iterations:
+            print(f"  without {family}: {out} (finished: {args.iterations} iterations)", flush=True)
+            return out
     cmd = [
         sys.executable, "-m", "kinlearn", "train-obstacle-planner", "--robot", robot,
         "--families", *args.base, "--leave-out", family,
@@ -54,7 +60,7 @@ def train(robot: str, family: str, args, run: Path) -> Path:
         "--candidates", str(args.candidates), "--problems-dir", str(args.problems_dir),
         "--run-dir", str(run), "--no-progress",
     ]  # fmt: skip
-    if (run / "config.json").exists():  # finished: returns at once; interrupted: goes on
+    if (run / "config.json").exists():  # an interrupted run goes on
         cmd.append("--resume")
     print("  " + " ".join(cmd[2:]), flush=True)
     subprocess.run(cmd, check=True)
