@@ -537,11 +537,12 @@ _PROBE_LEVELS = 4
 
 
 @_jit
-def _scene_hit(q, margin, F, prismatic, folded, radii, on_floor, l_start, l_folded, l_radius, scene, frames):
-    """Whether some sphere at joints ``q`` is within ``margin`` of the scene (self-collision not looked at).
-    Link by link: a link whose ball (``l_folded``, ``l_radius``: holding its spheres ``l_start[l]`` to
-    ``l_start[l + 1]``) is farther than ``margin`` from the scene has none there, and its spheres are
-    not placed."""
+def _scene_hit(q, margin, body, scene, frames):
+    """Whether some sphere of ``body`` at joints ``q`` is within ``margin`` of the scene (self-collision not
+    looked at). Link by link: a link whose ball (holding its spheres ``l_start[l]`` to ``l_start[l + 1]``)
+    is farther than ``margin`` from the scene has none there, and its spheres are not placed."""
+    F, prismatic, _, folded, radii, on_floor = body[:6]
+    l_start, l_folded, l_radius = body[18:21]
     spheres, boxes, cylinders, floor = scene
     _chain(q, F, prismatic, frames)
     for lk in range(l_start.shape[0] - 1):
@@ -576,16 +577,13 @@ def _probe(path, max_travel, margin, body, scene):
     interpolation, to the bit), so True means the path collides; False says nothing. Most colliding paths
     (a planner's candidates, a sampler's long edges) collide somewhere inside, where a walk from the start
     reaches late: a probe finds it in a few scene checks."""
-    F, prismatic, _, folded, radii, on_floor, _, lever = body[:8]
-    l_start, l_folded, l_radius = body[18:21]
+    lever = body[7]
     W, dof = path.shape
     if W < 2 or not _all_finite(path):
         return False
     frames, q = np.empty((dof + 1, 3, 4)), np.empty(dof)
     for k in range(1, W - 1):
-        if _scene_hit(
-            path[k], margin, F, prismatic, folded, radii, on_floor, l_start, l_folded, l_radius, scene, frames
-        ):
+        if _scene_hit(path[k], margin, body, scene, frames):
             return True
     steps = np.empty(W - 1)
     _grid_steps(path, max_travel, lever, steps)
@@ -600,20 +598,7 @@ def _probe(path, max_travel, margin, body, scene):
                 frac = i / n
                 for j in range(dof):
                     q[j] = path[k, j] + frac * (path[k + 1, j] - path[k, j])
-                if _scene_hit(
-                    q,
-                    margin,
-                    F,
-                    prismatic,
-                    folded,
-                    radii,
-                    on_floor,
-                    l_start,
-                    l_folded,
-                    l_radius,
-                    scene,
-                    frames,
-                ):
+                if _scene_hit(q, margin, body, scene, frames):
                     return True
         parts *= 2
     return False
