@@ -321,3 +321,22 @@ def test_distillation_pulls_the_nearest_candidate_and_is_recorded(problems, tmp_
     assert "imitation" not in _tiny(problems).to_dict()["loss"]
     assert cfg.to_dict()["loss"]["imitation"] == 50.0
     assert ObstacleTrainConfig.from_dict(_tiny(problems).to_dict()) == _tiny(problems)
+
+
+def test_solvable_only_trains_on_what_the_sampler_solves(problems, tmp_path):
+    """The feasibility filter: training keeps the problems whose offline sampler path was found (all of
+    them when it finds all), records itself in the run's config only when on, and is refused when it
+    would leave nothing."""
+    import shutil
+
+    from kinlearn.training.obstacle_path import expert_paths
+
+    path = tmp_path / "train.npz"
+    shutil.copy(problems[0], path)
+    cfg = _tiny((path,), iterations=2, solvable_only=True)
+    assert cfg.to_dict()["solvable_only"] is True and "solvable_only" not in _tiny(problems).to_dict()
+    tm = train_obstacle_model(cfg, tmp_path / "run", progress=False)
+    _, found = expert_paths(path, load_robot("iiwa14"), tm.config.steps)
+    assert not tm.distilled and int(found.sum()) >= 4  # a filter, not a teacher
+    kept = {f for f, ok in zip(problems[1].family.tolist(), found.tolist(), strict=True) if ok}
+    assert len(tm.families) == len(kept)

@@ -224,6 +224,12 @@ def _add_train_obstacle_planner(sub) -> None:
         "loss (default: 0, self-supervised alone; 10 is a good start)",
     )
     p.add_argument(
+        "--solvable-only",
+        action="store_true",
+        help="train only on the problems the compiled RRT-Connect solves within 20,000 iterations (solved once, "
+        "cached beside the problems): unverified problems include infeasible ones; a filter, no path is shown",
+    )
+    p.add_argument(
         "--init-checkpoint",
         type=EXISTING_FILE,
         default=None,
@@ -274,6 +280,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
             "lr": args.lr,
             "candidates": args.candidates,
             **({"imitation": args.imitation} if args.imitation else {}),  # absent: self-supervised, as before
+            **({"solvable_only": True} if args.solvable_only else {}),
             "body": file_identity(args.body_checkpoint) if args.body_checkpoint else "analytic",
             "init": file_identity(args.init_checkpoint) if args.init_checkpoint else None,
         },
@@ -295,6 +302,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         lr=args.lr,
         model={"candidates": args.candidates},
         loss=ObstacleLossConfig(imitation=args.imitation),
+        solvable_only=args.solvable_only,
         init_checkpoint=str(args.init_checkpoint) if args.init_checkpoint else None,
         seed=args.seed,
     )

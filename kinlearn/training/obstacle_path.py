@@ -100,7 +100,11 @@ class ObstacleTrainConfig:
     (``body_checkpoint``, a learned body model). ``points``: configurations per segment at which the
     loss looks at the body. ``init_checkpoint``: start from a trained model's weights and input
     standardisation (fine-tuning, e.g. on more problems) instead of a fresh one; its architecture must
-    match ``model``. Adam with cosine decay to zero.
+    match ``model``. ``solvable_only``: train on the problems the compiled RRT-Connect solves within
+    :data:`EXPERT_ITERATIONS` (:func:`expert_paths`, made once and cached) and drop the rest: unverified
+    problems include infeasible ones (start and goal in parts of the free space that do not connect),
+    whose loss can only pull paths through obstacles. A filter, not a teacher: no path is shown unless
+    ``loss.imitation`` > 0. Adam with cosine decay to zero.
     """
 
     robot: str = "iiwa14"
@@ -113,6 +117,7 @@ class ObstacleTrainConfig:
     points: int = 2
     checkpoint_every: int = 100
     init_checkpoint: str | None = None
+    solvable_only: bool = False
     loss: ObstacleLossConfig = field(default_factory=ObstacleLossConfig)
     model: dict = field(default_factory=dict)
     seed: int = 0
@@ -136,6 +141,8 @@ class ObstacleTrainConfig:
         d["problems"] = list(self.problems)
         if not self.loss.imitation:  # a self-supervised run's record, as before distillation existed
             del d["loss"]["imitation"]
+        if not self.solvable_only:  # and as before the filter existed
+            del d["solvable_only"]
         return d
 
     @classmethod
@@ -442,6 +449,15 @@ def train_obstacle_model(
     tm = ObstaclePathModel(config.model_config(robot))
     kin = kinematics(robot)
     pool = _load_pool(config.problems, robot)
+    experts = found = None
+    if config.loss.imitation > 0 or config.solvable_only:  # the offline sampler's paths, in the pool's order
+        parts = [expert_paths(p, robot, config.model_config(robot).steps) for p in config.problems]
+        experts = torch.cat([e for e, _ in parts])[:, 1:-1].float()
+        found = torch.cat([f for _, f in parts])
+        if config.solvable_only:
+            if not bool(found.any()):
+                raise ConfigError("solvable_only: the sampler solved none of the training problems")
+            pool, experts, found = pool[found], experts[found], found[found]
     ef_all = (kin.position(pool.start), kin.position(pool.goal))
     n_pool = len(pool)
     seen = {f for i, f in enumerate(FAMILIES) if bool((pool.family == i).any())}
@@ -465,12 +481,10 @@ def train_obstacle_model(
             floor_all.repeat(2, 1),
         )
     tm.families = tuple(f for f in FAMILIES if f in seen)  # recorded in its checkpoints
-    experts = found = None
-    if config.loss.imitation > 0:  # the offline sampler's paths, in the pool's order
-        parts = [expert_paths(p, robot, tm.config.steps) for p in config.problems]
-        experts = torch.cat([e for e, _ in parts])[:, 1:-1].float()
-        found = torch.cat([f for _, f in parts])
+    if config.loss.imitation > 0:
         tm.distilled = True
+    else:
+        experts = None  # (a filter only: no target)
     loop = iteration_loop(
         tm,
         config,
