@@ -24,7 +24,7 @@ d_m, the next ⌊min_m (d_m − slack) / (t_m / n_k)⌋ sub-steps are free and a
 and the first colliding segment are those of checking every sub-step; only the clearance (a minimum
 over the evaluated configurations) needs ``exact=True``.
 
-Two refinements keep the verdict that of every sub-step and cut the work (``benchmarks/dense_check_speed.py``):
+Two refinements keep the verdict that of every sub-step and cut the work (``benchmarks/candidate_check_speed.py``):
 
 - **A self-collision pair closes at its own rate.** Turning joint j changes the distance ‖B − A‖ of a
   sphere B after it from a sphere A before it by at most |Δθ_j| times A's distance from the joint's
@@ -74,7 +74,6 @@ _SLACK = 1e-9
 _GROUP_MIN = 4
 #: Share of its budget's span after which an item is recomputed at a configuration evaluated anyway.
 _REFRESH = 0.5
-
 
 #: Metres of slack when a primitive is culled by its bounding ball (far above a distance's rounding).
 _CULL = 1e-9
@@ -433,8 +432,9 @@ def _verdict(path, max_travel, margin, body, scene):
     where some budget may be spent, and then only the spent items are recomputed. The pairs of a
     sphere with the spheres of one lower link go as one item, group g: sphere ``g_sphere[g]`` against
     ``g_members[g_start[g]:g_start[g + 1]]``, whose link's ball ``g_ball[g]`` (a sphere of radius
-    ``b_radius`` around ``b_folded`` in link ``b_link``'s frame) holds them: its distance to that ball,
-    or where that is not positive the pairs' smallest distance. ``pairs`` are the pairs not grouped.
+    ``b_radius`` around ``b_folded`` in link ``b_link``'s frame) holds them: far from that ball (farther
+    than its radius) the group's budget is its distance to the ball, spent at its members' fastest rate;
+    nearer, each member's own distance, spent at its own rate. ``pairs`` are the pairs not grouped.
     ``body``: the arrays of :func:`_unpack_body`; ``scene``: those of :func:`_unpack_scene`."""
     F, prismatic, link, folded, radii, on_floor, pairs, lever = body[:8]
     g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius, p_lever, g_lever, m_lever = body[8:18]
@@ -576,10 +576,11 @@ def _probe(path, max_travel, margin, body, scene):
     (:data:`_PROBE_LEVELS`). Each is a configuration :func:`_verdict` checks (the same sub-step count and
     interpolation, to the bit), so True means the path collides; False says nothing. Most colliding paths
     (a planner's candidates, a sampler's long edges) collide somewhere inside, where a walk from the start
-    reaches late: a probe finds it in a few scene checks."""
+    reaches late: a probe finds it in a few scene checks. ``path`` is finite (as :func:`_verdict` takes
+    it: :func:`_first_free_packed` checks every candidate first)."""
     lever = body[7]
     W, dof = path.shape
-    if W < 2 or not _all_finite(path):
+    if W < 2:
         return False
     frames, q = np.empty((dof + 1, 3, 4)), np.empty(dof)
     for k in range(1, W - 1):
@@ -759,23 +760,23 @@ class KernelBody:
         ball_links = np.unique(self.link[lower[grouped]])
         index = {int(l): b for b, l in enumerate(ball_links)}
         self.b_link = np.ascontiguousarray(ball_links.astype(np.int64))
-        b_local = np.array([local[self.link == l].mean(axis=0) for l in ball_links]).reshape(-1, 3)
-        self.b_radius = np.array(
-            [
-                float(
-                    (
-                        np.linalg.norm(local[self.link == l] - b_local[b], axis=1)
-                        + self.radii[self.link == l]
-                    ).max()
-                )
-                for b, l in enumerate(ball_links)
-            ]
+        # A ball per link around its spheres (centre: their mean, in the link's frame; the spheres are
+        # sorted by link, those of link l are l_start[l] to l_start[l + 1]): the probe's broad phase, and
+        # the bound of a group of pairs with that link's spheres.
+        self.l_start = np.ascontiguousarray(
+            np.searchsorted(self.link, np.arange(self.dof + 2)).astype(np.int64)
         )
-        b_folded = b_local.copy()
-        for b, l in enumerate(ball_links):
-            if l > 0:
-                b_folded[b] = _z_to_axis(robot.joints[l - 1].axis).T @ b_local[b]
-        self.b_folded = np.ascontiguousarray(b_folded)
+        self.l_folded = np.zeros((self.dof + 1, 3))
+        self.l_radius = np.zeros(self.dof + 1)
+        for lk in range(self.dof + 1):
+            a, b = self.l_start[lk], self.l_start[lk + 1]
+            if b > a:
+                self.l_folded[lk] = self.folded[a:b].mean(axis=0)
+                self.l_radius[lk] = float(
+                    (np.linalg.norm(self.folded[a:b] - self.l_folded[lk], axis=1) + self.radii[a:b]).max()
+                )
+        self.b_folded = np.ascontiguousarray(self.l_folded[ball_links].reshape(-1, 3))
+        self.b_radius = np.ascontiguousarray(self.l_radius[ball_links])
         up, low = upper[grouped], lower[grouped]
         key = up * (self.dof + 1) + self.link[low]
         order = np.argsort(key, kind="stable")
@@ -798,20 +799,6 @@ class KernelBody:
             g_lever[g] = m_lever[span].max(axis=0)
         self.group_lever = np.ascontiguousarray(g_lever)
         self.member_lever = np.ascontiguousarray(m_lever)
-        # A ball per link around its spheres (centre: their mean, in the link's frame; the spheres are
-        # sorted by link, those of link l are l_start[l] to l_start[l + 1]): the probe's broad phase.
-        self.l_start = np.ascontiguousarray(
-            np.searchsorted(self.link, np.arange(self.dof + 2)).astype(np.int64)
-        )
-        self.l_folded = np.zeros((self.dof + 1, 3))
-        self.l_radius = np.zeros(self.dof + 1)
-        for lk in range(self.dof + 1):
-            a, b = self.l_start[lk], self.l_start[lk + 1]
-            if b > a:
-                self.l_folded[lk] = self.folded[a:b].mean(axis=0)
-                self.l_radius[lk] = float(
-                    (np.linalg.norm(self.folded[a:b] - self.l_folded[lk], axis=1) + self.radii[a:b]).max()
-                )
 
     def _item_lever(self, pairs: np.ndarray, axis: np.ndarray) -> np.ndarray:
         """``(P, dof)``: per pair and joint, min(lever of its upper sphere, axis distance of its lower one)
