@@ -451,7 +451,7 @@ def train_obstacle_model(
     pool = _load_pool(config.problems, robot)
     experts = found = None
     if config.loss.imitation > 0 or config.solvable_only:  # the offline sampler's paths, in the pool's order
-        parts = [expert_paths(p, robot, config.model_config(robot).steps) for p in config.problems]
+        parts = [expert_paths(p, robot, tm.config.steps) for p in config.problems]
         experts = torch.cat([e for e, _ in parts])[:, 1:-1].float()
         found = torch.cat([f for _, f in parts])
         if config.solvable_only:
@@ -481,10 +481,9 @@ def train_obstacle_model(
             floor_all.repeat(2, 1),
         )
     tm.families = tuple(f for f in FAMILIES if f in seen)  # recorded in its checkpoints
-    if config.loss.imitation > 0:
-        tm.distilled = True
-    else:
-        experts = None  # (a filter only: no target)
+    tm.distilled = config.loss.imitation > 0
+    if not tm.distilled:  # the sampler's paths filtered the pool; they are no target
+        experts = None
     loop = iteration_loop(
         tm,
         config,
@@ -516,9 +515,10 @@ def train_obstacle_model(
         imitated = {}
         if target is not None:
             has = found[idx].to(per.dtype)
-            nearest = terms.pop("imitation").min(dim=1).values
-            total = total + config.loss.imitation * (nearest * has).sum() / has.sum().clamp_min(1.0)
-            imitated = {"train/imitation": float((nearest.detach() * has).sum() / has.sum().clamp_min(1.0))}
+            nearest = terms.pop("imitation").min(dim=1).values  # the nearest candidate's, per problem
+            imitation = (nearest * has).sum() / has.sum().clamp_min(1.0)  # over the problems with a path
+            total = total + config.loss.imitation * imitation
+            imitated = {"train/imitation": float(imitation.detach())}
         loss = loop.step(total, check=True)
         rows = torch.arange(per.shape[0])
         logged = {f"train/best_{k}": float(v.detach()[rows, best.indices].mean()) for k, v in terms.items()}
