@@ -1,7 +1,7 @@
 """Leave one family out, every family: train the obstacle network without it, plan its held-out problems.
 
     python benchmarks/leave_one_out.py --robot iiwa14 [--families bookcase cubby …] [--iterations 3000]
-        [--candidates 8] [--problems-per-family 200] [--base all] [--run-root runs/loo/iiwa14] [--problems-dir DIR]
+        [--candidates C] [--problems-per-family 200] [--base all] [--run-root runs/loo/iiwa14] [--problems-dir DIR]
         [--problems benchmarks/data/scene_problems_iiwa14.npz] [--out benchmarks/results/loo_iiwa14]
 
 For each family F of ``--families`` (default: the seven scene families) a network is trained with
@@ -97,7 +97,9 @@ def main() -> None:
         "--base", nargs="*", default=["all"], help="what every network trains on, less the one left out"
     )
     ap.add_argument("--iterations", type=int, default=3000)
-    ap.add_argument("--candidates", type=int, default=8)
+    ap.add_argument(
+        "--candidates", type=int, default=None, help="paths per problem (default: the reference network's)"
+    )
     ap.add_argument("--problems-per-family", type=int, default=200)
     ap.add_argument("--run-root", type=Path, default=None)
     ap.add_argument(
@@ -123,6 +125,8 @@ def main() -> None:
     reference = (
         kinlearn.Planner.load(args.reference) if args.reference else kinlearn.Planner.default(args.robot)
     )
+    if args.candidates is None:  # trained as the network it is compared with
+        args.candidates = reference.obstacle_tm.config.candidates
     ref_ok = success(reference, problems, body, refine_steps=0)
     line_ok = obstacle_outcome(
         body, [joint_line_path(*problems.problem(i), body=body)[0] for i in range(len(problems))], problems
