@@ -340,3 +340,35 @@ def test_solvable_only_trains_on_what_the_sampler_solves(problems, tmp_path):
     assert not tm.distilled and int(found.sum()) >= 4  # a filter, not a teacher
     kept = {f for f, ok in zip(problems[1].family.tolist(), found.tolist(), strict=True) if ok}
     assert len(tm.families) == len(kept)
+
+
+def test_solvable_only_refuses_a_pool_the_sampler_solves_none_of(problems, tmp_path):
+    """Every start inside an obstacle: the sampler solves nothing, and the filter says so (a
+    ConfigError) instead of training on an empty pool."""
+    import dataclasses
+
+    from kinlearn.collision import Scene
+
+    pset = problems[1]
+    n = len(pset)
+    walled = Scene.from_spheres([[0.0, 0.0, 0.3, 0.5]], floor=0.0).expand(n)  # the base inside a ball
+    dataclasses.replace(pset, scene=walled).save(tmp_path / "blocked.npz")
+    with pytest.raises(ConfigError, match="solved none"):
+        train_obstacle_model(
+            _tiny((tmp_path / "blocked.npz",), iterations=1, solvable_only=True),
+            tmp_path / "run",
+            progress=False,
+        )
+
+
+@pytest.mark.parametrize("flag", [["--imitation", "-1"], ["--imitation", "nan"]])
+def test_train_obstacle_planner_refuses_a_bad_imitation_weight(flag, tmp_path, capsys):
+    from kinlearn.cli.main import main
+
+    args = ["train-obstacle-planner", "--problems-per-family", "1", "--iterations", "1", *flag]
+    with pytest.raises(SystemExit) as exit_:
+        main([*args, "--run-dir", str(tmp_path / "run"), "--no-progress"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "--imitation" in err and "finite number ≥ 0" in err
+    assert not (tmp_path / "run").exists()  # refused before anything is written
