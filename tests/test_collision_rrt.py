@@ -115,6 +115,34 @@ def test_samples_near_the_root_extend_by_their_own_step(wall_problem):
     assert bool(check_path(body, torch.from_numpy(path), scene).collision_free)
 
 
+def test_balanced_search_extends_the_smaller_tree(wall_problem):
+    """The balanced search extends the smaller tree, whatever the round's parity; taking turns does not.
+    Seen through samples at the extended tree's own root (``local=1, sigma=0``): an extension adds a copy
+    of that root (a free motion of length 0), and nothing else adds one. With the goal's tree made the
+    larger (copies of the goal), both of the first two rounds grow the start's tree when balanced, and
+    only the first when taking turns. Both find the wall problem's path, free by the torch check."""
+    robot, body, scene, start, goal = wall_problem
+    kb, ks = K.KernelBody(body), K.KernelScene(scene)
+    copies = {}
+    for balanced in (True, False):
+        rrt = RrtConnect(
+            kb, ks, start, goal, robot.lower, robot.upper, local=1.0, sigma=0.0, balanced=balanced
+        )
+        rrt.nodes[1, 1:30], rrt.parent[1, 1:30], rrt.state[1] = goal, 0, 30
+        rrt.run(2)
+        n0, n1 = int(rrt.state[0]), int(rrt.state[1])
+        copies[balanced] = (
+            int((rrt.nodes[0, :n0] == start).all(axis=1).sum()),
+            int((rrt.nodes[1, :n1] == goal).all(axis=1).sum()),
+        )
+    assert copies[True] == (3, 30)  # the start's root and two copies; the goal's tree not extended
+    assert copies[False] == (2, 31)  # one copy each
+    for balanced in (True, False):
+        rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=3, balanced=balanced)
+        path = next(p for p in (rrt.run(25) for _ in range(400)) if p is not None)
+        assert bool(check_path(body, torch.from_numpy(path), scene).collision_free)
+
+
 def test_rrt_connect_needs_a_bound_and_refuses_bad_ones(wall_problem):
     from kinlearn.collision.rrt import rrt_connect
 

@@ -1,7 +1,8 @@
 """RRT-Connect compiled with its collision checker: the sampling stage of a plan under a deadline.
 
 The algorithm is RRT-Connect (Kuffner and LaValle, ICRA 2000): two trees, rooted at the start and the
-goal, take turns; one extends a step of at most ``step`` radians towards a random configuration
+goal; the smaller one (balanced bidirectional search, LaValle, *Planning Algorithms*, 2006, §5.5.3)
+extends a step of at most ``step`` radians towards a random configuration
 (uniform in the limits, or near its root), the other then greedily connects towards the new node,
 until they meet. The joined
 path is shortened by random vertex shortcuts (any two vertices whose straight segment is free join).
@@ -90,9 +91,12 @@ def _extend(nodes, parent, count, t, q, step, seg, max_travel, f, n, s, out):
 
 
 @_jit
-def _grow(nodes, parent, state, lo, hi, step, local, sigma, local_step, iterations, max_travel, f, n, s):
+def _grow(
+    nodes, parent, state, lo, hi, step, local, sigma, local_step, iterations, max_travel, f, n, s, balanced
+):
     """Up to ``iterations`` rounds of RRT-Connect on the trees in ``nodes``/``parent``; a share
-    ``local`` of the samples is drawn near the extended tree's root (Gaussian, ``sigma`` rad per joint)."""
+    ``local`` of the samples is drawn near the extended tree's root (Gaussian, ``sigma`` rad per joint).
+    ``balanced``: the smaller tree is extended (in turn when they are equal), else each in turn."""
     dof = lo.shape[0]
     count = state[_N0 : _N1 + 1]
     seg, q, new, conn = np.empty((2, dof)), np.empty(dof), np.empty(dof), np.empty(dof)
@@ -100,6 +104,8 @@ def _grow(nodes, parent, state, lo, hi, step, local, sigma, local_step, iteratio
         if state[_STATUS] != 0:
             return
         a = int(state[_ROUND] % 2)
+        if balanced and count[0] != count[1]:
+            a = 0 if count[0] < count[1] else 1
         state[_ROUND] += 1
         near = _uniform(state) < local
         if near:  # near the root: out of the cell, from under the table
@@ -167,6 +173,13 @@ class RrtConnect:
     hardest cubby and cage problems 78% against 44–61%; on the iiwa14's it cost time (mean 2.3 against
     1.4 ms) and on the ur5's it changed nothing, so it is not the default.
 
+    ``balanced``: extend the smaller tree each round (the trees take turns when equal), not the two in
+    turn: a tree stuck in a cell gets the samples until it is out. On the tuning problems (seeds
+    3004–3010, 3 seeds each, the machine shared with two trainings) the share solved within 20 ms went
+    93.3 → 97.9% for the panda (all its feasible ones within 50 ms), 98.3 → 100% for the iiwa14 and
+    48.1 → 49.3% for the ur5 (half its tuning problems are infeasible); the mean time to a path fell by
+    a third to a half.
+
     ``run(iterations)`` grows the trees for that many more rounds and returns the path ``(V, dof)``
     once found (``None`` while not); ``valid_ends`` says whether start and goal are free at all.
     """
@@ -186,7 +199,9 @@ class RrtConnect:
         local: float = 0.5,
         sigma: float = 0.8,
         local_step: float | None = None,
+        balanced: bool = True,
     ):
+        self.balanced = bool(balanced)
         lo, hi = np.ascontiguousarray(lower, np.float64), np.ascontiguousarray(upper, np.float64)
         q0, q1 = np.ascontiguousarray(start, np.float64), np.ascontiguousarray(goal, np.float64)
         dof = body.dof
@@ -242,7 +257,7 @@ class RrtConnect:
             return self._path
         _grow(
             self.nodes, self.parent, self.state, self.lo, self.hi, self.step, self.local, self.sigma, self.local_step, int(iterations),
-            self.max_travel, self._f, self._n, self._s,
+            self.max_travel, self._f, self._n, self._s, self.balanced,
         )  # fmt: skip
         self.iterations += int(iterations)
         if int(self.state[_STATUS]) != 1:
