@@ -170,3 +170,35 @@ def test_an_arm_with_an_obstacle_network_samples_what_its_proposals_left():
     b = iiwa.plan(start, goal, obstacles=scene)
     assert a.stage == "rrt" and bool(a.success) and torch.equal(a.joints, b.joints)
     assert bool(check_path(iiwa.body, a.joints, scene).collision_free)
+
+
+def test_the_kernels_are_loaded_before_the_first_deadline_starts():
+    """A first plan among obstacles in a fresh process loads the compiled check and sampler and the
+    planner's sphere body before its deadline's clock starts (a deadline of 50 ms is no use if loading
+    them takes a second of it): when the Deadline is made, the kernels hold compiled code and the body
+    is packed. A planner without obstacles loads nothing."""
+    import subprocess
+    import sys
+
+    code = """
+import torch
+from kinlearn.planning import planner as P, stages
+from kinlearn.collision import kernel, rrt
+seen = []
+class Spy(stages.Deadline):
+    def __init__(self, *a, **k):
+        pl = PL[0]
+        seen.append((bool(kernel._first_free_packed.signatures), bool(rrt._grow.signatures),
+                     pl._np_body_cache is not None))
+        super().__init__(*a, **k)
+P.Deadline = Spy
+PL = [P.Planner.default("panda")]
+q = torch.as_tensor((PL[0]._lo_np + PL[0]._hi_np) / 2)
+PL[0].plan(q, q + 0.05)
+first = list(seen)
+PL[0].plan(q, q + 0.05, obstacles=[[0.6, 0.0, 0.9, 0.05]], deadline=0.05)
+print(first[0], seen[-1])
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split("\n")[-2] == "(False, False, False) (True, True, True)"

@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import ConfigError, ShapeError
 from . import kernel
 
-__all__ = ["RrtConnect", "rrt_connect"]
+__all__ = ["RrtConnect", "rrt_connect", "warm_up"]
 
 _jit = numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
@@ -330,3 +330,22 @@ def rrt_connect(
                 break
             path = rrt.shortcut(path, path.shape[0])
     return path, clock() - t0, rrt.iterations
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the sampler's kernels now, on a tiny problem: a first
+    sampling stage otherwise spends its deadline loading them."""
+    from ..body.robot import load_robot
+    from .body import body_spheres
+    from .scene import Scene
+
+    robot = load_robot("iiwa14")
+    body = kernel.KernelBody(body_spheres(robot).double())
+    scene = kernel.KernelScene(Scene.from_spheres([[0.5, 0.0, 0.5, 0.1]], floor=0.0))
+    start = np.zeros(robot.dof)
+    goal = start.copy()
+    goal[0] = 0.5
+    rrt = RrtConnect(body, scene, start, goal, robot.lower, robot.upper)
+    path = rrt.run(5)
+    if path is not None:
+        rrt.shortcut(path, 1)

@@ -60,7 +60,7 @@ from .inference import NumpyObstacleModel, NumpyPathModel
 from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance, judge
 from .stages import DEADLINE_RESERVE, Deadline, densify
 
-__all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position"]
+__all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position", "warm_up"]
 
 #: Planners shipped inside the package, one folder per robot (see ``kinlearn/checkpoints/README.md``).
 DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
@@ -84,6 +84,17 @@ def _kernel():
 
 
 _LAZY: dict = {}
+
+
+def warm_up() -> None:
+    """Load the compiled collision check and sampler now (once per process; about a second from
+    numba's cache), so that no plan's deadline is spent loading them."""
+    if not _LAZY.get("warm"):
+        from ..collision import rrt
+
+        _kernel().warm_up()
+        rrt.warm_up()
+        _LAZY["warm"] = True
 
 
 #: A joint goal this close to the start (rad, every joint) is no move: its plan stays at the start.
@@ -208,6 +219,7 @@ class Planner:
         self._body, self._body64 = body, None
         self.refine_steps = _check_steps(refine_steps)
         self._np_body_cache = None
+        self._warm = False
         self._small, self._large = _Compiled, _Torch
         self._core = self._rollout
         self._lo, self._hi = robot.limits(torch.float64)
@@ -352,7 +364,9 @@ class Planner:
         :meth:`__init__`) for this call: where no proposal is free, this many gradient steps refine the
         least colliding one (bounded time; 25 lifts the held-out success from 80% to 92%).
 
-        ``deadline`` (seconds, from the call): among obstacles, where the learned proposals and the
+        ``deadline`` (seconds, from the call; the first plan among obstacles in a process first loads the
+        compiled kernels and this planner's sphere body, about a second, before its clock starts:
+        :meth:`warm_up`): among obstacles, where the learned proposals and the
         refinement cleared nothing, RRT-Connect with shortcutting on the compiled checker
         (:mod:`kinlearn.collision.rrt`) gets what is left of it; the plan comes back by the deadline,
         flagged (``collision_free`` False) where nothing was cleared in time. Without a deadline (the
@@ -374,12 +388,29 @@ class Planner:
         :class:`DomainWarning` (or raises :class:`DomainError` when ``strict``) for input outside
         the training domain. A plan that misses its goal is returned with ``success`` False.
         """
+        if obstacles is not None or getattr(start, "obstacles", None) is not None:
+            self.warm_up()  # once, before the clock starts: no deadline is spent loading kernels
         timer = Deadline(deadline)  # started before the input is checked: the caller's time
         steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
         problem, dtype, device = self._problem(start, goal, goal_position, obstacles)
         return self._plan(problem, steps, refine_steps is None, strict, dtype, device, timer)
 
     __call__ = plan
+
+    def warm_up(self) -> None:
+        """Load now what the first plan among obstacles would load (once per planner): the compiled
+        check and sampler (:func:`warm_up`), this planner's sphere body, and one small plan's code paths.
+        :meth:`plan` calls it before its deadline's clock starts; call it ahead to keep the first plan's
+        call short too."""
+        if self._warm:
+            return
+        self._warm = True
+        warm_up()
+        mid = torch.as_tensor((self._lo_np + self._hi_np) / 2)
+        far = Scene.from_spheres([[10.0, 10.0, 10.0, 0.1]], floor=None)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            self.plan(mid, mid + 0.01, obstacles=far, refine_steps=0)
 
     def _plan(
         self,
