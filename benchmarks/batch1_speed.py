@@ -113,7 +113,13 @@ def main() -> None:
     from kinlearn.data.problem import Problem
 
     stages = {
-        name: [] for name in ("the Problem (checks, FK)", "proposals (obstacle TM)", "check (first_free)")
+        name: []
+        for name in (
+            "the Problem (checks, FK)",
+            "the straight line's check",
+            "proposals (obstacle TM; skipped where the line is free)",
+            "check (first_free)",
+        )
     }
     stages["judge (verdict, the Plan)"] = []
     for s, g, sc in problems:
@@ -124,15 +130,23 @@ def main() -> None:
         d = robot.dof
         backend = planner._backend(1)
         packed = backend.scenes(problem.obstacles, 1)
+        line_free = backend.line_free(planner, planner._line(st[:, :d], gl[:, :d], 0), packed)
+        t1b = time.perf_counter()
         paths, order = planner._proposals(
-            st[:, :d], st[:, d:], gl[:, :d], gl[:, d:], backend.rows(packed, problem.obstacles, 1), 0
+            st[:, :d],
+            st[:, d:],
+            gl[:, :d],
+            gl[:, d:],
+            backend.rows(packed, problem.obstacles, 1),
+            0,
+            line_free,
         )
         t2 = time.perf_counter()
-        pick, free_ = backend.first_free(planner, paths, order, problem.obstacles, packed)
+        pick, free_ = backend.first_free(planner, paths, order, problem.obstacles, packed, line_free)
         t3 = time.perf_counter()
         judge(problem, paths[0, pick[0]], tolerance=planner.tolerance, collision_free=free_[0])
         t4 = time.perf_counter()
-        for name, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3), strict=True):
+        for name, dt in zip(stages, (t1 - t0, t1b - t1, t2 - t1b, t3 - t2, t4 - t3), strict=True):
             stages[name].append(dt)
     print("\nan obstacle plan's stages, each timed alone (median µs):")
     for name, ts in stages.items():

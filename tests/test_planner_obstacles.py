@@ -288,3 +288,43 @@ def test_the_problem_the_other_way_round_adds_its_candidates_walked_backwards(pl
     assert np.array_equal(ahead[0, 1 : C + 1], back[0, C + 1 :, ::-1])
     assert np.array_equal(ahead[0, C + 1 :], back[0, 1 : C + 1, ::-1])
     assert not np.allclose(ahead[0, 1 : C + 1], ahead[0, C + 1 :])  # more paths, not the same ones twice
+
+
+def test_a_free_straight_line_is_the_plan_without_running_the_network(planner, problems, monkeypatch):
+    """The straight joint line is checked first: it is the shortest candidate, so where it is free it is
+    the plan, and the network is not run for that problem (a batch runs it for the others only); where it
+    collides, the network's candidates are checked as before."""
+    import numpy as np
+
+    calls = []
+    net = planner._np_obstacle_tm
+
+    class Counted:
+        fractions = net.fractions
+
+        def __call__(self, *args):
+            calls.append(args[0].shape[0])
+            return net(*args)
+
+    free_line = ~problems.hard
+    assert bool(free_line.any()) and bool(problems.hard.any())
+    i, j = int(free_line.nonzero()[0, 0]), int(problems.hard.nonzero()[0, 0])
+    easy = _plan_one(planner, problems, i)
+    monkeypatch.setattr(planner, "_np_obstacle_tm", Counted())
+    again = _plan_one(planner, problems, i)
+    assert calls == [] and bool(again.collision_free) and again.stage == "learned"
+    assert np.array_equal(np.asarray(again.joints), np.asarray(easy.joints))
+    line = np.linspace(0.0, 1.0, np.asarray(again.joints).shape[0])[:, None]
+    s, g, _ = problems.problem(i)
+    assert np.allclose(np.asarray(again.joints), s.numpy() + line * (g - s).numpy(), atol=1e-12)
+    _plan_one(planner, problems, j)
+    assert calls == [1, 1]  # the problem and the problem the other way round
+    both = problems[torch.tensor([i, j])]
+    calls.clear()
+    planner.plan(both.start, both.goal, obstacles=both.scene, refine_steps=0)
+    assert calls == [1, 1]  # only the hard one's
+
+
+def _plan_one(planner, problems, i):
+    s, g, scene = problems.problem(i)
+    return planner.plan(s, g, obstacles=scene, refine_steps=0)

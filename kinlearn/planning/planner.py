@@ -534,7 +534,22 @@ class Planner:
         the batch size decides anything."""
         return self._small if n <= SMALL_BATCH else self._large
 
-    def _proposals(self, theta0, ef0, thetaT, efT, scenes, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    def _line(self, theta0, thetaT, steps: int) -> np.ndarray:
+        """The straight joint line ``(N, 1, K, dof)`` with the knots the proposals give it (the first
+        candidate of :meth:`_proposals`, to the bit)."""
+        f = (
+            np.linspace(0.0, 1.0, NO_MODEL_KNOTS + 1)[1:-1, None]
+            if self.obstacle_tm is None
+            else self._np_obstacle_tm.fractions
+        )
+        line = np.empty((theta0.shape[0], 1, f.shape[0] + 2, theta0.shape[1]))
+        line[:, 0, 0], line[:, 0, -1] = theta0, thetaT
+        line[:, 0, 1:-1] = theta0[:, None] + f * (thetaT - theta0)[:, None]
+        return _halve_segments(line) if steps else line
+
+    def _proposals(
+        self, theta0, ef0, thetaT, efT, scenes, steps: int, skip: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The candidate joint paths ``(N, C + 1, K, dof)`` (the straight joint line first, then the
         obstacle-aware TM's for the problem, then its paths for the problem the other way round, walked
         backwards: C twice the network's candidates; segments halved when refining) and each problem's
@@ -543,7 +558,9 @@ class Planner:
         ``scenes``: per problem its scene's model rows ``(P, 7)`` and floor ``(2,)``, without padding. The
         TM runs on each problem alone, as a batch-1 plan runs it: float32 products of another batch size
         round differently (up to 3e-5 rad on the held-out set), and a plan must not depend on its
-        batch-mates."""
+        batch-mates. ``skip (N,)``: problems whose straight line is already known free (the shortest
+        path, so their plan whatever the network proposes): the network is not run for them, and their
+        other candidates are copies of the line."""
         n, dof = theta0.shape
         if self.obstacle_tm is None:  # the straight joint line alone
             f = np.linspace(0.0, 1.0, NO_MODEL_KNOTS + 1)[1:-1, None]
@@ -552,7 +569,12 @@ class Planner:
             tm = self._np_obstacle_tm
             f = tm.fractions
             parts = []
+            C = 2 * self.obstacle_tm.config.candidates
             for i in range(n):
+                if skip is not None and skip[i]:
+                    line = theta0[i] + f * (thetaT[i] - theta0[i])
+                    parts.append(np.broadcast_to(line, (1, C, *line.shape)))
+                    continue
                 rows, floor = scenes[i]
                 mask = np.ones((1, rows.shape[0]), dtype=bool)
                 one = (theta0[i : i + 1], ef0[i : i + 1], thetaT[i : i + 1], efT[i : i + 1])
@@ -561,7 +583,6 @@ class Planner:
                 # walked backwards, are as many more candidates for one more pass.
                 back = tm(*one[2:], *one[:2], rows[None], mask, floor[None])[:, :, ::-1]
                 parts.append(np.concatenate((ahead, back), axis=1))
-            C = 2 * self.obstacle_tm.config.candidates
             mid = np.concatenate(parts) if parts else np.zeros((0, C, f.shape[0], dof))
         np.clip(mid, self._lo_np, self._hi_np, out=mid)
         C = mid.shape[1]
@@ -601,8 +622,12 @@ class Planner:
         n = theta0.shape[0]
         backend = self._backend(n)
         packed = backend.scenes(scene, n)  # the scene converted once, for the TM and the check
-        paths, order = self._proposals(theta0, ef0, thetaT, efT, backend.rows(packed, scene, n), steps)
-        pick, free = backend.first_free(self, paths, order, scene, packed)
+        # The straight joint line first: the shortest path, so the plan wherever it is free, and then
+        # the network need not run (a few plans: the compiled check; many: checked with the rest).
+        line_free = backend.line_free(self, self._line(theta0, thetaT, steps), packed)
+        rows = backend.rows(packed, scene, n)
+        paths, order = self._proposals(theta0, ef0, thetaT, efT, rows, steps, skip=line_free)
+        pick, free = backend.first_free(self, paths, order, scene, packed, line_free)
         out = paths[np.arange(n), pick]
         stage = np.where(free, "learned", "none").astype(object)
         batched = len(scene.batch_shape) > 0
@@ -804,7 +829,8 @@ class Planner:
 
 class _Backend:
     """What a batch size runs on (:meth:`Planner._backend`): the TM's forward pass, the scenes packed for
-    the check and the TM, and each problem's first collision-free candidate."""
+    the check and the TM, whether the straight joint line is free where that is cheap to know first, and
+    each problem's first collision-free candidate."""
 
 
 class _Compiled(_Backend):
@@ -827,12 +853,26 @@ class _Compiled(_Backend):
         return [(ks.model_rows(), ks.floor) for ks in packed]
 
     @staticmethod
-    def first_free(planner: Planner, paths, order, scene: Scene, packed) -> tuple[np.ndarray, np.ndarray]:
-        n = paths.shape[0]
-        free = np.zeros(n, dtype=bool)
-        pick = order[:, 0].copy()  # none free: the shortest, flagged
+    def line_free(planner: Planner, line: np.ndarray, packed: list) -> np.ndarray:
+        """Whether each problem's straight joint line ``(N, 1, K, dof)`` is free (the exact verdict)."""
         check = _kernel().first_free
-        for i in range(n):
+        return np.array(
+            [
+                check(planner._np_body, line[i], packed[i], max_travel=CHECK_TRAVEL) == 0
+                for i in range(len(packed))
+            ],
+            dtype=bool,
+        )
+
+    @staticmethod
+    def first_free(
+        planner: Planner, paths, order, scene: Scene, packed, done: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``done (N,)``: problems whose straight line (candidate 0) is known free: picked unchecked."""
+        free = done.copy()
+        pick = np.where(done, 0, order[:, 0])  # none free: the shortest, flagged
+        check = _kernel().first_free
+        for i in np.flatnonzero(~done):
             k = check(planner._np_body, paths[i], packed[i], order[i], max_travel=CHECK_TRAVEL)
             if k >= 0:
                 pick[i], free[i] = k, True
@@ -863,7 +903,14 @@ class _Torch(_Backend):
         return [(rows[i, mask[i]], floor[i]) for i in range(n)]
 
     @staticmethod
-    def first_free(planner: Planner, paths, order, scene: Scene, packed) -> tuple[np.ndarray, np.ndarray]:
+    def line_free(planner: Planner, line: np.ndarray, packed) -> np.ndarray:
+        """Not looked at first: the lines are checked with every other candidate, at once."""
+        return np.zeros(line.shape[0], dtype=bool)
+
+    @staticmethod
+    def first_free(
+        planner: Planner, paths, order, scene: Scene, packed, done: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         batched = len(scene.batch_shape) > 0
         check = check_path(
             planner.body,
