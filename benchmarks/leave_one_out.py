@@ -1,12 +1,12 @@
 """Leave one family out, every family: train the obstacle network without it, plan its held-out problems.
 
     python benchmarks/leave_one_out.py --robot iiwa14 [--families bookcase cubby …] [--iterations 3000]
-        [--candidates C] [--problems-per-family 200] [--base all] [--run-root runs/loo/iiwa14] [--problems-dir DIR]
+        [--candidates C] [--problems-per-family 200] [--solvable-only] [--base all] [--run-root runs/loo/iiwa14] [--problems-dir DIR]
         [--problems benchmarks/data/scene_problems_iiwa14.npz] [--out benchmarks/results/loo_iiwa14]
 
 For each family F of ``--families`` (default: the seven scene families) a network is trained with
-``kinlearn train-obstacle-planner --families BASE --leave-out F`` (the same problems, seeds, iterations
-and candidates as the network trained on every family; a run already in ``RUN_ROOT/without-F`` is
+``kinlearn train-obstacle-planner --families BASE --leave-out F`` (the same problems, seeds, iterations,
+candidates and feasibility filter as the network trained on every family; a run already in ``RUN_ROOT/without-F`` is
 used if its log says it finished, resumed if not), put into a copy of the shipped planner's folder, and asked for
 fixed-time plans (``refine_steps=0``: the learned proposals alone) and plans with ``deadline=0.05`` on
 the held-out problems of ``--problems`` (seeds apart from every training seed; verified solvable).
@@ -60,6 +60,8 @@ def train(robot: str, family: str, args, run: Path) -> Path:
         "--candidates", str(args.candidates), "--problems-dir", str(args.problems_dir),
         "--run-dir", str(run), "--no-progress",
     ]  # fmt: skip
+    if args.solvable_only:
+        cmd.append("--solvable-only")
     if (run / "config.json").exists():  # an interrupted run goes on
         cmd.append("--resume")
     print("  " + " ".join(cmd[2:]), flush=True)
@@ -101,6 +103,11 @@ def main() -> None:
         "--candidates", type=int, default=None, help="paths per problem (default: the reference network's)"
     )
     ap.add_argument("--problems-per-family", type=int, default=200)
+    ap.add_argument(
+        "--solvable-only",
+        action="store_true",
+        help="train on the problems the sampler solves only (as the panda's and the ur5's shipped networks)",
+    )
     ap.add_argument("--run-root", type=Path, default=None)
     ap.add_argument(
         "--problems-dir", type=Path, default=None, help="training problems (default RUN_ROOT/problems)"
