@@ -60,7 +60,7 @@ from .inference import NumpyObstacleModel, NumpyPathModel
 from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance, judge
 from .stages import DEADLINE_RESERVE, Deadline, densify
 
-__all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position", "warm_up"]
+__all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position"]
 
 #: Planners shipped inside the package, one folder per robot (see ``kinlearn/checkpoints/README.md``).
 DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
@@ -86,7 +86,7 @@ def _kernel():
 _LAZY: dict = {}
 
 
-def warm_up() -> None:
+def _load_kernels() -> None:
     """Load the compiled collision check and sampler now (once per process; about a second from
     numba's cache), so that no plan's deadline is spent loading them."""
     if not _LAZY.get("warm"):
@@ -399,13 +399,13 @@ class Planner:
 
     def warm_up(self) -> None:
         """Load now what the first plan among obstacles would load (once per planner): the compiled
-        check and sampler (:func:`warm_up`), this planner's sphere body, and one small plan's code paths.
+        check and sampler (:func:`_load_kernels`), this planner's sphere body, and one small plan's code paths.
         :meth:`plan` calls it before its deadline's clock starts; call it ahead to keep the first plan's
         call short too."""
         if self._warm:
             return
         self._warm = True
-        warm_up()
+        _load_kernels()
         mid = torch.as_tensor((self._lo_np + self._hi_np) / 2)
         far = Scene.from_spheres([[10.0, 10.0, 10.0, 0.1]], floor=None)
         with warnings.catch_warnings():
@@ -534,18 +534,18 @@ class Planner:
         the batch size decides anything."""
         return self._small if n <= SMALL_BATCH else self._large
 
+    def _fractions(self) -> np.ndarray:
+        """Where the inner knots of every proposal sit along it ``(T − 1, 1)``: the obstacle network's, or
+        without one the straight line's :data:`NO_MODEL_KNOTS` segments."""
+        if self.obstacle_tm is None:
+            return np.linspace(0.0, 1.0, NO_MODEL_KNOTS + 1)[1:-1, None]
+        return self._np_obstacle_tm.fractions
+
     def _line(self, theta0, thetaT, steps: int) -> np.ndarray:
         """The straight joint line ``(N, 1, K, dof)`` with the knots the proposals give it (the first
         candidate of :meth:`_proposals`, to the bit)."""
-        f = (
-            np.linspace(0.0, 1.0, NO_MODEL_KNOTS + 1)[1:-1, None]
-            if self.obstacle_tm is None
-            else self._np_obstacle_tm.fractions
-        )
-        line = np.empty((theta0.shape[0], 1, f.shape[0] + 2, theta0.shape[1]))
-        line[:, 0, 0], line[:, 0, -1] = theta0, thetaT
-        line[:, 0, 1:-1] = theta0[:, None] + f * (thetaT - theta0)[:, None]
-        return _halve_segments(line) if steps else line
+        f = self._fractions()
+        return _knotted(theta0, (theta0[:, None] + f * (thetaT - theta0)[:, None])[:, None], thetaT, steps)
 
     def _proposals(
         self, theta0, ef0, thetaT, efT, scenes, steps: int, skip: np.ndarray | None = None
@@ -562,18 +562,17 @@ class Planner:
         path, so their plan whatever the network proposes): the network is not run for them, and their
         other candidates are copies of the line."""
         n, dof = theta0.shape
+        f = self._fractions()
+        line = theta0[:, None] + f * (thetaT - theta0)[:, None]  # the straight joint line's knots
         if self.obstacle_tm is None:  # the straight joint line alone
-            f = np.linspace(0.0, 1.0, NO_MODEL_KNOTS + 1)[1:-1, None]
-            mid = np.zeros((n, 0, NO_MODEL_KNOTS - 1, dof))
+            mid = np.zeros((n, 0, f.shape[0], dof))
         else:
             tm = self._np_obstacle_tm
-            f = tm.fractions
             parts = []
             C = 2 * self.obstacle_tm.config.candidates
             for i in range(n):
                 if skip is not None and skip[i]:
-                    line = theta0[i] + f * (thetaT[i] - theta0[i])
-                    parts.append(np.broadcast_to(line, (1, C, *line.shape)))
+                    parts.append(np.broadcast_to(line[i], (1, C, *line[i].shape)))
                     continue
                 rows, floor = scenes[i]
                 mask = np.ones((1, rows.shape[0]), dtype=bool)
@@ -585,15 +584,9 @@ class Planner:
                 parts.append(np.concatenate((ahead, back), axis=1))
             mid = np.concatenate(parts) if parts else np.zeros((0, C, f.shape[0], dof))
         np.clip(mid, self._lo_np, self._hi_np, out=mid)
-        C = mid.shape[1]
-        line = theta0[:, None] + f * (thetaT - theta0)[:, None]  # the straight joint line's knots
-        inner = np.concatenate((line[:, None], mid), axis=1)  # (N, C + 1, T − 1, dof)
-        paths = np.empty((n, C + 1, inner.shape[2] + 2, dof))
-        paths[:, :, 0] = theta0[:, None]
-        paths[:, :, 1:-1] = inner
-        paths[:, :, -1] = thetaT[:, None]
-        if steps:  # each segment halved (the same paths): the knots a refined path is optimised on
-            paths = _halve_segments(paths)
+        # (N, C + 1, K, dof): each segment halved when refining (the same paths: the knots a refined path
+        # is optimised on)
+        paths = _knotted(theta0, np.concatenate((line[:, None], mid), axis=1), thetaT, steps)
         length = np.linalg.norm(np.diff(paths, axis=2), axis=-1).sum(-1)  # (N, C + 1)
         return paths, np.argsort(length, axis=1, kind="stable")
 
@@ -973,6 +966,17 @@ def _inside(joints: torch.Tensor, lo: np.ndarray, hi: np.ndarray) -> torch.Tenso
     out = joints.clone()
     out[..., 1:-1, :] = torch.minimum(torch.maximum(out[..., 1:-1, :], lo_t), hi_t)
     return out
+
+
+def _knotted(theta0: np.ndarray, inner: np.ndarray, thetaT: np.ndarray, steps: int) -> np.ndarray:
+    """Paths ``(N, C, T + 1, dof)`` from their inner knots ``(N, C, T − 1, dof)`` between each problem's
+    start and goal ``(N, dof)``, each segment halved when refining (``steps`` > 0)."""
+    n, C, inside, dof = inner.shape
+    paths = np.empty((n, C, inside + 2, dof))
+    paths[:, :, 0] = theta0[:, None]
+    paths[:, :, 1:-1] = inner
+    paths[:, :, -1] = thetaT[:, None]
+    return _halve_segments(paths) if steps else paths
 
 
 def _halve_segments(paths: np.ndarray) -> np.ndarray:
