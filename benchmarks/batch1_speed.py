@@ -37,7 +37,7 @@ from kinlearn.collision.ompl import OmplRrtConnect
 from kinlearn.data.problems import ProblemSet
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 from kinlearn.planning.plan import judge
-from kinlearn.planning.planner import Planner
+from kinlearn.planning.planner import Planner, _first_free, _lines_free, _packed_scenes
 
 HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"
 
@@ -128,21 +128,20 @@ def main() -> None:
         t1 = time.perf_counter()
         st, gl = problem.start.numpy()[None], problem.goal.numpy()[None]
         d = robot.dof
-        backend = planner._backend(1)
-        packed = backend.scenes(problem.obstacles, 1)
-        line_free = backend.line_free(planner, planner._line(st[:, :d], gl[:, :d], 0), packed)
+        packed = _packed_scenes(problem.obstacles, 1)
+        line_free = _lines_free(planner, planner._line(st[:, :d], gl[:, :d], 0), packed)
         t1b = time.perf_counter()
         paths, order = planner._proposals(
             st[:, :d],
             st[:, d:],
             gl[:, :d],
             gl[:, d:],
-            backend.rows(packed, problem.obstacles, 1),
+            [(ks.model_rows(), ks.floor) for ks in packed],
             0,
             line_free,
         )
         t2 = time.perf_counter()
-        pick, free_ = backend.first_free(planner, paths, order, problem.obstacles, packed, line_free)
+        pick, free_ = _first_free(planner, paths, order, packed, line_free)
         t3 = time.perf_counter()
         judge(problem, paths[0, pick[0]], tolerance=planner.tolerance, collision_free=free_[0])
         t4 = time.perf_counter()

@@ -22,10 +22,10 @@ SCENES = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "scene_pr
 
 @pytest.fixture(scope="module")
 def panda():
-    """The panda's planner without an obstacle network: its learned stage is the straight joint line
-    alone, so the hard problems below are left to the later stages."""
+    """The panda's planner without an obstacle network or the retreat stage: its learned stage is the
+    straight joint line alone, so the hard problems below are left to the later stages."""
     base = Planner.default("panda")
-    return Planner(base.robot, base.tm, base.fm, base.im)
+    return Planner(base.robot, base.tm, base.fm, base.im, retreat=False)
 
 
 @pytest.fixture(scope="module")

@@ -1,10 +1,11 @@
 """The compiled (numba) kernel of the chain model's position solver, for planning on the CPU.
 
-One function, :func:`solve_position_numba`, does what :func:`kinlearn.models.chain.solve_position`
-does in torch — the same fixed restarts, the same projected damped least-squares steps on the chain's
-geometric Jacobian, the same choice of solution — without a Python call per operation: a batch-1
-position goal costs microseconds instead of milliseconds. ``tests/test_chain.py`` holds the two to
-each other. A rigid chain only (the residual MLP runs in torch).
+:func:`solve_position_numba` does what :func:`kinlearn.models.chain.solve_position` does in torch —
+the same fixed restarts, the same projected damped least-squares steps on the chain's geometric
+Jacobian, the same choice of solution — without a Python call per operation: a batch-1 position goal
+costs microseconds instead of milliseconds. ``tests/test_chain.py`` holds the two to each other.
+:func:`chain_positions` is the chain's FK on the same code (the retreat stage starts its vias from it,
+:mod:`kinlearn.planning.retreat`). A rigid chain only (the residual MLP runs in torch).
 
 Nothing is compiled at import (and the planner imports this module only when it first solves a
 position goal): the first call compiles (seconds) and caches the machine code beside this file
@@ -16,7 +17,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["solve_position_numba"]
+__all__ = ["chain_positions", "solve_position_numba"]
 
 
 @numba.njit(cache=True, fastmath=False)
@@ -149,6 +150,28 @@ def _solve(w, q, tip, ref, theta0, target, lo, hi, seeds, iterations, damping, t
                     out[k, i] = th[i]
             if r == 0 and err <= tolerance:  # the solution reached from the start itself is kept
                 break
+
+
+@numba.njit(cache=True, fastmath=False)
+def _positions(w, q, tip, ref, theta, out):
+    n = w.shape[0]
+    p, J = np.empty(3), np.empty((3, n))
+    R, Ri, RR, t = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
+    axes, pts = np.empty((n, 3)), np.empty((n, 3))
+    for k in range(theta.shape[0]):
+        _fk_jac(w, q, tip, ref, theta[k], p, J, R, Ri, RR, t, axes, pts)
+        out[k] = p
+
+
+def chain_positions(
+    w: np.ndarray, q: np.ndarray, tip: np.ndarray, ref: np.ndarray, theta: np.ndarray
+) -> np.ndarray:
+    """The chain's end-effector positions ``(N, 3)`` at float64 joints ``theta (N, n)`` (the arrays of
+    :meth:`~kinlearn.models.chain.ChainFM.kernel_arrays`): the rigid chain's FK, compiled."""
+    theta = np.ascontiguousarray(theta, dtype=np.float64)
+    out = np.empty((theta.shape[0], 3))
+    _positions(w, q, tip, ref, theta, out)
+    return out
 
 
 def solve_position_numba(

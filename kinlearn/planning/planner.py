@@ -39,7 +39,6 @@ from ..body.robot import BUILTIN_ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import as_int
 from ..collision.body import BodySpheres, body_spheres
-from ..collision.check import check_path
 from ..collision.scene import Scene
 from ..data.babbling import MAX_STEP
 from ..data.problem import LIMIT_TOLERANCE, SMALL_BATCH, Problem, positions
@@ -53,11 +52,12 @@ from ..io import load_checkpoint, resolve_dependency
 from ..models.chain import ChainFM, solve_position, solve_position_arrays
 from ..models.forward_inverse import ForwardModel, InverseModel, load_fm, load_im
 from ..models.joint_path import JointPathModel, load_path_model
-from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model, scene_primitives
+from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model
 from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
 from .inference import NumpyObstacleModel, NumpyPathModel
 from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance, judge
+from .retreat import RetreatVias, free_depths, retreat_path
 from .stages import DEADLINE_RESERVE, Deadline, densify
 
 __all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position"]
@@ -141,6 +141,7 @@ class Planner:
         body: BodySpheres | None = None,
         refine_steps: int = 0,
         chain: ChainFM | None = None,
+        retreat: bool = True,
     ):
         """``fm``/``im``: needed by a waypoint TM, and by a planner without ``chain`` for end-effector
         position goals.
@@ -151,6 +152,10 @@ class Planner:
 
         ``obstacle_tm``: the obstacle-aware TM that plans when obstacles are given; ``body``: the arm's
         collision spheres its plans are checked with (default: the robot's analytic sphere model).
+        ``retreat``: where no proposed path is collision-free, the retreat stage
+        (:mod:`kinlearn.planning.retreat`: out of the start's cell and into the goal's along fixed
+        end-effector retreats, the straight line or the network across; fixed time) before anything
+        else; False leaves the proposals alone (the network's own fixed-time success).
         ``refine_steps``: where no proposed path is collision-free, this many steps of the gradient
         trajectory optimiser (:func:`kinlearn.planning.obstacle_baselines.trajectory_optimiser`) from the least
         colliding one, kept if the dense check then finds it free (0: none; the plan's time stays
@@ -218,6 +223,10 @@ class Planner:
         self._np_obstacle_tm = NumpyObstacleModel(obstacle_tm) if obstacle_tm is not None else None
         self._body, self._body64 = body, None
         self.refine_steps = _check_steps(refine_steps)
+        if not isinstance(retreat, bool):
+            raise ConfigError(f"retreat must be True or False, got {retreat!r}")
+        self.retreat = retreat
+        self._vias: RetreatVias | bool | None = None  # made on the first retreat (False: not possible)
         self._np_body_cache = None
         self._warm = False
         self._small, self._large = _Compiled, _Torch
@@ -399,13 +408,16 @@ class Planner:
 
     def warm_up(self) -> None:
         """Load now what the first plan among obstacles would load (once per planner): the compiled
-        check and sampler (:func:`_load_kernels`), this planner's sphere body, and one small plan's code paths.
+        check and sampler (:func:`_load_kernels`), the retreat stage's solver, this planner's sphere
+        body, and one small plan's code paths.
         :meth:`plan` calls it before its deadline's clock starts; call it ahead to keep the first plan's
         call short too."""
         if self._warm:
             return
         self._warm = True
         _load_kernels()
+        if self.retreat and self._retreat_vias() is not None:  # the chain's compiled solver
+            self._retreat_vias().vias((self._lo_np + self._hi_np) / 2)
         mid = torch.as_tensor((self._lo_np + self._hi_np) / 2)
         far = Scene.from_spheres([[10.0, 10.0, 10.0, 0.1]], floor=None)
         with warnings.catch_warnings():
@@ -529,9 +541,9 @@ class Planner:
         return self._np_body_cache
 
     def _backend(self, n: int) -> _Backend:
-        """Where a batch of ``n`` plans runs: the compiled kernels and NumPy for a few (no per-operation
-        dispatch), torch for many (its batched products and checks are faster there). The one place
-        the batch size decides anything."""
+        """Where the free-space TM runs for a batch of ``n`` plans: NumPy for a few (no per-operation
+        dispatch), torch for many (its batched products are faster there). The one place the batch
+        size decides anything (obstacle plans are checked by the compiled kernels at every size)."""
         return self._small if n <= SMALL_BATCH else self._large
 
     def _fractions(self) -> np.ndarray:
@@ -605,67 +617,109 @@ class Planner:
         stage that made it ``(N,)`` (:data:`~kinlearn.planning.stages.STAGES`).
 
         Stage 1: the learned proposals (:meth:`_proposals`), each problem's first collision-free one in
-        their order (exact verdicts), else its shortest, flagged. Stage 2 (``steps`` > 0), for the
-        problems stage 1 left colliding: the optimiser from the least colliding proposal
-        (:meth:`_refine`), kept if the dense check finds it free. Stage 3 (a ``deadline``, or an
-        iteration budget ``iterations``), for those still colliding, one after the other while time is
-        left: the compiled RRT-Connect (:meth:`_sample`). Each stage takes the problems the one before left unsolved. Each plan is its
-        problem's alone: proposals are made as at batch 1 and the optimiser starts from the very path a
-        batch-1 plan starts from."""
+        their order (exact verdicts), else its shortest, flagged. Stage 2 (the planner's ``retreat``),
+        for the problems stage 1 left colliding: :meth:`_retreat`. Stage 3 (``steps`` > 0), for those
+        still colliding: the optimiser from the least colliding proposal (:meth:`_refine`), kept if the
+        dense check finds it free. Stage 4 (a ``deadline``, or an iteration budget ``iterations``), for
+        those still colliding, one after the other while time is left: the compiled RRT-Connect
+        (:meth:`_sample`). Each plan is its problem's alone: proposals are made as at batch 1, the
+        optimiser starts from the very path a batch-1 plan starts from, and paths of other lengths (the
+        retreat stage's, the sampler's) are brought to the batch's longest by splitting segments (the
+        same polylines, checked again).
+        """
         n = theta0.shape[0]
-        backend = self._backend(n)
-        packed = backend.scenes(scene, n)  # the scene converted once, for the TM and the check
+        packed = _packed_scenes(scene, n)  # the scene converted once, for the TM and the check
         # The straight joint line first: the shortest path, so the plan wherever it is free, and then
-        # the network need not run (a few plans: the compiled check; many: checked with the rest).
-        line_free = backend.line_free(self, self._line(theta0, thetaT, steps), packed)
-        rows = backend.rows(packed, scene, n)
+        # the network need not run.
+        line_free = _lines_free(self, self._line(theta0, thetaT, steps), packed)
+        rows = [(ks.model_rows(), ks.floor) for ks in packed]
         paths, order = self._proposals(theta0, ef0, thetaT, efT, rows, steps, skip=line_free)
-        pick, free = backend.first_free(self, paths, order, scene, packed, line_free)
+        pick, free = _first_free(self, paths, order, packed, line_free)
         out = paths[np.arange(n), pick]
         stage = np.where(free, "learned", "none").astype(object)
         batched = len(scene.batch_shape) > 0
 
-        def kernel_scene(i):
-            return (
-                packed[i]
-                if packed is not None
-                else _kernel().KernelScene(scene[int(i)] if batched else scene)
-            )
-
-        if steps:
+        found: dict[int, tuple[np.ndarray, str]] = {}  # paths of other lengths, joined at the end
+        if self.retreat and self._retreat_vias() is not None:
             for i in np.flatnonzero(~free):
                 if deadline.expired(DEADLINE_RESERVE):
                     break
-                nscene = kernel_scene(i)
+                path = self._retreat(theta0[i], thetaT[i], packed[i], rows[i], steps)
+                if path is not None:
+                    found[int(i)] = (path, "retreat")
+        open_ = ~free
+        open_[list(found)] = False  # the problems no stage has cleared yet
+        if steps:
+            for i in np.flatnonzero(open_):
+                if deadline.expired(DEADLINE_RESERVE):
+                    break
+                nscene = packed[i]
                 _, clear, _ = _kernel().check_paths(self._np_body, paths[i], nscene, max_travel=CHECK_TRAVEL)
                 best = paths[i, int(np.argmax(clear))]  # from the least colliding one
                 out[i], free[i] = self._refine(best, scene[int(i)] if batched else scene, nscene, steps)
                 stage[i] = "refine" if free[i] else "none"
+                open_[i] = not free[i]
         if deadline.seconds is not None or iterations:
-            found = {}
-            for i in np.flatnonzero(~free):
+            for i in np.flatnonzero(open_):
                 if deadline.expired(DEADLINE_RESERVE):  # never, without a deadline
                     break
-                path = self._sample(theta0[i], thetaT[i], kernel_scene(i), deadline, int(i), iterations)
+                path = self._sample(theta0[i], thetaT[i], packed[i], deadline, int(i), iterations)
                 if path is not None:
-                    found[int(i)] = path
-            if found:
-                K = max(out.shape[1], *(p.shape[0] for p in found.values()))
-                if K > out.shape[1]:  # every path to the longest one's knots (the same polylines)
-                    out = np.stack([densify(p, K) for p in out])
-                for i, path in found.items():
-                    dense = densify(path, K)
-                    # The plan's knots are checked as the plan will be judged (sub-steps of its own
-                    # segments), not only the sampler's motions: no plan is called free that the dense
-                    # check of its joints would not call free.
-                    if (
-                        _kernel().first_free(
-                            self._np_body, dense[None], kernel_scene(i), max_travel=CHECK_TRAVEL
-                        )
-                        == 0
-                    ):
-                        out[i], free[i], stage[i] = dense, True, "rrt"
+                    found[int(i)] = (path, "rrt")
+        if found:
+            K = max(out.shape[1], *(p.shape[0] for p, _ in found.values()))
+            if K > out.shape[1]:  # every path to the longest one's knots (the same polylines)
+                out = np.stack([densify(p, K) for p in out])
+            for i, (path, name) in found.items():
+                dense = densify(path, K)
+                # The plan's knots are checked as the plan will be judged (sub-steps of its own
+                # segments), not only the sampler's motions: no plan is called free that the dense
+                # check of its joints would not call free. A retreat path's segments were checked as
+                # they are (the verdict of a polyline is its segments'): again only when split here.
+                if (name == "retreat" and dense.shape[0] == path.shape[0]) or _kernel().first_free(
+                    self._np_body, dense[None], packed[i], max_travel=CHECK_TRAVEL
+                ) == 0:
+                    out[i], free[i], stage[i] = dense, True, name
         return out, free, stage
+
+    def _retreat_vias(self) -> RetreatVias | None:
+        """The retreat stage's via solver (made once): on the planner's identified chain, else on the
+        chain its robot's model describes; None for an arm that is not all revolute joints (the stage
+        is then skipped)."""
+        if self._vias is None:
+            from ..data.scenes import scene_scale
+
+            if self.chain is None and any(j.kind != "revolute" for j in self.robot.joints):
+                self._vias = False
+            else:
+                chain = self.chain if self.chain is not None else ChainFM.from_robot(self.robot)
+                self._vias = RetreatVias(chain, self._lo_np, self._hi_np, scene_scale(self.robot))
+        return self._vias or None
+
+    def _retreat(self, theta0: np.ndarray, thetaT: np.ndarray, nscene, rows, steps: int) -> np.ndarray | None:
+        """The retreat stage (:mod:`kinlearn.planning.retreat`) for one problem: its path ``(V, dof)`` or
+        None. ``rows``: the problem's scene rows and floor for the network (as :meth:`_proposals` takes
+        them)."""
+        k, body, vias = _kernel(), self._np_body, self._retreat_vias()
+
+        def first_free(paths, order):
+            return k.first_free(body, paths, nscene, order, max_travel=CHECK_TRAVEL)
+
+        def segment_free(segment):
+            return first_free(segment[None], _ZERO) == 0
+
+        transfer = None
+        if self.obstacle_tm is not None:
+
+            def transfer(a, b):
+                ends = positions(self.robot, np.stack((a, b)))
+                paths, order = self._proposals(a[None], ends[:1], b[None], ends[1:], [rows], steps)
+                j = first_free(paths[0], order[0])
+                return paths[0, j] if j >= 0 else None
+
+        v0, vT = vias.vias(theta0), vias.vias(thetaT)
+        d0, dT = free_depths(segment_free, theta0, v0), free_depths(segment_free, thetaT, vT)
+        return retreat_path(theta0, thetaT, v0, vT, d0, dT, first_free, transfer)
 
     def _sample(
         self, start: np.ndarray, goal: np.ndarray, nscene, deadline: Deadline, seed: int, iterations: int
@@ -821,61 +875,19 @@ class Planner:
 
 
 class _Backend:
-    """What a batch size runs on (:meth:`Planner._backend`): the TM's forward pass, the scenes packed for
-    the check and the TM, whether the straight joint line is free where that is cheap to know first, and
-    each problem's first collision-free candidate."""
+    """Where the free-space TM's forward pass runs for a batch size (:meth:`Planner._backend`)."""
 
 
 class _Compiled(_Backend):
-    """A few plans: the TM in NumPy, scenes packed once for the compiled kernels (which also give the
-    obstacle TM its rows), verdicts by :func:`~kinlearn.collision.kernel.first_free`."""
+    """A few plans: the TM in NumPy (no per-operation dispatch)."""
 
     @staticmethod
     def tm(planner: Planner, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
         return planner._np_tm(theta0, ef0, thetaT, efT)
 
-    @staticmethod
-    def scenes(scene: Scene, n: int) -> list:
-        K = _kernel().KernelScene
-        if len(scene.batch_shape) == 0:
-            return [K.of(scene)] * n
-        return [K(scene[i]) for i in range(n)]
-
-    @staticmethod
-    def rows(packed: list, scene: Scene, n: int) -> list:
-        return [(ks.model_rows(), ks.floor) for ks in packed]
-
-    @staticmethod
-    def line_free(planner: Planner, line: np.ndarray, packed: list) -> np.ndarray:
-        """Whether each problem's straight joint line ``(N, 1, K, dof)`` is free (the exact verdict)."""
-        check = _kernel().first_free
-        return np.array(
-            [
-                check(planner._np_body, line[i], packed[i], max_travel=CHECK_TRAVEL) == 0
-                for i in range(len(packed))
-            ],
-            dtype=bool,
-        )
-
-    @staticmethod
-    def first_free(
-        planner: Planner, paths, order, scene: Scene, packed, done: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``done (N,)``: problems whose straight line (candidate 0) is known free: picked unchecked."""
-        free = done.copy()
-        pick = np.where(done, 0, order[:, 0])  # none free: the shortest, flagged
-        check = _kernel().first_free
-        for i in np.flatnonzero(~done):
-            k = check(planner._np_body, paths[i], packed[i], order[i], max_travel=CHECK_TRAVEL)
-            if k >= 0:
-                pick[i], free[i] = k, True
-        return pick, free
-
 
 class _Torch(_Backend):
-    """Many plans: the TM in torch (in its dtype), the obstacle TM's rows by
-    :func:`~kinlearn.models.obstacle_path.scene_primitives`, verdicts by torch's
-    :func:`~kinlearn.collision.check_path` on every candidate at once."""
+    """Many plans: the TM in torch (in its dtype), one batched pass."""
 
     @staticmethod
     def tm(planner: Planner, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
@@ -886,35 +898,48 @@ class _Torch(_Backend):
             out = planner.tm(s0, sT)
         return out.joints.double().numpy(), out.ef.double().numpy()
 
-    @staticmethod
-    def scenes(scene: Scene, n: int) -> None:
-        return None
 
-    @staticmethod
-    def rows(packed, scene: Scene, n: int) -> list:
-        rows, mask, floor = (t.numpy() for t in scene_primitives(scene, n, torch.float64))
-        return [(rows[i, mask[i]], floor[i]) for i in range(n)]
+# Obstacle plans are checked by the compiled kernels at every batch size: a problem's candidates in
+# the order of their length, each walked with the skipping bounds and stopped at its first collision
+# (:mod:`kinlearn.collision.kernel`), where torch's dense check evaluates every sub-step of every
+# candidate (on the CPU, 0.2 s for 200 held-out iiwa14 problems against a ConfigError for too many
+# configurations; 88 s for 17 of the panda's scene-family problems).
 
-    @staticmethod
-    def line_free(planner: Planner, line: np.ndarray, packed) -> np.ndarray:
-        """Not looked at first: the lines are checked with every other candidate, at once."""
-        return np.zeros(line.shape[0], dtype=bool)
 
-    @staticmethod
-    def first_free(
-        planner: Planner, paths, order, scene: Scene, packed, done: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        batched = len(scene.batch_shape) > 0
-        check = check_path(
-            planner.body,
-            torch.from_numpy(paths),
-            scene.unsqueeze(-1) if batched else scene,
-            max_travel=CHECK_TRAVEL,
-        )
-        ranked_free = np.take_along_axis(check.collision_free.numpy(), order, axis=1)
-        free = ranked_free.any(axis=1)
-        first = np.take_along_axis(order, ranked_free.argmax(axis=1)[:, None], 1)[:, 0]
-        return np.where(free, first, order[:, 0]), free
+def _packed_scenes(scene: Scene, n: int) -> list:
+    """Each problem's scene packed once for the kernels (which also give the obstacle TM its rows)."""
+    K = _kernel().KernelScene
+    if len(scene.batch_shape) == 0:
+        return [K.of(scene)] * n
+    return [K(scene[i]) for i in range(n)]
+
+
+def _lines_free(planner: Planner, line: np.ndarray, packed: list) -> np.ndarray:
+    """Whether each problem's straight joint line ``(N, 1, K, dof)`` is free (the exact verdict)."""
+    check = _kernel().first_free
+    return np.array(
+        [
+            check(planner._np_body, line[i], packed[i], max_travel=CHECK_TRAVEL) == 0
+            for i in range(len(packed))
+        ],
+        dtype=bool,
+    )
+
+
+def _first_free(
+    planner: Planner, paths, order, packed: list, done: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each problem's first collision-free candidate in its ``order`` and whether there was one (none: its
+    shortest, flagged). ``done (N,)``: problems whose straight line (candidate 0) is known free: picked
+    unchecked."""
+    free = done.copy()
+    pick = np.where(done, 0, order[:, 0])
+    check = _kernel().first_free
+    for i in np.flatnonzero(~done):
+        k = check(planner._np_body, paths[i], packed[i], order[i], max_travel=CHECK_TRAVEL)
+        if k >= 0:
+            pick[i], free[i] = k, True
+    return pick, free
 
 
 @torch.no_grad()
@@ -966,6 +991,10 @@ def _inside(joints: torch.Tensor, lo: np.ndarray, hi: np.ndarray) -> torch.Tenso
     out = joints.clone()
     out[..., 1:-1, :] = torch.minimum(torch.maximum(out[..., 1:-1, :], lo_t), hi_t)
     return out
+
+
+#: The order of one path (never written: the kernels only read it).
+_ZERO = np.zeros(1, dtype=np.int64)
 
 
 def _knotted(theta0: np.ndarray, inner: np.ndarray, thetaT: np.ndarray, steps: int) -> np.ndarray:

@@ -1,19 +1,25 @@
 """A plan's stages around obstacles, and the deadline that bounds them.
 
-An obstacle plan is made in up to three stages, each run only when the earlier ones cleared nothing:
+An obstacle plan is made in up to four stages, each run only when the earlier ones cleared nothing:
 
 =============  ====================================================================================
 ``learned``    the learned proposals (the obstacle-aware network's paths and the straight joint
                line), the shortest free one by the compiled dense check. Fixed time.
+``retreat``    out of the start's cell and into the goal's along fixed end-effector retreats, the
+               straight joint line or the network's candidates across (:mod:`kinlearn.planning.retreat`;
+               ``Planner(retreat=False)`` leaves it out). Fixed time.
 ``refine``     bounded gradient refinement of the least colliding proposal (``refine_steps``).
-``rrt``        RRT-Connect with shortcutting (OMPL) on the compiled checker, for what the deadline
-               leaves. Only with a deadline: its time is the clock's, so it is not bit-reproducible.
+``rrt``        the compiled RRT-Connect with shortcutting (:mod:`kinlearn.collision.rrt`): for what a
+               deadline leaves, or, by default (no ``refine_steps`` given), for a fixed budget of
+               iterations (:data:`~kinlearn.planning.planner.DEFAULT_RRT_ITERATIONS`).
 =============  ====================================================================================
 
 ``plan.stage`` names the stage a plan came from; ``"none"`` marks a plan none of them cleared (it is
-flagged: ``collision_free`` False, ``success`` False). Without a deadline the stages are the first two,
-and a plan is deterministic; with ``deadline=seconds`` each stage starts only while time is left and
-the sampling stage stops by the deadline (:class:`Deadline`).
+flagged: ``collision_free`` False, ``success`` False). ``refine_steps=k`` without a deadline asks for fixed time: the
+first two stages and k refinement steps, no sampling. Without a deadline every stage is a fixed amount
+of work and a plan is deterministic; with ``deadline=seconds`` each stage starts only while time is
+left and the sampling stage stops by the deadline (:class:`Deadline`), so whether it finds a path in
+time depends on the machine.
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ from ..errors import ConfigError
 __all__ = ["STAGES", "Deadline", "densify"]
 
 #: The stages a plan can come from, in the order they run; "none" when none cleared the obstacles.
-STAGES: tuple[str, ...] = ("learned", "refine", "rrt", "none")
+STAGES: tuple[str, ...] = ("learned", "retreat", "refine", "rrt", "none")
 #: Time (s) kept back from a deadline for the work after a stage: judging, packing the plan.
 DEADLINE_RESERVE = 0.002
 

@@ -1,0 +1,184 @@
+"""Retreat and approach: the fixed-time candidates that leave the start's cell before the transfer and
+enter the goal's after it.
+
+A start or a goal inside a cell (a bookcase's, a cubby's, a cage's, under a table) is left the way a
+hand is taken out of a shelf: straight back out of the opening first, then across, then straight in.
+The obstacle network's candidates are smooth bends of the straight joint line; they rarely thread that
+(the cell families are where its fixed-time success is lowest). This stage adds the structure, and
+keeps the network for what it does well, the transfer between two points in the open:
+
+1. **Retreats.** For each end of a problem, a chain of via configurations per direction
+   (:data:`RETREAT_DIRECTIONS`: back toward the base's vertical axis, straight up, and both at once),
+   the end effector moved by each of :data:`RETREAT_DISTANCES` (metres for an arm of the iiwa14's
+   reach, scaled by the arm's); each via solved from the one before by a fixed number of projected
+   damped least-squares steps on the planner's kinematic chain (the identified one where the planner
+   has it: :mod:`kinlearn.models.chain`), so that the joint line between neighbours moves the hand
+   nearly straight. How deep each chain is free from its end is found by the compiled dense check,
+   segment by segment (a chain is cut at its first colliding segment).
+2. **Straight transfers.** Every pair of free retreats (one of either end, or none at one end) joined
+   by the straight joint line between them; the shortest whole path (joint length) whose joining
+   segment is free. Retreats and transfer are checked apart: the dense check of a polyline is that of
+   its segments, so the joined path's verdict is theirs.
+3. **Learned transfers.** Where no straight transfer is free: between the deepest free retreats (at
+   most :data:`RETREAT_TRANSFERS` pairs), the obstacle network's candidates for the transfer, as a
+   problem of its own (the straight line first, then its paths both ways), the shortest free.
+
+Every count is fixed: the solver's steps, the vias, the path checks, at most
+2 × :data:`RETREAT_TRANSFERS` network passes. The stage runs only for problems the learned proposals
+left colliding, so the plans they clear do not change (:mod:`kinlearn.planning.stages`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..models.chain import ChainFM
+
+__all__ = [
+    "RETREAT_DIRECTIONS",
+    "RETREAT_DISTANCES",
+    "RETREAT_TRANSFERS",
+    "RetreatVias",
+    "free_depths",
+    "retreat_path",
+]
+
+#: Directions the end effector retreats in (base frame): toward the base's vertical axis (horizontal),
+#: straight up, and the two at once (normalised).
+RETREAT_DIRECTIONS: tuple[str, ...] = ("in", "up", "in-up")
+#: How far it retreats (m, for an arm of the iiwa14's horizontal reach; scaled by the arm's reach):
+#: each direction's chain holds one via per distance.
+RETREAT_DISTANCES: tuple[float, ...] = (0.1, 0.2, 0.3)
+#: Pairs of deepest free retreats the network plans the transfer between (2 passes each).
+RETREAT_TRANSFERS = 3
+#: Damped least-squares steps per via (from the via before it, or from the end itself).
+RETREAT_ITERATIONS = 15
+#: Damping of those steps (m): a via moves the joints little where the chain is near a singularity.
+RETREAT_DAMPING = 0.05
+
+
+class RetreatVias:
+    """The retreat vias of a configuration: ``vias(theta (dof,)) -> (D, L, dof)``, D directions, L
+    distances (:data:`RETREAT_DIRECTIONS`, :data:`RETREAT_DISTANCES`), solved on ``chain``
+    (compiled; a rigid chain: an identified chain's residual network is left out, the vias being only
+    guides, and every path through them is checked by the dense check) within ``lower``/``upper``.
+    ``scale``: the arm's horizontal reach over the iiwa14's."""
+
+    def __init__(self, chain: ChainFM, lower: np.ndarray, upper: np.ndarray, scale: float):
+        if not isinstance(chain, ChainFM):
+            raise ConfigError(f"retreat vias need a ChainFM, got {type(chain).__name__}")
+        if not (np.isfinite(scale) and scale > 0):
+            raise ConfigError(f"scale must be a finite number > 0, got {scale!r}")
+        self.arrays = chain.kernel_arrays()
+        self.dof = chain.dof
+        self.lower = np.ascontiguousarray(lower, dtype=np.float64)
+        self.upper = np.ascontiguousarray(upper, dtype=np.float64)
+        self.distances = scale * np.asarray(RETREAT_DISTANCES, dtype=np.float64)
+        self._no_seeds = np.zeros((0, self.dof))
+
+    def _position(self, theta: np.ndarray) -> np.ndarray:
+        from ..models.chain_kernel import chain_positions
+
+        return chain_positions(*self.arrays, theta)
+
+    def vias(self, theta: np.ndarray) -> np.ndarray:
+        from ..models.chain_kernel import solve_position_numba
+
+        theta = np.ascontiguousarray(theta, dtype=np.float64).reshape(1, self.dof)
+        p = self._position(theta)[0]
+        radial = np.array([p[0], p[1], 0.0])
+        norm = float(np.linalg.norm(radial))
+        inward = -radial / norm if norm > 1e-9 else np.zeros(3)  # on the axis: "in" stays put
+        up = np.array([0.0, 0.0, 1.0])
+        both = inward + up
+        directions = np.stack((inward, up, both / np.linalg.norm(both)))
+        D, L = directions.shape[0], self.distances.shape[0]
+        out = np.empty((D, L, self.dof))
+        q = np.repeat(theta, D, axis=0)
+        for k, d in enumerate(self.distances):  # each via from the one before (continuation)
+            q, _ = solve_position_numba(
+                *self.arrays, q, p + d * directions, self.lower, self.upper, self._no_seeds,
+                iterations=RETREAT_ITERATIONS, damping=RETREAT_DAMPING, tolerance=1e-4,
+            )  # fmt: skip
+            out[:, k] = q
+        return out
+
+
+def free_depths(
+    segment_free: Callable[[np.ndarray], bool], theta: np.ndarray, vias: np.ndarray
+) -> np.ndarray:
+    """``(D,)``: per direction, how many of ``vias (D, L, dof)``'s vias the chain from ``theta``
+    reaches through free segments (0: its first segment collides). ``segment_free(path (2, dof))``:
+    the dense check's verdict."""
+    D, L, _ = vias.shape
+    depth = np.zeros(D, dtype=np.int64)
+    for d in range(D):
+        prev = theta
+        for k in range(L):
+            if not segment_free(np.stack((prev, vias[d, k]))):
+                break
+            depth[d] = k + 1
+            prev = vias[d, k]
+    return depth
+
+
+def _ends(theta: np.ndarray, vias: np.ndarray, depth: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """The free retreats of one end as vertex lists from it, ``[theta]`` (none) first, then each
+    direction's free prefixes, shallow to deep; and each one's joint length."""
+    ends, lengths = [theta[None]], [0.0]
+    for d in range(vias.shape[0]):
+        n = int(depth[d])
+        if n:
+            chain = np.concatenate((theta[None], vias[d, :n]))
+            steps = np.cumsum(np.linalg.norm(np.diff(chain, axis=0), axis=-1))
+            for k in range(n):
+                ends.append(chain[: k + 2])
+                lengths.append(float(steps[k]))
+    return ends, np.array(lengths)
+
+
+def retreat_path(
+    theta0: np.ndarray,
+    thetaT: np.ndarray,
+    vias0: np.ndarray,
+    viasT: np.ndarray,
+    depth0: np.ndarray,
+    depthT: np.ndarray,
+    first_free: Callable[[np.ndarray, np.ndarray], int],
+    transfer: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None,
+) -> np.ndarray | None:
+    """The retreat stage's path ``(V, dof)`` from ``theta0`` to ``thetaT`` (steps 2 and 3 of the module
+    docstring), or None. ``vias*``/``depth*``: each end's vias and free depths (:class:`RetreatVias`,
+    :func:`free_depths`). ``first_free(paths (P, W, dof), order)``: the dense check's first free path
+    in ``order`` (−1: none). ``transfer(a, b)``: a free path from configuration ``a`` to ``b`` by the
+    network (None: none free, or no network)."""
+    (ends0, len0), (endsT, lenT) = _ends(theta0, vias0, depth0), _ends(thetaT, viasT, depthT)
+    if len(ends0) == 1 and len(endsT) == 1:  # no free retreat at either end: the straight line again
+        return None
+    a_last = np.stack([a[-1] for a in ends0])
+    b_last = np.stack([b[-1] for b in endsT])
+    joins = np.empty((len(ends0), len(endsT), 2, a_last.shape[1]))
+    joins[:, :, 0], joins[:, :, 1] = a_last[:, None], b_last[None]
+    gap = np.linalg.norm(joins[:, :, 1] - joins[:, :, 0], axis=-1)
+    length = (len0[:, None] + lenT[None] + gap).ravel()
+    order = np.argsort(length, kind="stable")
+    order = order[order != 0]  # pair (0, 0): no retreat at either end, the straight line
+    k = first_free(joins.reshape(-1, 2, a_last.shape[1]), order)
+    if k >= 0:
+        a, b = ends0[k // len(endsT)], endsT[k % len(endsT)]
+        return np.concatenate((a, b[::-1]))
+    if transfer is None:
+        return None
+    depth = np.add.outer([len(a) for a in ends0], [len(b) for b in endsT]).ravel()
+    depth[0] = 0
+    for k in np.argsort(-depth, kind="stable")[:RETREAT_TRANSFERS]:  # the deepest first
+        if depth[k] == 0:
+            break
+        a, b = ends0[k // len(endsT)], endsT[k % len(endsT)]
+        middle = transfer(a[-1], b[-1])
+        if middle is not None:
+            return np.concatenate((a[:-1], middle, b[::-1][1:]))
+    return None

@@ -1,0 +1,204 @@
+"""The retreat stage: vias along fixed end-effector retreats, chains cut at their first colliding
+segment, the shortest free join, the network across between the deepest retreats, and the planner's
+plans from it (free by torch's independent dense check, the same alone and in a batch)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from kinlearn.body.robot import load_robot
+from kinlearn.collision import check_path
+from kinlearn.collision.kernel import KernelBody, KernelScene, first_free
+from kinlearn.data.problems import ProblemSet
+from kinlearn.errors import ConfigError
+from kinlearn.models.chain import ChainFM
+from kinlearn.models.chain_kernel import chain_positions
+from kinlearn.planning import retreat as R
+from kinlearn.planning.plan import CHECK_TRAVEL
+from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
+
+SCENES = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "scene_problems_panda.npz"
+#: Held-out panda problems: two cells the network's proposals leave colliding (bookcase), one it clears (bin).
+CELL_STRAIGHT, CELL_ACROSS, OPEN = 1, 4, 60
+
+
+@pytest.fixture(scope="module")
+def problems():
+    return ProblemSet.load(SCENES, robot="panda")
+
+
+@pytest.fixture(scope="module")
+def panda():
+    return Planner.default("panda")
+
+
+@pytest.fixture(scope="module")
+def alone():
+    """The shipped panda planner without the retreat stage: its network's own fixed-time plans."""
+    return Planner.load(DEFAULT_CHECKPOINTS / "panda", retreat=False)
+
+
+def test_vias_move_the_hand_the_fixed_distances_in_the_fixed_directions(problems):
+    robot = load_robot("panda")
+    chain = ChainFM.from_robot(robot)
+    vias = R.RetreatVias(chain, robot.lower, robot.upper, scale=1.0)
+    theta = problems.start[CELL_STRAIGHT].numpy()
+    out = vias.vias(theta)
+    D, L = len(R.RETREAT_DIRECTIONS), len(R.RETREAT_DISTANCES)
+    assert out.shape == (D, L, robot.dof)
+    assert (out >= robot.lower).all() and (out <= robot.upper).all()
+    arrays = chain.kernel_arrays()
+    p = chain_positions(*arrays, theta[None])[0]
+    inward = -np.array([p[0], p[1], 0.0]) / np.linalg.norm(p[:2])
+    up = np.array([0.0, 0.0, 1.0])
+    directions = [inward, up, (inward + up) / np.sqrt(2)]
+    for d, u in enumerate(directions):
+        moved = chain_positions(*arrays, out[d]) - p
+        np.testing.assert_allclose(moved, np.outer(R.RETREAT_DISTANCES, u), atol=5e-3)
+    # each via solved from the one before: neighbours are close in joint space (no jump to another branch)
+    steps = np.linalg.norm(
+        np.diff(np.concatenate((np.broadcast_to(theta, (D, 1, 7)), out), 1), axis=1), axis=-1
+    )
+    assert steps.max() < 0.6
+
+
+def test_bad_vias_settings_are_refused():
+    robot = load_robot("panda")
+    with pytest.raises(ConfigError):
+        R.RetreatVias(object(), robot.lower, robot.upper, 1.0)
+    with pytest.raises(ConfigError):
+        R.RetreatVias(ChainFM.from_robot(robot), robot.lower, robot.upper, float("nan"))
+    with pytest.raises(ConfigError, match="retreat"):
+        Planner.load(DEFAULT_CHECKPOINTS / "panda", retreat="yes")
+
+
+def test_free_depths_stop_at_the_first_segment_torch_finds_colliding(panda, problems):
+    """Each chain's depth agrees with torch's dense check (an independent implementation): its first
+    `depth` segments free, the next one colliding."""
+    body = KernelBody(panda.body)
+    seen = set()
+    for i in (CELL_STRAIGHT, CELL_ACROSS, 20, 41):
+        start, _, scene = problems.problem(i)
+        theta = start.numpy()
+        vias = panda._retreat_vias().vias(theta)
+        ks = KernelScene(scene)
+        depth = R.free_depths(
+            lambda seg, ks=ks: first_free(body, seg[None], ks, max_travel=CHECK_TRAVEL) == 0, theta, vias
+        )
+        for d in range(vias.shape[0]):
+            chain = np.concatenate((theta[None], vias[d]))
+            for k in range(min(int(depth[d]) + 1, vias.shape[1])):
+                free = bool(check_path(panda.body, torch.from_numpy(chain[k : k + 2]), scene).collision_free)
+                assert free == (k < depth[d])
+            seen.add(int(depth[d]))
+    assert min(seen) < len(R.RETREAT_DISTANCES) in seen  # both a cut chain and a whole one were met
+
+
+def _chains(L=2, D=1, dof=2):
+    """Vias of two ends on a plane: the start's go up in y, the goal's too."""
+    v0 = np.array([[[0.0, 1.0 + k] for k in range(L)]] * D)
+    vT = np.array([[[4.0, 1.0 + k] for k in range(L)]] * D)
+    return np.zeros(dof), np.array([4.0, 0.0]), v0, vT
+
+
+def test_the_shortest_free_join_is_taken_and_never_the_straight_line():
+    theta0, thetaT, v0, vT = _chains()
+    asked = []
+
+    def first_free(paths, order):  # free: a join at height ≥ 2 (a wall below)
+        asked.append(order.copy())
+        for k in order:
+            if paths[k][:, 1].min() >= 2.0:
+                return int(k)
+        return -1
+
+    path = R.retreat_path(theta0, thetaT, v0, vT, np.array([2]), np.array([2]), first_free, None)
+    np.testing.assert_array_equal(path, [[0, 0], [0, 1], [0, 2], [4, 2], [4, 1], [4, 0]])
+    assert 0 not in asked[0]  # the pair without a retreat at either end: the straight line, not asked again
+    # The same with both chains cut at depth 1: no join clears the wall, and no network: nothing.
+    assert R.retreat_path(theta0, thetaT, v0, vT, np.array([1]), np.array([1]), first_free, None) is None
+    # No free retreat at either end: nothing asked.
+    asked.clear()
+    assert R.retreat_path(theta0, thetaT, v0, vT, np.array([0]), np.array([0]), first_free, None) is None
+    assert not asked
+
+
+def test_the_network_goes_across_between_the_deepest_retreats_a_bounded_number_of_times():
+    theta0, thetaT, v0, vT = _chains(L=3, D=2)
+    calls = []
+
+    def transfer(a, b):
+        calls.append((a.copy(), b.copy()))
+        return np.stack((a, (a + b) / 2, b)) if len(calls) == 2 else None
+
+    path = R.retreat_path(
+        theta0, thetaT, v0, vT, np.array([3, 2]), np.array([1, 3]), lambda p, o: -1, transfer
+    )
+    assert len(calls) == 2 <= R.RETREAT_TRANSFERS
+    np.testing.assert_array_equal(calls[0][0], v0[0, 2])  # the deepest pair first: 3 vias + 3 vias
+    np.testing.assert_array_equal(calls[0][1], vT[1, 2])
+    a, b = calls[1]
+    np.testing.assert_array_equal(path[0], theta0)
+    np.testing.assert_array_equal(path[-1], thetaT)
+    assert any((path == (a + b) / 2).all(-1))  # the transfer's own knot is in the path
+    none = []
+    R.retreat_path(
+        theta0,
+        thetaT,
+        v0,
+        vT,
+        np.array([3, 3]),
+        np.array([3, 3]),
+        lambda p, o: -1,
+        lambda a, b: none.append(1),
+    )
+    assert len(none) == R.RETREAT_TRANSFERS
+
+
+def test_cells_the_network_leaves_colliding_are_cleared_by_the_retreat_stage(panda, alone, problems):
+    for i in (CELL_STRAIGHT, CELL_ACROSS):
+        start, goal, scene = problems.problem(i)
+        before = alone.plan(start, goal, obstacles=scene, refine_steps=0)
+        assert before.stage == "none" and not bool(before.collision_free)
+        plan = panda.plan(start, goal, obstacles=scene, refine_steps=0)
+        assert plan.stage == "retreat" and bool(plan.collision_free) and bool(plan.success)
+        assert bool(check_path(panda.body, plan.joints, scene).collision_free)  # torch agrees
+        assert torch.equal(plan.joints[0], start) and torch.equal(plan.joints[-1], goal)
+        again = panda.plan(start, goal, obstacles=scene, refine_steps=0)
+        assert torch.equal(again.joints, plan.joints)  # fixed work: deterministic
+    # The network's own plans are not touched.
+    start, goal, scene = problems.problem(OPEN)
+    a = alone.plan(start, goal, obstacles=scene, refine_steps=0)
+    b = panda.plan(start, goal, obstacles=scene, refine_steps=0)
+    assert a.stage == b.stage == "learned" and torch.equal(a.joints, b.joints)
+
+
+@pytest.mark.parametrize("n", [3, 17])  # a few plans and more than SMALL_BATCH
+def test_a_batch_plans_each_problem_as_alone(panda, problems, n):
+    idx = [CELL_STRAIGHT, CELL_ACROSS, OPEN, *range(61, 61 + n - 3)]
+    sub = problems[torch.tensor(idx)]
+    batch = panda.plan(sub.start, sub.goal, obstacles=sub.scene, refine_steps=0)
+    assert list(batch.stage[:3]) == ["retreat", "retreat", "learned"]
+    for j in range(3):
+        one = panda.plan(*sub.problem(j)[:2], obstacles=sub.problem(j)[2], refine_steps=0)
+        # the same polyline (the batch's knots are its longest plan's count: segments split more finely)
+        assert _off(batch.joints[j], one.joints) < 1e-12 and _off(one.joints, batch.joints[j]) < 1e-12
+        assert bool(batch.collision_free[j]) == bool(one.collision_free)
+        assert bool(check_path(panda.body, batch.joints[j], sub.scene[j]).collision_free) == bool(
+            one.collision_free
+        )
+
+
+def _off(points: torch.Tensor, polyline: torch.Tensor) -> float:
+    """The largest distance (rad) from a knot of ``points`` to the polyline ``polyline``."""
+    a, b = polyline[:-1].numpy(), polyline[1:].numpy()
+    d = b - a
+    worst = 0.0
+    for p in points.numpy():
+        t = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0.0, 1.0)
+        worst = max(worst, float(np.linalg.norm(a + t[:, None] * d - p, axis=-1).min()))
+    return worst
