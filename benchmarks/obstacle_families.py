@@ -10,12 +10,14 @@ untimed warm-up call first, and every path is judged by one rule
 (:func:`kinlearn.evaluation.obstacles.obstacle_outcome`: starts at the start, reaches the goal, within
 the limits, and the dense check finds no collision with the scene, the floor or itself).
 
-Rows: the straight joint line; kinlearn's fixed-time stage alone (``refine_steps=0``: the learned
-proposals, no refinement or sampling), its default plan (the proposals, then a fixed budget of
-RRT-Connect iterations where they cleared nothing; deterministic) and its plan with ``deadline=0.05``; the compiled RRT-Connect and OMPL's RRT-Connect,
-each with time limits; the gradient trajectory optimiser. The success-against-budget figure draws, per
+Rows: the straight joint line; kinlearn's fixed-time stages (``refine_steps=0``: the learned
+proposals, then the retreat stage, no refinement or sampling), the same with the network alone
+(``retreat=False``) and with no network (the straight line, then the retreat stage: a planner trained
+on nothing); its default plan (those, then a fixed budget of RRT-Connect iterations where they cleared
+nothing; deterministic) and its plan with ``deadline=0.05``; the compiled RRT-Connect and OMPL's
+RRT-Connect, each with time limits; the gradient trajectory optimiser. The success-against-budget figure draws, per
 sampling planner, the share solved within each budget (its 1 s run's solve times), the kinlearn rows
-as points at their p99 time, and the fixed-time row also as the share of problems it solved within each
+as points at their p99 time, and the fixed-time rows also as the share of problems it solved within each
 budget (its plans' own times, dashed). After every call of every row the paper-size TM's forward pass is
 timed once, and each row's p50 and p99 are given over its p50 and p99 (the fixed-time goal's yardstick).
 
@@ -50,32 +52,44 @@ from kinlearn.planning.obstacle_baselines import (
     scene_rrt_connect,
     trajectory_optimiser,
 )
+from kinlearn.planning.planner import DEFAULT_CHECKPOINTS
 
 DATA = Path(__file__).parent / "data"
 
 
-def _planner_rows(planner) -> dict:
-    """kinlearn's plan as path functions, with and without a deadline (if this kinlearn has it)."""
+def _planner_rows(planner, folder: Path) -> dict:
+    """kinlearn's plan as path functions, with and without a deadline (if this kinlearn has it); where
+    this kinlearn has the retreat stage, its fixed-time stage also without it (the network alone) and
+    without the network (the straight line and the retreat stage: what a planner trained on nothing
+    clears). ``folder``: the planner's folder (loaded again for those two)."""
     has_deadline = "deadline" in inspect.signature(kinlearn.Planner.plan).parameters
+    has_retreat = "retreat" in inspect.signature(kinlearn.Planner.__init__).parameters
 
-    def run(start, goal, scene, **kw):
+    def run(start, goal, scene, planner=planner, **kw):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NoObstacleModelWarning)
             plan = planner.plan(start, goal, obstacles=scene, **kw)
         return torch.as_tensor(plan.joints), (plan.stage, bool(plan.collision_free))
 
-    rows = {
-        "kinlearn fixed time (refine_steps=0)": lambda s, g, sc: run(s, g, sc, refine_steps=0),
-        "kinlearn plan (default)": lambda s, g, sc: run(s, g, sc),
-    }
+    rows = {"kinlearn fixed time (refine_steps=0)": lambda s, g, sc: run(s, g, sc, refine_steps=0)}
+    if has_retreat:
+        alone = kinlearn.Planner.load(folder, retreat=False)
+        bare = kinlearn.Planner.load(folder, obstacle_tm=None)
+        rows["kinlearn fixed time, network alone (retreat=False)"] = lambda s, g, sc: run(
+            s, g, sc, planner=alone, refine_steps=0
+        )
+        rows["kinlearn fixed time, no network (line + retreat)"] = lambda s, g, sc: run(
+            s, g, sc, planner=bare, refine_steps=0
+        )
+    rows["kinlearn plan (default)"] = lambda s, g, sc: run(s, g, sc)
     if has_deadline:
         rows["kinlearn plan, deadline 0.05 s"] = lambda s, g, sc: run(s, g, sc, deadline=0.05)
     return rows
 
 
-def methods(planner, body, budgets, ompl_budgets, opt_steps) -> dict:
+def methods(planner, folder, body, budgets, ompl_budgets, opt_steps) -> dict:
     rows = {"joint line": lambda s, g, sc: (joint_line_path(s, g, sc, body=body)[0], None)}
-    rows.update(_planner_rows(planner))
+    rows.update(_planner_rows(planner, folder))
     for b in budgets:
         rows[f"compiled RRT-Connect, {b:g} s"] = lambda s, g, sc, b=b: (
             compiled_rrt_connect(s, g, sc, time_limit=b, body=body)[0],
@@ -125,7 +139,8 @@ def main() -> None:
     fams = [f for f in FAMILIES if len(problems.of(f))]
     print(f"{len(problems)} problems from {path} ({', '.join(f'{f} {len(problems.of(f))}' for f in fams)})")
     print(f"hard (straight joint line collides): {int(problems.hard.sum())}")
-    planner = kinlearn.Planner.load(args.planner) if args.planner else kinlearn.Planner.default(args.robot)
+    folder = args.planner or DEFAULT_CHECKPOINTS / args.robot
+    planner = kinlearn.Planner.load(folder)
     trained = None if planner.obstacle_tm is None else planner.obstacle_tm.families
     left_out = [f for f in fams if trained is not None and f not in trained]
     print(
@@ -145,7 +160,7 @@ def main() -> None:
     # yardstick, timed after every call of every row.
     paper_tm = TrajectoryModel(TMConfig(robot=robot.name, dof=robot.dof, normalize=False)).eval()
     tm_state = torch.zeros(1, robot.dof + 3)
-    for name, fn in methods(planner, body, budgets, ompl_budgets, opt_steps).items():
+    for name, fn in methods(planner, folder, body, budgets, ompl_budgets, opt_steps).items():
         s0, g0, sc0 = problems.problem(0)
         fn(s0, g0, sc0)  # warm-up: compile, load, caches
         paths, seconds, stages, tm_seconds = [], [], [], []

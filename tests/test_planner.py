@@ -166,3 +166,13 @@ def test_plans_follow_the_inputs_device_and_dtype():
         assert on_gpu.joints.device.type == "cuda" and on_gpu.joints.dtype == dtype
         torch.testing.assert_close(on_gpu.joints.cpu().double(), on_cpu.joints.double(), atol=1e-6, rtol=0)
         assert torch.equal(on_gpu.success.cpu(), on_cpu.success)
+
+
+def test_the_default_planner_is_shared_and_options_make_a_new_one():
+    shared = Planner.default("iiwa14")
+    assert Planner.default("iiwa14") is shared and shared.retreat
+    alone = Planner.default("iiwa14", retreat=False)
+    assert alone is not shared and not alone.retreat and shared.retreat
+    assert alone.obstacle_tm is not None and alone.robot.name == "iiwa14"
+    with pytest.raises(ConfigError, match="ships no planner"):
+        Planner.default("no_such_arm", retreat=False)

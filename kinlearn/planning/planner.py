@@ -288,10 +288,13 @@ class Planner:
         return cls(_robot(robot, tm.robot_name), tm, fm, im, **options)
 
     @classmethod
-    def default(cls, robot: str = "iiwa14") -> Planner:
-        """The planner shipped with kinlearn for ``robot``."""
+    def default(cls, robot: str = "iiwa14", **options) -> Planner:
+        """The planner shipped with kinlearn for ``robot`` (one per process, shared); with ``options``
+        (as for :meth:`__init__`, e.g. ``retreat=False``) a new one of the same models."""
         if isinstance(robot, Robot):
             robot = robot.name
+        if options:
+            return _default_planner.__wrapped__(robot, **options)
         return _default_planner(robot)
 
     # ----------------------------------------------------------------------------------------------
@@ -366,8 +369,11 @@ class Planner:
         for every plan) or ``(..., K, 4)`` (a scene per plan), or a :class:`~kinlearn.collision.Scene`
         (spheres, boxes, cylinders, a floor) of batch shape ``()`` or the plans'. The obstacle-aware TM
         proposes several joint paths, the straight joint line joins them, and the shortest (in joint
-        space) that the dense check finds collision-free is the plan; the plan's ``collision_free`` says
-        whether one was (``success`` requires it); if none is, the shortest, flagged. A start or goal that
+        space) that the dense check finds collision-free is the plan; where none is, the retreat stage
+        (:mod:`kinlearn.planning.retreat`, unless the planner was made with ``retreat=False``) backs the
+        hand out of the start's cell and into the goal's and crosses between them, in fixed time. The
+        plan's ``collision_free`` says whether a stage cleared it (``success`` requires it); if none did,
+        the shortest proposal, flagged. A start or goal that
         already collides gives a plan with ``collision_free`` False. Bad obstacles raise
         :class:`~kinlearn.errors.ObstacleError`. ``refine_steps``: overrides the planner's (see
         :meth:`__init__`) for this call: where no proposal is free, this many gradient steps refine the
@@ -375,18 +381,20 @@ class Planner:
 
         ``deadline`` (seconds, from the call; the first plan among obstacles in a process first loads the
         compiled kernels and this planner's sphere body, about a second, before its clock starts:
-        :meth:`warm_up`): among obstacles, where the learned proposals and the
+        :meth:`warm_up`): among obstacles, where the learned proposals, the retreat stage and the
         refinement cleared nothing, RRT-Connect with shortcutting on the compiled checker
         (:mod:`kinlearn.collision.rrt`) gets what is left of it; the plan comes back by the deadline,
         flagged (``collision_free`` False) where nothing was cleared in time. Without a deadline (the
         default) plans are bit-reproducible; with one, whether the sampling stage finds a path in time
         depends on the machine (its path, once found, on the seed alone).
 
-        By default (``refine_steps`` not given) a plan the learned proposals did not clear (without an
-        obstacle network: the straight joint line alone) is sampled for: RRT-Connect runs for at most
+        By default (``refine_steps`` not given) a plan the fixed-time stages did not clear (the learned
+        proposals, without an obstacle network the straight joint line alone, and the retreat stage) is
+        sampled for: RRT-Connect runs for at most
         :data:`DEFAULT_RRT_ITERATIONS` iterations — a budget of work, not of time, so the plan is the
         same on every machine — or, with a deadline, for the time left. ``refine_steps=k`` (0 too) asks
-        for fixed-time planning instead: the proposals and k refinement steps, no sampling.
+        for fixed-time planning instead: the proposals, the retreat stage and k refinement steps, no
+        sampling.
         ``plan.stage`` names the stage that made each plan (:mod:`kinlearn.planning.stages`). Free-space plans ignore the deadline (they are fixed-time).
 
         Every plan's verdict is :func:`~kinlearn.planning.plan.judge`'s (the analytic FK of its joint
@@ -1028,7 +1036,7 @@ def _robot(robot: str | Robot | None, name: str) -> Robot:
 
 
 @lru_cache(maxsize=8)
-def _default_planner(robot: str) -> Planner:
+def _default_planner(robot: str, **options) -> Planner:
     path = DEFAULT_CHECKPOINTS / robot
     # Only kinlearn's own arms ship planners: a registered arm never gets another arm's.
     if robot not in BUILTIN_ROBOTS or not (path / "tm.pt").is_file():
@@ -1037,7 +1045,7 @@ def _default_planner(robot: str) -> Planner:
             f"kinlearn ships no planner for {robot!r} (shipped: {', '.join(shipped)}); train one with "
             "`kinlearn train-planner` and load it with Planner.load(run_dir)"
         )
-    return Planner.load(path, robot=robot)
+    return Planner.load(path, robot=robot, **options)
 
 
 def plan(
