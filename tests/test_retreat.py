@@ -202,3 +202,18 @@ def _off(points: torch.Tensor, polyline: torch.Tensor) -> float:
         t = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0.0, 1.0)
         worst = max(worst, float(np.linalg.norm(a + t[:, None] * d - p, axis=-1).min()))
     return worst
+
+
+def test_the_plan_command_has_the_stage_and_leaves_it_out_when_asked(problems, tmp_path, capsys):
+    from kinlearn.cli.main import main
+
+    start, goal, scene = problems.problem(CELL_STRAIGHT)
+    scene.save(tmp_path / "scene.npz")
+    joints = [",".join(f"{v:.17g}" for v in q.tolist()) for q in (start, goal)]
+    args = ["plan", "--robot", "panda", "--start", joints[0], "--goal", joints[1], "--refine-steps", "0"]
+    assert main([*args, "--obstacles", str(tmp_path / "scene.npz")]) == 0
+    assert "retreat" in capsys.readouterr().out
+    assert main([*args, "--obstacles", str(tmp_path / "scene.npz"), "--no-retreat"]) == 1
+    assert "none" in capsys.readouterr().out
+    assert main([*args, "--no-retreat"]) == 2
+    assert "--no-retreat leaves out a stage of planning around obstacles" in capsys.readouterr().err

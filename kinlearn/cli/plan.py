@@ -94,15 +94,21 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
         type=NONNEGATIVE_INT,
         default=None,
         help="with obstacles: plan in fixed time, with this many gradient steps refining the least colliding "
-        "proposal when none is free (0: the proposals alone); default: not given, so a plan whose "
-        "proposals all collide is sampled for (a fixed budget of RRT-Connect iterations, deterministic)",
+        "proposal when none is free (0: the proposals and the retreat stage alone); default: not given, so "
+        "a plan they leave colliding is sampled for (a fixed budget of RRT-Connect iterations, deterministic)",
+    )
+    p.add_argument(
+        "--no-retreat",
+        action="store_true",
+        help="with obstacles: leave out the retreat stage (out of the start's cell and into the goal's along "
+        "fixed end-effector retreats), so the network's proposals alone make the fixed-time plan",
     )
     p.add_argument(
         "--deadline",
         type=number_type(float, low=0, open_low=True),
         default=None,
         metavar="SECONDS",
-        help="with obstacles: where the learned proposals (and refinement) clear nothing, RRT-Connect on the "
+        help="with obstacles: where the fixed-time stages (and refinement) clear nothing, RRT-Connect on the "
         "compiled checker gets what is left of SECONDS; the plan comes back by then (default: none: "
         "a budget of iterations instead, deterministic)",
     )
@@ -110,7 +116,11 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
 
 def plan_from_args(args: argparse.Namespace, strict: bool = False):
     """``(planner, plan, scene or None)`` for the options of :func:`add_plan_inputs`."""
-    planner = Planner.load(args.model, robot=args.robot) if args.model else Planner.default(args.robot)
+    options = {"retreat": False} if args.no_retreat else {}
+    if args.model:
+        planner = Planner.load(args.model, robot=args.robot, **options)
+    else:
+        planner = Planner.default(args.robot, **options)
     if args.request is not None:
         if args.start is not None or args.goal is not None or args.goal_position is not None:
             raise ConfigError(
@@ -139,6 +149,10 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
         obstacles = Scene.from_moveit(args.scene, base_pose=args.base_pose)
     if args.deadline is not None and obstacles is None:
         raise ConfigError("--deadline bounds planning around obstacles: give --obstacles or --scene too")
+    if args.no_retreat and obstacles is None:
+        raise ConfigError(
+            "--no-retreat leaves out a stage of planning around obstacles: give --obstacles or --scene too"
+        )
     options = {
         "obstacles": obstacles,
         "refine_steps": args.refine_steps,
