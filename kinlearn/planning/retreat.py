@@ -89,12 +89,7 @@ class RetreatVias:
 
         theta = np.ascontiguousarray(theta, dtype=np.float64).reshape(1, self.dof)
         p = self._position(theta)[0]
-        radial = np.array([p[0], p[1], 0.0])
-        norm = float(np.linalg.norm(radial))
-        inward = -radial / norm if norm > 1e-9 else np.zeros(3)  # on the axis: "in" stays put
-        up = np.array([0.0, 0.0, 1.0])
-        both = inward + up
-        directions = np.stack((inward, up, both / np.linalg.norm(both)))
+        directions = _directions(p)
         D, L = directions.shape[0], self.distances.shape[0]
         out = np.empty((D, L, self.dof))
         q = np.repeat(theta, D, axis=0)
@@ -105,6 +100,26 @@ class RetreatVias:
             )  # fmt: skip
             out[:, k] = q
         return out
+
+
+def _directions(p: np.ndarray) -> np.ndarray:
+    """The unit retreat directions ``(D, 3)`` of :data:`RETREAT_DIRECTIONS` from an end effector at ``p``:
+    "in" horizontal toward the base's vertical axis (none on the axis itself), "up" +z, and the
+    normalised sums of the words of a hyphenated name."""
+    radial = np.array([p[0], p[1], 0.0])
+    norm = float(np.linalg.norm(radial))
+    unit = {
+        "in": -radial / norm if norm > 1e-9 else np.zeros(3),
+        "out": radial / norm if norm > 1e-9 else np.zeros(3),
+        "up": np.array([0.0, 0.0, 1.0]),
+        "down": np.array([0.0, 0.0, -1.0]),
+    }
+    out = []
+    for name in RETREAT_DIRECTIONS:
+        v = sum(unit[w] for w in name.split("-"))
+        n = float(np.linalg.norm(v))
+        out.append(v / n if n > 1e-9 else v)
+    return np.stack(out)
 
 
 def free_depths(
