@@ -36,8 +36,9 @@ from kinlearn.collision import kernel
 from kinlearn.collision.ompl import OmplRrtConnect
 from kinlearn.data.problems import ProblemSet
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
+from kinlearn.planning.around import _first_free, _lines_free, _packed_scenes
 from kinlearn.planning.plan import judge
-from kinlearn.planning.planner import Planner, _first_free, _lines_free, _packed_scenes
+from kinlearn.planning.planner import Planner
 
 HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"
 

@@ -13,8 +13,10 @@ Two kinds of trajectory model plan here:
   goal's end effector but not at the goal's joints.
 
 A goal given as an end-effector position (``goal_position=`` or a goal of shape ``(..., 3)``) is
-first turned into goal joints by the learned IM and FM, stepping the end effector along the straight
-line to it; the joint path is then planned to those joints.
+first turned into goal joints on the identified chain, or by the learned IM and FM stepping the end
+effector along the straight line to it; the joint path is then planned to those joints. Among
+obstacles the stages of :mod:`kinlearn.planning.around` make the joint path (the planner derives from
+its :class:`~kinlearn.planning.around.ObstacleStages`).
 
 Every plan says how it went (:class:`~kinlearn.planning.plan.Plan`: ``goal_error``, ``joint_error``,
 ``success``), measured by the analytic FK of its own joint path. Inputs outside the domain the TM was
@@ -24,7 +26,6 @@ with ``strict=True``.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 import warnings
@@ -38,7 +39,7 @@ from ..body.kinematics import kinematics
 from ..body.robot import BUILTIN_ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import as_int
-from ..collision.body import BodySpheres, body_spheres
+from ..collision.body import BodySpheres
 from ..collision.scene import Scene
 from ..data.babbling import MAX_STEP
 from ..data.problem import LIMIT_TOLERANCE, SMALL_BATCH, Problem, positions
@@ -55,46 +56,22 @@ from ..models.joint_path import JointPathModel, load_path_model
 from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model
 from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
+from .around import ObstacleStages, _load_kernels
 from .inference import NumpyObstacleModel, NumpyPathModel
-from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance, judge
-from .retreat import RetreatVias, free_depths, retreat_path
-from .stages import DEADLINE_RESERVE, Deadline, densify
+from .plan import DEFAULT_TOLERANCE, Plan, Tolerance, judge
+from .retreat import RetreatVias
+from .stages import Deadline
 
 __all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position"]
 
 #: Planners shipped inside the package, one folder per robot (see ``kinlearn/checkpoints/README.md``).
 DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
 
-#: Without an obstacle-trained network: the straight joint line's segments.
-NO_MODEL_KNOTS = 11
 #: RRT-Connect iterations a plan gets by default (no deadline, no ``refine_steps``) where its learned
 #: proposals (or, without an obstacle network, its straight line) cleared nothing: a fixed budget of
 #: work, so the same path on every machine. On the held-out scene problems the sampler solves most
 #: within a few hundred iterations, where 25 refinement steps took about a second for half the success.
 DEFAULT_RRT_ITERATIONS = 2000
-
-
-def _kernel():
-    """The compiled collision kernels, imported on first use (numba takes about a second to load)."""
-    if "kernel" not in _LAZY:
-        from ..collision import kernel
-
-        _LAZY["kernel"] = kernel
-    return _LAZY["kernel"]
-
-
-_LAZY: dict = {}
-
-
-def _load_kernels() -> None:
-    """Load the compiled collision check and sampler now (once per process; about a second from
-    numba's cache), so that no plan's deadline is spent loading them."""
-    if not _LAZY.get("warm"):
-        from ..collision import rrt
-
-        _kernel().warm_up()
-        rrt.warm_up()
-        _LAZY["warm"] = True
 
 
 #: A joint goal this close to the start (rad, every joint) is no move: its plan stays at the start.
@@ -123,7 +100,7 @@ def _out_dtype(x) -> tuple[torch.dtype, torch.device]:
     return (torch.float64 if kind == np.float64 else torch.get_default_dtype()), torch.device("cpu")
 
 
-class Planner:
+class Planner(ObstacleStages):
     """A trajectory model with the frozen models it plans through, for one robot."""
 
     def __init__(
@@ -530,242 +507,14 @@ class Planner:
         return plan
 
     # ----------------------------------------------------------------------------------------------
-    # Obstacles: stage 1, the learned proposals, checked densely; stage 2, bounded refinement
+    # Free space
     # ----------------------------------------------------------------------------------------------
-
-    @property
-    def body(self) -> BodySpheres:
-        """The collision spheres plans are checked with (float64; made once, the given body untouched)."""
-        if self._body64 is None:
-            body = body_spheres(self.robot) if self._body is None else self._body
-            self._body64 = body if body.radii.dtype == torch.float64 else copy.deepcopy(body).double()
-        return self._body64
-
-    @property
-    def _np_body(self):
-        """The body packed for the compiled checks (:class:`~kinlearn.collision.kernel.KernelBody`)."""
-        if self._np_body_cache is None:
-            self._np_body_cache = _kernel().KernelBody(self.body)
-        return self._np_body_cache
 
     def _backend(self, n: int) -> _Backend:
         """Where the free-space TM runs for a batch of ``n`` plans: NumPy for a few (no per-operation
         dispatch), torch for many (its batched products are faster there). The one place the batch
         size decides anything (obstacle plans are checked by the compiled kernels at every size)."""
         return self._small if n <= SMALL_BATCH else self._large
-
-    def _fractions(self) -> np.ndarray:
-        """Where the inner knots of every proposal sit along it ``(T − 1, 1)``: the obstacle network's, or
-        without one the straight line's :data:`NO_MODEL_KNOTS` segments."""
-        if self.obstacle_tm is None:
-            return np.linspace(0.0, 1.0, NO_MODEL_KNOTS + 1)[1:-1, None]
-        return self._np_obstacle_tm.fractions
-
-    def _line(self, theta0, thetaT, steps: int) -> np.ndarray:
-        """The straight joint line ``(N, 1, K, dof)`` with the knots the proposals give it (the first
-        candidate of :meth:`_proposals`, to the bit)."""
-        f = self._fractions()
-        return _knotted(theta0, (theta0[:, None] + f * (thetaT - theta0)[:, None])[:, None], thetaT, steps)
-
-    def _proposals(
-        self, theta0, ef0, thetaT, efT, scenes, steps: int, skip: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The candidate joint paths ``(N, C + 1, K, dof)`` (the straight joint line first, then the
-        obstacle-aware TM's for the problem, then its paths for the problem the other way round, walked
-        backwards: C twice the network's candidates; segments halved when refining) and each problem's
-        order of them, shortest first (the straight line leads among equals).
-
-        ``scenes``: per problem its scene's model rows ``(P, 7)`` and floor ``(2,)``, without padding. The
-        TM runs on each problem alone, as a batch-1 plan runs it: float32 products of another batch size
-        round differently (up to 3e-5 rad on the held-out set), and a plan must not depend on its
-        batch-mates. ``skip (N,)``: problems whose straight line is already known free (the shortest
-        path, so their plan whatever the network proposes): the network is not run for them, and their
-        other candidates are copies of the line."""
-        n, dof = theta0.shape
-        f = self._fractions()
-        line = theta0[:, None] + f * (thetaT - theta0)[:, None]  # the straight joint line's knots
-        if self.obstacle_tm is None:  # the straight joint line alone
-            mid = np.zeros((n, 0, f.shape[0], dof))
-        else:
-            tm = self._np_obstacle_tm
-            parts = []
-            C = 2 * self.obstacle_tm.config.candidates
-            for i in range(n):
-                if skip is not None and skip[i]:
-                    parts.append(np.broadcast_to(line[i], (1, C, *line[i].shape)))
-                    continue
-                rows, floor = scenes[i]
-                mask = np.ones((1, rows.shape[0]), dtype=bool)
-                one = (theta0[i : i + 1], ef0[i : i + 1], thetaT[i : i + 1], efT[i : i + 1])
-                ahead = tm(*one, rows[None], mask, floor[None])
-                # The problem the other way round (the network learned both directions): its paths,
-                # walked backwards, are as many more candidates for one more pass.
-                back = tm(*one[2:], *one[:2], rows[None], mask, floor[None])[:, :, ::-1]
-                parts.append(np.concatenate((ahead, back), axis=1))
-            mid = np.concatenate(parts) if parts else np.zeros((0, C, f.shape[0], dof))
-        np.clip(mid, self._lo_np, self._hi_np, out=mid)
-        # (N, C + 1, K, dof): each segment halved when refining (the same paths: the knots a refined path
-        # is optimised on)
-        paths = _knotted(theta0, np.concatenate((line[:, None], mid), axis=1), thetaT, steps)
-        length = np.linalg.norm(np.diff(paths, axis=2), axis=-1).sum(-1)  # (N, C + 1)
-        return paths, np.argsort(length, axis=1, kind="stable")
-
-    def _plan_around(
-        self,
-        theta0,
-        ef0,
-        thetaT,
-        efT,
-        scene: Scene,
-        steps: int,
-        deadline: Deadline,
-        iterations: int = 0,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Joint paths ``(N, K, dof)`` around ``scene``, whether each is collision-free ``(N,)`` and the
-        stage that made it ``(N,)`` (:data:`~kinlearn.planning.stages.STAGES`).
-
-        Stage 1: the learned proposals (:meth:`_proposals`), each problem's first collision-free one in
-        their order (exact verdicts), else its shortest, flagged. Stage 2 (the planner's ``retreat``),
-        for the problems stage 1 left colliding: :meth:`_retreat`. Stage 3 (``steps`` > 0), for those
-        still colliding: the optimiser from the least colliding proposal (:meth:`_refine`), kept if the
-        dense check finds it free. Stage 4 (a ``deadline``, or an iteration budget ``iterations``), for
-        those still colliding, one after the other while time is left: the compiled RRT-Connect
-        (:meth:`_sample`). Each plan is its problem's alone: proposals are made as at batch 1, the
-        optimiser starts from the very path a batch-1 plan starts from, and paths of other lengths (the
-        retreat stage's, the sampler's) are brought to the batch's longest by splitting segments (the
-        same polylines, checked again).
-        """
-        n = theta0.shape[0]
-        packed = _packed_scenes(scene, n)  # the scene converted once, for the TM and the check
-        # The straight joint line first: the shortest path, so the plan wherever it is free, and then
-        # the network need not run.
-        line_free = _lines_free(self, self._line(theta0, thetaT, steps), packed)
-        rows = [(ks.model_rows(), ks.floor) for ks in packed]
-        paths, order = self._proposals(theta0, ef0, thetaT, efT, rows, steps, skip=line_free)
-        pick, free = _first_free(self, paths, order, packed, line_free)
-        out = paths[np.arange(n), pick]
-        stage = np.where(free, "learned", "none").astype(object)
-        batched = len(scene.batch_shape) > 0
-
-        found: dict[int, tuple[np.ndarray, str]] = {}  # paths of other lengths, joined at the end
-        if self.retreat and self._retreat_vias() is not None:
-            for i in np.flatnonzero(~free):
-                if deadline.expired(DEADLINE_RESERVE):
-                    break
-                path = self._retreat(theta0[i], thetaT[i], packed[i], rows[i], steps)
-                if path is not None:
-                    found[int(i)] = (path, "retreat")
-        open_ = ~free
-        open_[list(found)] = False  # the problems no stage has cleared yet
-        if steps:
-            for i in np.flatnonzero(open_):
-                if deadline.expired(DEADLINE_RESERVE):
-                    break
-                nscene = packed[i]
-                _, clear, _ = _kernel().check_paths(self._np_body, paths[i], nscene, max_travel=CHECK_TRAVEL)
-                best = paths[i, int(np.argmax(clear))]  # from the least colliding one
-                out[i], free[i] = self._refine(best, scene[int(i)] if batched else scene, nscene, steps)
-                stage[i] = "refine" if free[i] else "none"
-                open_[i] = not free[i]
-        if deadline.seconds is not None or iterations:
-            for i in np.flatnonzero(open_):
-                if deadline.expired(DEADLINE_RESERVE):  # never, without a deadline
-                    break
-                path = self._sample(theta0[i], thetaT[i], packed[i], deadline, int(i), iterations)
-                if path is not None:
-                    found[int(i)] = (path, "rrt")
-        if found:
-            K = max(out.shape[1], *(p.shape[0] for p, _ in found.values()))
-            if K > out.shape[1]:  # every path to the longest one's knots (the same polylines)
-                out = np.stack([densify(p, K) for p in out])
-            for i, (path, name) in found.items():
-                dense = densify(path, K)
-                # The plan's knots are checked as the plan will be judged (sub-steps of its own
-                # segments), not only the sampler's motions: no plan is called free that the dense
-                # check of its joints would not call free. A retreat path's segments were checked as
-                # they are (the verdict of a polyline is its segments'): again only when split here.
-                if (name == "retreat" and dense.shape[0] == path.shape[0]) or _kernel().first_free(
-                    self._np_body, dense[None], packed[i], max_travel=CHECK_TRAVEL
-                ) == 0:
-                    out[i], free[i], stage[i] = dense, True, name
-        return out, free, stage
-
-    def _retreat_vias(self) -> RetreatVias | None:
-        """The retreat stage's via solver (made once): on the planner's identified chain, else on the
-        chain its robot's model describes; None for an arm that is not all revolute joints (the stage
-        is then skipped)."""
-        if self._vias is None:
-            from ..data.scenes import scene_scale
-
-            if self.chain is None and any(j.kind != "revolute" for j in self.robot.joints):
-                self._vias = False
-            else:
-                chain = self.chain if self.chain is not None else ChainFM.from_robot(self.robot)
-                self._vias = RetreatVias(chain, self._lo_np, self._hi_np, scene_scale(self.robot))
-        return self._vias or None
-
-    def _retreat(self, theta0: np.ndarray, thetaT: np.ndarray, nscene, rows, steps: int) -> np.ndarray | None:
-        """The retreat stage (:mod:`kinlearn.planning.retreat`) for one problem: its path ``(V, dof)`` or
-        None. ``rows``: the problem's scene rows and floor for the network (as :meth:`_proposals` takes
-        them)."""
-        k, body, vias = _kernel(), self._np_body, self._retreat_vias()
-
-        def first_free(paths, order):
-            return k.first_free(body, paths, nscene, order, max_travel=CHECK_TRAVEL)
-
-        def segment_free(segment):
-            return first_free(segment[None], _ZERO) == 0
-
-        transfer = None
-        if self.obstacle_tm is not None:
-
-            def transfer(a, b):
-                ends = positions(self.robot, np.stack((a, b)))
-                paths, order = self._proposals(a[None], ends[:1], b[None], ends[1:], [rows], steps)
-                j = first_free(paths[0], order[0])
-                return paths[0, j] if j >= 0 else None
-
-        v0, vT = vias.vias(theta0), vias.vias(thetaT)
-        d0, dT = free_depths(segment_free, theta0, v0), free_depths(segment_free, thetaT, vT)
-        return retreat_path(theta0, thetaT, v0, vT, d0, dT, first_free, transfer)
-
-    def _sample(
-        self, start: np.ndarray, goal: np.ndarray, nscene, deadline: Deadline, seed: int, iterations: int
-    ):
-        """Stage 3: the compiled RRT-Connect from ``start`` to ``goal`` for what ``deadline`` leaves (less
-        :data:`~kinlearn.planning.stages.DEADLINE_RESERVE`) and at most ``iterations`` iterations (0: no
-        budget but the deadline), shortcut; its path ``(V, dof)`` or None."""
-        from ..collision.rrt import rrt_connect
-
-        left = deadline.left() - DEADLINE_RESERVE  # inf without a deadline
-        if left <= 0:
-            return None
-        path, _, _ = rrt_connect(
-            self._np_body, nscene, start, goal, self._lo_np, self._hi_np, time_limit=left, seed=seed,
-            max_travel=CHECK_TRAVEL, clock=deadline.clock,
-            max_iterations=iterations or None,
-        )  # fmt: skip
-        return path
-
-    def _refine(self, path: np.ndarray, scene: Scene, nscene, steps: int) -> tuple[np.ndarray, bool]:
-        """``steps`` steps of the gradient trajectory optimiser from ``path`` (if any); the refined path
-        and whether the dense check finds it free. Without steps: ``(path, False)``."""
-        if not steps:
-            return path, False
-        from .obstacle_baselines import OptimiserConfig, trajectory_optimiser
-
-        p = torch.from_numpy(path)
-        config = OptimiserConfig(knots=p.shape[0])  # the plan's own length: every plan of a batch has it
-        refined, _ = trajectory_optimiser(
-            p[0], p[-1], scene, steps=steps, config=config, body=self.body, init=p
-        )
-        refined = np.ascontiguousarray(refined.numpy())
-        free = _kernel().first_free(self._np_body, refined[None], nscene, max_travel=CHECK_TRAVEL) == 0
-        return (refined, True) if free else (path, False)
-
-    # ----------------------------------------------------------------------------------------------
-    # Free space
-    # ----------------------------------------------------------------------------------------------
 
     def _joint_path(self, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
         """The joint-path TM's plan: knots ``(N, T + 1, dof)`` (clamped to the limits) and its ef
@@ -907,49 +656,6 @@ class _Torch(_Backend):
         return out.joints.double().numpy(), out.ef.double().numpy()
 
 
-# Obstacle plans are checked by the compiled kernels at every batch size: a problem's candidates in
-# the order of their length, each walked with the skipping bounds and stopped at its first collision
-# (:mod:`kinlearn.collision.kernel`), where torch's dense check evaluates every sub-step of every
-# candidate (on the CPU, 0.2 s for 200 held-out iiwa14 problems against a ConfigError for too many
-# configurations; 88 s for 17 of the panda's scene-family problems).
-
-
-def _packed_scenes(scene: Scene, n: int) -> list:
-    """Each problem's scene packed once for the kernels (which also give the obstacle TM its rows)."""
-    K = _kernel().KernelScene
-    if len(scene.batch_shape) == 0:
-        return [K.of(scene)] * n
-    return [K(scene[i]) for i in range(n)]
-
-
-def _lines_free(planner: Planner, line: np.ndarray, packed: list) -> np.ndarray:
-    """Whether each problem's straight joint line ``(N, 1, K, dof)`` is free (the exact verdict)."""
-    check = _kernel().first_free
-    return np.array(
-        [
-            check(planner._np_body, line[i], packed[i], max_travel=CHECK_TRAVEL) == 0
-            for i in range(len(packed))
-        ],
-        dtype=bool,
-    )
-
-
-def _first_free(
-    planner: Planner, paths, order, packed: list, done: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Each problem's first collision-free candidate in its ``order`` and whether there was one (none: its
-    shortest, flagged). ``done (N,)``: problems whose straight line (candidate 0) is known free: picked
-    unchecked."""
-    free = done.copy()
-    pick = np.where(done, 0, order[:, 0])
-    check = _kernel().first_free
-    for i in np.flatnonzero(~done):
-        k = check(planner._np_body, paths[i], packed[i], order[i], max_travel=CHECK_TRAVEL)
-        if k >= 0:
-            pick[i], free[i] = k, True
-    return pick, free
-
-
 @torch.no_grad()
 def step_to_position(
     fm: ForwardModel,
@@ -998,30 +704,6 @@ def _inside(joints: torch.Tensor, lo: np.ndarray, hi: np.ndarray) -> torch.Tenso
     hi_t = torch.where(hi_t.double() > hi64, torch.nextafter(hi_t, lo_t), hi_t)
     out = joints.clone()
     out[..., 1:-1, :] = torch.minimum(torch.maximum(out[..., 1:-1, :], lo_t), hi_t)
-    return out
-
-
-#: The order of one path (never written: the kernels only read it).
-_ZERO = np.zeros(1, dtype=np.int64)
-
-
-def _knotted(theta0: np.ndarray, inner: np.ndarray, thetaT: np.ndarray, steps: int) -> np.ndarray:
-    """Paths ``(N, C, T + 1, dof)`` from their inner knots ``(N, C, T − 1, dof)`` between each problem's
-    start and goal ``(N, dof)``, each segment halved when refining (``steps`` > 0)."""
-    n, C, inside, dof = inner.shape
-    paths = np.empty((n, C, inside + 2, dof))
-    paths[:, :, 0] = theta0[:, None]
-    paths[:, :, 1:-1] = inner
-    paths[:, :, -1] = thetaT[:, None]
-    return _halve_segments(paths) if steps else paths
-
-
-def _halve_segments(paths: np.ndarray) -> np.ndarray:
-    """Joint paths ``(..., K, dof)`` with a knot inserted halfway along each segment: ``(..., 2K − 1, dof)``,
-    the same piecewise-linear paths."""
-    out = np.empty((*paths.shape[:-2], 2 * paths.shape[-2] - 1, paths.shape[-1]))
-    out[..., 0::2, :] = paths
-    out[..., 1::2, :] = 0.5 * (paths[..., :-1, :] + paths[..., 1:, :])
     return out
 
 
