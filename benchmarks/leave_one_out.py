@@ -8,14 +8,15 @@ For each family F of ``--families`` (default: the seven scene families) a networ
 ``kinlearn train-obstacle-planner --families BASE --leave-out F`` (the same problems, seeds, iterations,
 candidates and feasibility filter as the network trained on every family; a run already in ``RUN_ROOT/without-F`` is
 used if its log says it finished, resumed if not), put into a copy of the shipped planner's folder, and asked for
-fixed-time plans (``refine_steps=0``: the learned proposals alone) and plans with ``deadline=0.05`` on
-the held-out problems of ``--problems`` (seeds apart from every training seed; verified solvable).
+fixed-time plans (``refine_steps=0``: the learned proposals, then the retreat stage), the same without the
+retreat stage (``retreat=False``: the network alone) and plans with ``deadline=0.05`` on the held-out
+problems of ``--problems`` (seeds apart from every training seed; verified solvable).
 Every plan is judged by :func:`kinlearn.evaluation.obstacles.obstacle_outcome`.
 
-The table gives per left-out family its fixed-time success (the network never saw it), the same
-network's success on the families it saw, the straight line's on the left-out family, the reference
-network's (``--reference``: a planner folder whose network saw every family; default the shipped one)
-on it, and the deadline's. Batch 1, one thread. Training takes minutes per family on the iiwa14 and
+The table gives per left-out family its fixed-time success (the network never saw it), the network alone's
+on it, the same network's fixed-time success on the families it saw, the straight line's on the left-out
+family, the reference network's (``--reference``: a planner folder whose network saw every family;
+default the shipped one) on it, with and without the retreat stage, and the deadline's. Batch 1, one thread. Training takes minutes per family on the iiwa14 and
 longer on the arms with many body spheres (see ``kinlearn/checkpoints/README.md``).
 """
 
@@ -69,14 +70,15 @@ def train(robot: str, family: str, args, run: Path) -> Path:
     return out
 
 
-def planner_with(network: Path, robot: str, folder: Path) -> kinlearn.Planner:
-    """The shipped planner of ``robot`` with ``network`` as its obstacle network (a folder copy)."""
+def planner_with(network: Path, robot: str, folder: Path, **options) -> kinlearn.Planner:
+    """The shipped planner of ``robot`` with ``network`` as its obstacle network (a folder copy);
+    ``options`` as for :class:`kinlearn.Planner`."""
     folder.mkdir(parents=True, exist_ok=True)
     shipped = Path(kinlearn.__file__).parent / "checkpoints" / robot
     for f in shipped.glob("*.pt"):
         shutil.copy2(f, folder / f.name)
     shutil.copy2(network, folder / "tm_obstacles.pt")
-    return kinlearn.Planner.load(folder)
+    return kinlearn.Planner.load(folder, **options)
 
 
 def success(planner, problems, body, **kw) -> np.ndarray:
@@ -129,12 +131,14 @@ def main() -> None:
     robot = kinlearn.load_robot(args.robot)
     body = body_spheres(robot).double()
     fam = problems.family.numpy()
-    reference = (
-        kinlearn.Planner.load(args.reference) if args.reference else kinlearn.Planner.default(args.robot)
-    )
+    ref_folder = args.reference or Path(kinlearn.__file__).parent / "checkpoints" / args.robot
+    reference = kinlearn.Planner.load(ref_folder)
+    has_retreat = hasattr(reference, "retreat")
+    ref_alone = kinlearn.Planner.load(ref_folder, retreat=False) if has_retreat else reference
     if args.candidates is None:  # trained as the network it is compared with
         args.candidates = reference.obstacle_tm.config.candidates
     ref_ok = success(reference, problems, body, refine_steps=0)
+    ref_alone_ok = success(ref_alone, problems, body, refine_steps=0)
     line_ok = obstacle_outcome(
         body, [joint_line_path(*problems.problem(i), body=body)[0] for i in range(len(problems))], problems
     )["success"].numpy()
@@ -147,12 +151,19 @@ def main() -> None:
         planner = planner_with(net, args.robot, args.run_root / f"planner-without-{f}")
         assert f not in planner.obstacle_tm.families, planner.obstacle_tm.families
         fixed = success(planner, problems, body, refine_steps=0)
+        if has_retreat:
+            alone = planner_with(net, args.robot, args.run_root / f"planner-without-{f}", retreat=False)
+            alone_ok = success(alone, problems, body, refine_steps=0)
+        else:
+            alone_ok = fixed
         timed = success(planner, problems, body, deadline=args.deadline)
         summary[f] = {
             "left_out_fixed": float(fixed[mine].mean()),
+            "left_out_network_alone": float(alone_ok[mine].mean()),
             "seen_fixed": float(fixed[~mine].mean()),
             "line": float(line_ok[mine].mean()),
             "reference_fixed": float(ref_ok[mine].mean()),
+            "reference_network_alone": float(ref_alone_ok[mine].mean()),
             "left_out_deadline": float(timed[mine].mean()),
             "trained_on": list(planner.obstacle_tm.families),
             "n": int(mine.sum()),
@@ -162,30 +173,44 @@ def main() -> None:
             [
                 f,
                 f"{100 * s['left_out_fixed']:.0f}%",
+                f"{100 * s['left_out_network_alone']:.0f}%",
                 f"{100 * s['seen_fixed']:.1f}%",
                 f"{100 * s['line']:.0f}%",
-                f"{100 * s['reference_fixed']:.0f}%",
+                f"{100 * s['reference_fixed']:.0f}% ({100 * s['reference_network_alone']:.0f}%)",
                 f"{100 * s['left_out_deadline']:.0f}%",
             ]
         )
-        print(f"  {f}: left out {rows[-1][1]}, seen {rows[-1][2]}, deadline {rows[-1][5]}", flush=True)
-    mean = {k: float(np.mean([s[k] for s in summary.values()])) for k in ("left_out_fixed", "seen_fixed")}
+        print(
+            f"  {f}: left out {rows[-1][1]} (alone {rows[-1][2]}), seen {rows[-1][3]}, deadline {rows[-1][6]}",
+            flush=True,
+        )
+    keys = (
+        "left_out_fixed",
+        "left_out_network_alone",
+        "seen_fixed",
+        "reference_fixed",
+        "reference_network_alone",
+    )
+    mean = {k: float(np.mean([s[k] for s in summary.values()])) for k in keys}
     summary["_mean"] = mean
     table = markdown_table(
         [
             "left-out family",
             "fixed time, left out",
+            "network alone, left out",
             "fixed time, the families it saw",
             "joint line",
-            "network that saw it",
+            "network that saw it (alone)",
             f"deadline {args.deadline:g} s, left out",
         ],
         rows,
     )
     print()
     print(table)
-    print(f"\nmean over the left-out families: {100 * mean['left_out_fixed']:.1f}% (left out), "
-          f"{100 * mean['seen_fixed']:.1f}% (seen)")  # fmt: skip
+    print(f"\nmean over the left-out families: {100 * mean['left_out_fixed']:.1f}% left out "
+          f"({100 * mean['left_out_network_alone']:.1f}% the network alone), against "
+          f"{100 * mean['reference_fixed']:.1f}% ({100 * mean['reference_network_alone']:.1f}%) "
+          "for the network that saw them")  # fmt: skip
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     (out / "table.md").write_text(table + "\n")
     print(f"wrote {out}/summary.json, table.md")
