@@ -217,3 +217,29 @@ def test_the_plan_command_has_the_stage_and_leaves_it_out_when_asked(problems, t
     assert "none" in capsys.readouterr().out
     assert main([*args, "--no-retreat"]) == 2
     assert "--no-retreat leaves out a stage of planning around obstacles" in capsys.readouterr().err
+
+
+def test_a_deadline_that_runs_out_stops_the_stage_between_transfers(panda, problems, monkeypatch):
+    """Every clock reading 20 ms later: with a deadline of 50 ms the joins are tried, then the deadline
+    has run out before the first network transfer, so the cell the network crosses stays flagged."""
+    from kinlearn.planning import stages
+
+    start, goal, scene = problems.problem(CELL_ACROSS)
+    assert panda.plan(start, goal, obstacles=scene, deadline=30.0).stage == "retreat"  # time enough: cleared
+    now = [0.0]
+
+    def slow():
+        now[0] += 0.02
+        return now[0]
+
+    monkeypatch.setattr(stages.time, "perf_counter", slow)
+    plan = panda.plan(start, goal, obstacles=scene, deadline=0.05)
+    assert plan.stage == "none" and not bool(plan.collision_free)
+    assert now[0] <= 0.2  # a handful of readings: the stage asked the deadline and stopped
+    calls = []
+    theta0, thetaT, v0, vT = _chains(L=3, D=2)
+    out = R.retreat_path(
+        theta0, thetaT, v0, vT, np.array([3, 3]), np.array([3, 3]), lambda p, o: -1,
+        lambda a, b: calls.append(1), stop=lambda: True,
+    )  # fmt: skip
+    assert out is None and not calls

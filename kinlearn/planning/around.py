@@ -171,7 +171,7 @@ class ObstacleStages:
             for i in np.flatnonzero(~free):
                 if deadline.expired(DEADLINE_RESERVE):
                     break
-                path = self._retreat(theta0[i], thetaT[i], packed[i], rows[i], steps)
+                path = self._retreat(theta0[i], thetaT[i], packed[i], rows[i], steps, deadline)
                 if path is not None:
                     found[int(i)] = (path, "retreat")
         open_ = ~free
@@ -223,7 +223,9 @@ class ObstacleStages:
                 self._vias = RetreatVias(chain, self._lo_np, self._hi_np, scene_scale(self.robot))
         return self._vias or None
 
-    def _retreat(self, theta0: np.ndarray, thetaT: np.ndarray, nscene, rows, steps: int) -> np.ndarray | None:
+    def _retreat(
+        self, theta0: np.ndarray, thetaT: np.ndarray, nscene, rows, steps: int, deadline: Deadline
+    ) -> np.ndarray | None:
         """The retreat stage (:mod:`kinlearn.planning.retreat`) for one problem: its path ``(V, dof)`` or
         None. ``rows``: the problem's scene rows and floor for the network (as :meth:`_proposals` takes
         them)."""
@@ -246,7 +248,17 @@ class ObstacleStages:
 
         v0, vT = vias.vias(theta0), vias.vias(thetaT)
         d0, dT = free_depths(segment_free, theta0, v0), free_depths(segment_free, thetaT, vT)
-        return retreat_path(theta0, thetaT, v0, vT, d0, dT, first_free, transfer)
+        return retreat_path(
+            theta0,
+            thetaT,
+            v0,
+            vT,
+            d0,
+            dT,
+            first_free,
+            transfer,
+            stop=lambda: deadline.expired(DEADLINE_RESERVE),
+        )
 
     def _sample(
         self, start: np.ndarray, goal: np.ndarray, nscene, deadline: Deadline, seed: int, iterations: int

@@ -164,14 +164,18 @@ def retreat_path(
     depthT: np.ndarray,
     first_free: Callable[[np.ndarray, np.ndarray], int],
     transfer: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None,
+    stop: Callable[[], bool] | None = None,
 ) -> np.ndarray | None:
     """The retreat stage's path ``(V, dof)`` from ``theta0`` to ``thetaT`` (steps 2 and 3 of the module
     docstring), or None. ``vias*``/``depth*``: each end's vias and free depths (:class:`RetreatVias`,
     :func:`free_depths`). ``first_free(paths (P, W, dof), order)``: the dense check's first free path
     in ``order`` (−1: none). ``transfer(a, b)``: a free path from configuration ``a`` to ``b`` by the
-    network (None: none free, or no network)."""
+    network (None: none free, or no network). ``stop()``: asked before the joins and before each
+    transfer; True gives up (a deadline that has run out)."""
     (ends0, len0), (endsT, lenT) = _ends(theta0, vias0, depth0), _ends(thetaT, viasT, depthT)
     if len(ends0) == 1 and len(endsT) == 1:  # no free retreat at either end: the straight line again
+        return None
+    if stop is not None and stop():
         return None
     a_last = np.stack([a[-1] for a in ends0])
     b_last = np.stack([b[-1] for b in endsT])
@@ -190,7 +194,7 @@ def retreat_path(
     depth = np.add.outer([len(a) for a in ends0], [len(b) for b in endsT]).ravel()
     depth[0] = 0
     for k in np.argsort(-depth, kind="stable")[:RETREAT_TRANSFERS]:  # the deepest first
-        if depth[k] == 0:
+        if depth[k] == 0 or (stop is not None and stop()):
             break
         a, b = ends0[k // len(endsT)], endsT[k % len(endsT)]
         middle = transfer(a[-1], b[-1])
