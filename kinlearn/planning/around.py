@@ -56,7 +56,13 @@ def _load_kernels() -> None:
 
 
 class ObstacleStages:
-    """The obstacle stages of a :class:`~kinlearn.planning.planner.Planner` (see the module docstring)."""
+    """The obstacle stages of a :class:`~kinlearn.planning.planner.Planner` (see the module docstring).
+
+    It reads what the planner holds: ``robot``, the limits ``_lo_np``/``_hi_np``, the obstacle network
+    (``obstacle_tm`` and its NumPy twin ``_np_obstacle_tm``), the identified ``chain``, the given body
+    (``_body``), ``retreat``, and the caches ``_body64``, ``_np_body_cache`` and ``_vias`` its
+    ``__init__`` sets to None.
+    """
 
     @property
     def body(self) -> BodySpheres:
