@@ -85,6 +85,7 @@ class RetreatVias:
         return chain_positions(*self.arrays, theta)
 
     def vias(self, theta: np.ndarray) -> np.ndarray:
+        """``(D, L, dof)``: the vias of joints ``theta (dof,)``, direction by direction, near to far."""
         from ..models.chain_kernel import solve_position_numba
 
         theta = np.ascontiguousarray(theta, dtype=np.float64).reshape(1, self.dof)
