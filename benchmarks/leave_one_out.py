@@ -23,6 +23,7 @@ longer on the arms with many body spheres (see ``kinlearn/checkpoints/README.md`
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import shutil
 import subprocess
@@ -70,15 +71,14 @@ def train(robot: str, family: str, args, run: Path) -> Path:
     return out
 
 
-def planner_with(network: Path, robot: str, folder: Path, **options) -> kinlearn.Planner:
-    """The shipped planner of ``robot`` with ``network`` as its obstacle network (a folder copy);
-    ``options`` as for :class:`kinlearn.Planner`."""
+def planner_with(network: Path, robot: str, folder: Path) -> kinlearn.Planner:
+    """The shipped planner of ``robot`` with ``network`` as its obstacle network (a folder copy)."""
     folder.mkdir(parents=True, exist_ok=True)
     shipped = Path(kinlearn.__file__).parent / "checkpoints" / robot
     for f in shipped.glob("*.pt"):
         shutil.copy2(f, folder / f.name)
     shutil.copy2(network, folder / "tm_obstacles.pt")
-    return kinlearn.Planner.load(folder, **options)
+    return kinlearn.Planner.load(folder)
 
 
 def success(planner, problems, body, **kw) -> np.ndarray:
@@ -133,7 +133,7 @@ def main() -> None:
     fam = problems.family.numpy()
     ref_folder = args.reference or Path(kinlearn.__file__).parent / "checkpoints" / args.robot
     reference = kinlearn.Planner.load(ref_folder)
-    has_retreat = hasattr(reference, "retreat")
+    has_retreat = "retreat" in inspect.signature(kinlearn.Planner.__init__).parameters
     ref_alone = kinlearn.Planner.load(ref_folder, retreat=False) if has_retreat else reference
     if args.candidates is None:  # trained as the network it is compared with
         args.candidates = reference.obstacle_tm.config.candidates
@@ -151,8 +151,8 @@ def main() -> None:
         planner = planner_with(net, args.robot, args.run_root / f"planner-without-{f}")
         assert f not in planner.obstacle_tm.families, planner.obstacle_tm.families
         fixed = success(planner, problems, body, refine_steps=0)
-        if has_retreat:
-            alone = planner_with(net, args.robot, args.run_root / f"planner-without-{f}", retreat=False)
+        if has_retreat:  # the same folder again, without the retreat stage
+            alone = kinlearn.Planner.load(args.run_root / f"planner-without-{f}", retreat=False)
             alone_ok = success(alone, problems, body, refine_steps=0)
         else:
             alone_ok = fixed

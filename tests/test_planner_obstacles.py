@@ -255,7 +255,7 @@ def test_refinement_from_a_path_of_the_wrong_shape_raises():
         trajectory_optimiser(torch.zeros(7), torch.full((7,), 0.3), scene, steps=1, init=torch.zeros(5, 6))
 
 
-@pytest.mark.parametrize("n", [5, 17])  # the NumPy path (≤ 16 plans) and the torch one
+@pytest.mark.parametrize("n", [5, 17])  # a few plans and more than SMALL_BATCH (the torch free-space TM)
 def test_refined_batches_keep_one_shape_and_agree_with_batch_one(planner, problems, n):
     """Refinement changes some plans of a batch and not others: every plan keeps the batch's one shape
     (2T + 1 configurations), and each is the plan of its problem planned alone. (Without the retreat

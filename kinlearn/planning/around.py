@@ -241,7 +241,7 @@ class ObstacleStages:
             return k.first_free(body, paths, nscene, order, max_travel=CHECK_TRAVEL)
 
         def segment_free(segment):
-            return first_free(segment[None], _ZERO) == 0
+            return k.first_free(body, segment[None], nscene, max_travel=CHECK_TRAVEL) == 0
 
         transfer = None
         if self.obstacle_tm is not None:
@@ -269,7 +269,7 @@ class ObstacleStages:
     def _sample(
         self, start: np.ndarray, goal: np.ndarray, nscene, deadline: Deadline, seed: int, iterations: int
     ):
-        """Stage 3: the compiled RRT-Connect from ``start`` to ``goal`` for what ``deadline`` leaves (less
+        """Stage 4: the compiled RRT-Connect from ``start`` to ``goal`` for what ``deadline`` leaves (less
         :data:`~kinlearn.planning.stages.DEADLINE_RESERVE`) and at most ``iterations`` iterations (0: no
         budget but the deadline), shortcut; its path ``(V, dof)`` or None."""
         from ..collision.rrt import rrt_connect
@@ -342,10 +342,6 @@ def _first_free(
         if k >= 0:
             pick[i], free[i] = k, True
     return pick, free
-
-
-#: The order of one path (never written: the kernels only read it).
-_ZERO = np.zeros(1, dtype=np.int64)
 
 
 def _knotted(theta0: np.ndarray, inner: np.ndarray, thetaT: np.ndarray, steps: int) -> np.ndarray:

@@ -271,7 +271,7 @@ class Planner(ObstacleStages):
         if isinstance(robot, Robot):
             robot = robot.name
         if options:
-            return _default_planner.__wrapped__(robot, **options)
+            return Planner.load(_shipped_folder(robot), robot=robot, **options)
         return _default_planner(robot)
 
     # ----------------------------------------------------------------------------------------------
@@ -717,8 +717,8 @@ def _robot(robot: str | Robot | None, name: str) -> Robot:
     return load_robot(name)
 
 
-@lru_cache(maxsize=8)
-def _default_planner(robot: str, **options) -> Planner:
+def _shipped_folder(robot: str) -> Path:
+    """The folder of the planner kinlearn ships for ``robot`` (a ConfigError for any other arm)."""
     path = DEFAULT_CHECKPOINTS / robot
     # Only kinlearn's own arms ship planners: a registered arm never gets another arm's.
     if robot not in BUILTIN_ROBOTS or not (path / "tm.pt").is_file():
@@ -727,7 +727,12 @@ def _default_planner(robot: str, **options) -> Planner:
             f"kinlearn ships no planner for {robot!r} (shipped: {', '.join(shipped)}); train one with "
             "`kinlearn train-planner` and load it with Planner.load(run_dir)"
         )
-    return Planner.load(path, robot=robot, **options)
+    return path
+
+
+@lru_cache(maxsize=8)
+def _default_planner(robot: str) -> Planner:
+    return Planner.load(_shipped_folder(robot), robot=robot)
 
 
 def plan(
