@@ -6,10 +6,11 @@ every sub-step, timed in the same run on one thread.
 
 The candidates are those ``plan(..., refine_steps=0)`` checks (the straight line and the obstacle
 network's paths both ways, shortest first) on the committed held-out problems of the seven scene families
-(``benchmarks/data/scene_problems_{robot}.npz``). Three ways to the same answer:
+(``benchmarks/data/scene_problems_{robot}.npz``). Four ways to the same answer:
 
-- ``first_free``: each candidate probed at spread grid configurations, scene only, link by link behind
-  a ball per link (a hit is a collision), then walked with budgets (the planner's check);
+- ``first_free``: each candidate probed first where the last candidates hit the scene, then at spread
+  grid configurations, scene only, link by link behind a ball per link (a hit is a collision), then
+  walked with budgets (the planner's check); also without the places of the last hits;
 - the walk alone: the budgeted verdict of each candidate in order until one is free;
 - exact: every sub-step of every candidate evaluated (``check_paths``), the first free one taken.
 
@@ -73,6 +74,9 @@ def main() -> None:
     def probe_then_walk(paths, order, ks):
         return int(K._first_free_packed(paths, order, TRAVEL, 0.0, f, n, ks.packed))
 
+    def unhinted(paths, order, ks):
+        return int(K._first_free_packed(paths, order, TRAVEL, 0.0, f, n, ks.packed, 0))
+
     def walk(paths, order, ks):
         for k in order:
             if K._verdict_packed(paths[k], TRAVEL, 0.0, f, n, ks.packed)[0] < 0:
@@ -83,7 +87,12 @@ def main() -> None:
         free = K.check_paths(kb, paths, ks, max_travel=TRAVEL)[0]
         return next((int(k) for k in order if free[k]), -1)
 
-    ways = {"first_free (probe, then walk)": probe_then_walk, "the walk alone": walk, "exact": exact}
+    ways = {
+        "first_free (probe where the last candidates hit, then spread; then walk)": probe_then_walk,
+        "probe spread only, then walk": unhinted,
+        "the walk alone": walk,
+        "exact": exact,
+    }
     best, picks = {}, {}
     for fn in ways.values():
         fn(*cands[0], scenes[0])  # compile or load

@@ -120,13 +120,20 @@ class ObstacleStages:
                     parts.append(np.broadcast_to(line[i], (1, C, *line[i].shape)))
                     continue
                 rows, floor = scenes[i]
-                mask = np.ones((1, rows.shape[0]), dtype=bool)
-                one = (theta0[i : i + 1], ef0[i : i + 1], thetaT[i : i + 1], efT[i : i + 1])
-                ahead = tm(*one, rows[None], mask, floor[None])
-                # The problem the other way round (the network learned both directions): its paths,
-                # walked backwards, are as many more candidates for one more pass.
-                back = tm(*one[2:], *one[:2], rows[None], mask, floor[None])[:, :, ::-1]
-                parts.append(np.concatenate((ahead, back), axis=1))
+                # The problem and the problem the other way round (the network learned both
+                # directions), as one batch of two: the second's paths, walked backwards, are as many
+                # more candidates.
+                a, b = (theta0[i], thetaT[i]), (ef0[i], efT[i])
+                both = tm(
+                    np.stack(a),
+                    np.stack(b),
+                    np.stack(a[::-1]),
+                    np.stack(b[::-1]),
+                    np.broadcast_to(rows, (2, *rows.shape)),
+                    np.ones((2, rows.shape[0]), dtype=bool),
+                    np.broadcast_to(floor, (2, 2)),
+                )
+                parts.append(np.concatenate((both[:1], both[1:, :, ::-1]), axis=1))
             mid = np.concatenate(parts) if parts else np.zeros((0, C, f.shape[0], dof))
         np.clip(mid, self._lo_np, self._hi_np, out=mid)
         # (N, C + 1, K, dof): each segment halved when refining (the same paths: the knots a refined path
