@@ -137,6 +137,29 @@ def test_the_planners_verdicts_on_the_heldout_problems_are_unchanged():
     assert found > 0
 
 
+def test_point_distances_match_torch():
+    """Points' signed distances to random scenes of every kind (floor included) are torch's, the body
+    distance of a zero-radius sphere."""
+    from kinlearn.collision import body_obstacle_distance
+
+    rng = np.random.default_rng(5)
+    signs = set()
+    for s in range(4):
+        scene = random_scene(rng, n=int(rng.integers(1, 6)), floor=bool(s % 2))
+        points = rng.uniform(-1.0, 1.0, (200, 3))
+        _, ref = body_obstacle_distance(
+            torch.from_numpy(points)[:, None], torch.zeros(1, dtype=torch.float64), scene, per_sphere=True
+        )
+        got = K.point_distances(K.KernelScene(scene), points)
+        assert np.abs(got - ref[:, 0].numpy()).max() <= TOL
+        signs |= set(np.sign(got).tolist())
+    assert {-1.0, 1.0} <= signs  # points inside and outside
+    with pytest.raises(ShapeError):
+        K.point_distances(K.KernelScene(scene), np.zeros((3, 2)))
+    with pytest.raises(ObstacleError):
+        K.point_distances(scene, np.zeros((3, 3)))
+
+
 def test_typed_errors():
     robot = load_robot("iiwa14")
     kb = K.KernelBody(body_spheres(robot).double())

@@ -50,22 +50,24 @@ def test_collision_free_agrees_with_the_dense_check(planner, problems):
 
 def test_shipped_planner_batch_one_flags_agree_with_the_dense_check():
     """The shipped planner at batch 1 (its compiled path: packed scene, kernel verdicts, judge's fast path)
-    on 60 held-out problems of every family: each plan's collision_free is torch check_path's verdict of
+    on 60 held-out problems of every family, with and without the retreat stage: each plan's collision_free is torch check_path's verdict of
     its joint path, and success is the judged rule (goal reached and free)."""
     shipped = Planner.default("iiwa14")
     ps = ProblemSet.load(BENCHMARK)
-    idx = torch.arange(0, len(ps), 17)
+    idx = torch.arange(0, len(ps), 17).tolist()
     joints, flags, success = [], [], []
-    for i in idx.tolist():
-        start, goal, scene = ps.problem(i)
-        one = shipped.plan(start, goal, obstacles=scene, refine_steps=0)  # fixed time: some stay colliding
-        joints.append(one.joints)
-        flags.append(bool(one.collision_free))
-        success.append(bool(one.success))
+    # The fixed-time stages, and the network alone (which leaves more colliding: both verdicts are met)
+    for planner in (shipped, Planner.default("iiwa14", retreat=False)):
+        for i in idx:
+            start, goal, scene = ps.problem(i)
+            one = planner.plan(start, goal, obstacles=scene, refine_steps=0)
+            joints.append(one.joints)
+            flags.append(bool(one.collision_free))
+            success.append(bool(one.success))
     # one by one: a retreat-stage plan has more knots than the proposals' (its vias)
     dense = [
         bool(check_path(shipped.body, j, ps.scene[i]).collision_free)
-        for j, i in zip(joints, idx.tolist(), strict=True)
+        for j, i in zip(joints, idx + idx, strict=True)
     ]
     assert dense == flags
     assert success == flags  # joint goals are reached exactly: success is the verdict

@@ -1,5 +1,5 @@
-"""The retreat stage: vias along fixed end-effector retreats, chains cut at their first colliding
-segment, the shortest free join, the network across between the deepest retreats, and the planner's
+"""The retreat stage: vias along fixed end-effector retreats (or, where none is free, along the scene's
+most open directions), chains cut at their first colliding segment, the shortest free join, the network across between the deepest retreats, and the planner's
 plans from it (free by torch's independent dense check, the same alone and in a batch)."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import pytest
 import torch
 
 from kinlearn.body.robot import load_robot
-from kinlearn.collision import check_path
-from kinlearn.collision.kernel import KernelBody, KernelScene, first_free
+from kinlearn.collision import Box, Scene, check_path
+from kinlearn.collision.kernel import KernelBody, KernelScene, first_free, point_distances
 from kinlearn.data.problems import ProblemSet
 from kinlearn.errors import ConfigError
 from kinlearn.models.chain import ChainFM
@@ -24,6 +24,8 @@ from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
 SCENES = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "scene_problems_panda.npz"
 #: Held-out panda problems: two cells the network's proposals leave colliding (bookcase), one it clears (bin).
 CELL_STRAIGHT, CELL_ACROSS, OPEN = 1, 4, 60
+#: A held-out cubby problem whose start cannot retreat in any fixed direction (its cell opens elsewhere).
+CELL_SIDEWAYS = 33
 
 
 @pytest.fixture(scope="module")
@@ -96,6 +98,65 @@ def test_free_depths_stop_at_the_first_segment_torch_finds_colliding(panda, prob
                 assert free == (k < depth[d])
             seen.add(int(depth[d]))
     assert min(seen) < len(R.RETREAT_DISTANCES) in seen  # both a cut chain and a whole one were met
+
+
+def test_open_directions_point_out_of_a_cell_and_keep_the_grid_order_in_the_open():
+    """A cell of five boards around a point, open toward −x: the most open direction leaves through the
+    opening, and every direction returned is at least as open as any other. In an empty scene every
+    direction is fully open: the grid's own order (no preference from rounding)."""
+    p = np.array([0.6, 0.1, 0.4])
+    boards = [  # centre, half extents: floor, roof, back (+x), and both sides
+        ((0.6, 0.1, 0.28), (0.2, 0.2, 0.02)),
+        ((0.6, 0.1, 0.52), (0.2, 0.2, 0.02)),
+        ((0.82, 0.1, 0.4), (0.02, 0.2, 0.14)),
+        ((0.6, -0.12, 0.4), (0.2, 0.02, 0.14)),
+        ((0.6, 0.32, 0.4), (0.2, 0.02, 0.14)),
+    ]
+    ks = KernelScene(Scene.from_primitives([Box(c, h) for c, h in boards]))
+
+    def distance(points):
+        return point_distances(ks, points)
+
+    out = R.open_directions(p, distance, reach=0.3, cap=0.1)
+    assert out.shape == (R.OPEN_DIRECTIONS, 3)
+    np.testing.assert_allclose(np.linalg.norm(out, axis=1), 1.0)
+    assert out[0] @ np.array([-1.0, 0.0, 0.0]) > 0.99  # straight out of the opening
+
+    def least(d):
+        return min(distance(p + np.outer(R._RAY_SHARES * 0.3, d)).min(), 0.1)
+
+    kept = min(least(d) for d in out)
+    assert all(least(d) <= kept + 1e-12 for d in R._GRID if not any(np.allclose(d, o) for o in out))
+    empty = KernelScene(Scene.from_spheres(np.zeros((0, 4))))
+    np.testing.assert_array_equal(
+        R.open_directions(p, lambda x: point_distances(empty, x), 0.3, 0.1), R._GRID[: R.OPEN_DIRECTIONS]
+    )
+
+
+def test_an_end_with_no_free_fixed_retreat_retreats_where_its_scene_is_open(panda, problems):
+    """The start of a cubby problem cannot retreat toward the base or up (every fixed chain's first
+    segment collides); given the scene, its retreats go where the scene is open, and torch's dense
+    check (independent) finds them free as deep as the stage says. The planner's plan is the retreat
+    stage's, free."""
+    start, goal, scene = problems.problem(CELL_SIDEWAYS)
+    theta = start.numpy()
+    ks = KernelScene(scene)
+    body = KernelBody(panda.body)
+
+    def segment_free(seg):
+        return first_free(body, seg[None], ks, max_travel=CHECK_TRAVEL) == 0
+
+    vias = panda._retreat_vias()
+    fixed, depth = vias.free(theta, segment_free)
+    assert not depth.any() and np.array_equal(fixed, vias.vias(theta))
+    opened, depth = vias.free(theta, segment_free, lambda x: point_distances(ks, x))
+    assert depth.max() == len(R.RETREAT_DISTANCES) and opened.shape == fixed.shape
+    for d in np.flatnonzero(depth):
+        chain = torch.from_numpy(np.concatenate((theta[None], opened[d, : depth[d]])))
+        assert bool(check_path(panda.body, chain, scene).collision_free)
+    plan = panda.plan(start, goal, obstacles=scene, refine_steps=0)
+    assert plan.stage == "retreat" and bool(plan.success)
+    assert bool(check_path(panda.body, plan.joints, scene).collision_free)
 
 
 def _chains(L=2, D=1, dof=2):

@@ -63,6 +63,7 @@ __all__ = [
     "clearances",
     "first_free",
     "near_pairs",
+    "point_distances",
     "warm_up",
 ]
 
@@ -1110,6 +1111,25 @@ def near_pairs(centres, radii, pairs, cut: float) -> tuple[np.ndarray, np.ndarra
     return b.astype(np.int64), k.astype(np.int64)
 
 
+@_jit
+def _point_distances(points, spheres, boxes, cylinders, floor, out):
+    for i in range(points.shape[0]):
+        out[i] = _sphere_scene(
+            points[i, 0], points[i, 1], points[i, 2], 0.0, True, spheres, boxes, cylinders, floor
+        )
+
+
+def point_distances(scene: KernelScene, points) -> np.ndarray:
+    """Signed distances ``(N,)`` of points ``(N, 3)`` (m, the robot's base frame) to ``scene``, its floor
+    included (negative inside a primitive; +inf for an empty scene without a floor)."""
+    if not isinstance(scene, KernelScene):
+        raise ObstacleError(f"scene must be a KernelScene (KernelScene(scene)), got {type(scene).__name__}")
+    pts = _joints(points, 3, "points", 2)
+    out = np.empty(pts.shape[0])
+    _point_distances(pts, *scene.args(), out)
+    return out
+
+
 def clearances(body: KernelBody, scene: KernelScene, q, per_sphere: bool = False):
     """``(scene clearance (N,), self clearance (N,))`` of configurations ``q (N, dof)`` (and, with
     ``per_sphere``, each sphere's distance to the scene ``(N, M)``): the numbers of
@@ -1205,3 +1225,4 @@ def warm_up() -> None:
     first_free(body, path, scene)
     clearances(body, scene, path[0])
     centres(body, path[0])
+    point_distances(scene, np.zeros((1, 3)))

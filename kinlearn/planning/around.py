@@ -23,7 +23,7 @@ from ..collision.scene import Scene
 from ..data.problem import positions
 from ..models.chain import ChainFM
 from .plan import CHECK_TRAVEL
-from .retreat import RetreatVias, free_depths, retreat_path
+from .retreat import RetreatVias, retreat_path
 from .stages import DEADLINE_RESERVE, Deadline, densify
 
 __all__ = ["NO_MODEL_KNOTS", "ObstacleStages"]
@@ -259,8 +259,13 @@ class ObstacleStages:
                 j = first_free(paths[0], order[0])
                 return paths[0, j] if j >= 0 else None
 
-        v0, vT = vias.vias(theta0), vias.vias(thetaT)
-        d0, dT = free_depths(segment_free, theta0, v0), free_depths(segment_free, thetaT, vT)
+        def distance(points):
+            return k.point_distances(nscene, points)
+
+        (v0, d0), (vT, dT) = (
+            vias.free(theta0, segment_free, distance),
+            vias.free(thetaT, segment_free, distance),
+        )
         return retreat_path(
             theta0,
             thetaT,

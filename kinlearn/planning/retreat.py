@@ -14,7 +14,11 @@ keeps the network for what it does well, the transfer between two points in the 
    damped least-squares steps on the planner's kinematic chain (the identified one where the planner
    has it: :mod:`kinlearn.models.chain`), so that the joint line between neighbours moves the hand
    nearly straight. How deep each chain is free from its end is found by the compiled dense check,
-   segment by segment (a chain is cut at its first colliding segment).
+   segment by segment (a chain is cut at its first colliding segment). An end with no free retreat in
+   those directions (a cell that opens sideways or downward, a hand under a board) retreats instead in
+   the :data:`OPEN_DIRECTIONS` directions along which the scene is most open from its end effector
+   (:func:`open_directions`: of the 26 of a cube's faces, edges and corners, those whose points out to
+   the farthest retreat keep the most clearance).
 2. **Straight transfers.** Every pair of free retreats (one of either end, or none at one end) joined
    by the straight joint line between them; the shortest whole path (joint length) whose joining
    segment is free. Retreats and transfer are checked apart: the dense check of a polyline is that of
@@ -23,8 +27,8 @@ keeps the network for what it does well, the transfer between two points in the 
    most :data:`RETREAT_TRANSFERS` pairs), the obstacle network's candidates for the transfer, as a
    problem of its own (the straight line first, then its paths both ways), the shortest free.
 
-Every count is fixed: the solver's steps, the vias, the path checks, at most
-2 × :data:`RETREAT_TRANSFERS` network passes. The stage runs only for problems the learned proposals
+Every count is fixed: the solver's steps, the vias (an end's open directions at most once), the path
+checks, at most 2 × :data:`RETREAT_TRANSFERS` network passes. The stage runs only for problems the learned proposals
 left colliding, so the plans they clear do not change (:mod:`kinlearn.planning.stages`).
 """
 
@@ -38,11 +42,13 @@ from ..errors import ConfigError
 from ..models.chain import ChainFM
 
 __all__ = [
+    "OPEN_DIRECTIONS",
     "RETREAT_DIRECTIONS",
     "RETREAT_DISTANCES",
     "RETREAT_TRANSFERS",
     "RetreatVias",
     "free_depths",
+    "open_directions",
     "retreat_path",
 ]
 
@@ -54,6 +60,20 @@ RETREAT_DIRECTIONS: tuple[str, ...] = ("in", "up", "in-up")
 RETREAT_DISTANCES: tuple[float, ...] = (0.1, 0.2, 0.3)
 #: Pairs of deepest free retreats the network plans the transfer between (2 passes each).
 RETREAT_TRANSFERS = 3
+#: Directions an end with no free retreat in :data:`RETREAT_DIRECTIONS` retreats in instead: the scene's
+#: most open ones (:func:`open_directions`).
+OPEN_DIRECTIONS = 3
+#: Clearance (m, for an arm of the iiwa14's reach; scaled) above which a direction counts as fully open:
+#: open directions tie, and keep the grid's order.
+OPEN_CLEARANCE = 0.1
+#: Where along a direction its clearance is looked at, as shares of the farthest retreat.
+_RAY_SHARES = np.linspace(0.3, 1.0, 5)
+#: The directions :func:`open_directions` ranks: the 26 of a cube's faces, edges and corners (unit).
+_GRID = np.array(
+    [(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1) if (x, y, z) != (0, 0, 0)],
+    dtype=np.float64,
+)
+_GRID /= np.linalg.norm(_GRID, axis=1, keepdims=True)
 #: Damped least-squares steps per via (from the via before it, or from the end itself).
 RETREAT_ITERATIONS = 15
 #: Damping of those steps (m): a via moves the joints little where the chain is near a singularity.
@@ -84,13 +104,39 @@ class RetreatVias:
 
         return chain_positions(*self.arrays, theta)
 
-    def vias(self, theta: np.ndarray) -> np.ndarray:
-        """``(D, L, dof)``: the vias of joints ``theta (dof,)``, direction by direction, near to far."""
-        from ..models.chain_kernel import solve_position_numba
-
+    def vias(
+        self, theta: np.ndarray, distance: Callable[[np.ndarray], np.ndarray] | None = None
+    ) -> np.ndarray:
+        """``(D, L, dof)``: the vias of joints ``theta (dof,)`` in :data:`RETREAT_DIRECTIONS`, direction by
+        direction, near to far; given the scene's ``distance(points (N, 3)) -> (N,)``, in its most open
+        directions instead (:func:`open_directions`)."""
         theta = np.ascontiguousarray(theta, dtype=np.float64).reshape(1, self.dof)
         p = self._position(theta)[0]
-        directions = _directions(p)
+        if distance is None:
+            return self._solve(theta, p, _directions(p))
+        cap = OPEN_CLEARANCE * self.distances[-1] / RETREAT_DISTANCES[-1]  # scaled as the distances
+        return self._solve(theta, p, open_directions(p, distance, self.distances[-1], cap))
+
+    def free(
+        self,
+        theta: np.ndarray,
+        segment_free: Callable[[np.ndarray], bool],
+        distance: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One end's retreats: ``(vias (D, L, dof), free depths (D,))`` (:func:`free_depths`) in
+        :data:`RETREAT_DIRECTIONS`; where none of those is free and the scene's ``distance`` is given,
+        in its most open directions."""
+        vias = self.vias(theta)
+        depth = free_depths(segment_free, theta, vias)
+        if distance is not None and not depth.any():
+            vias = self.vias(theta, distance)
+            depth = free_depths(segment_free, theta, vias)
+        return vias, depth
+
+    def _solve(self, theta: np.ndarray, p: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """The vias ``(D, L, dof)`` of ``theta (1, dof)`` (end effector at ``p``) along ``directions (D, 3)``."""
+        from ..models.chain_kernel import solve_position_numba
+
         D, L = directions.shape[0], self.distances.shape[0]
         out = np.empty((D, L, self.dof))
         q = np.repeat(theta, D, axis=0)
@@ -121,6 +167,18 @@ def _directions(p: np.ndarray) -> np.ndarray:
         n = float(np.linalg.norm(v))
         out.append(v / n if n > 1e-9 else v)
     return np.stack(out)
+
+
+def open_directions(
+    p: np.ndarray, distance: Callable[[np.ndarray], np.ndarray], reach: float, cap: float
+) -> np.ndarray:
+    """The :data:`OPEN_DIRECTIONS` unit directions ``(k, 3)`` of the grid along which the scene is most
+    open from the point ``p (3,)``: ranked by the least signed distance ``distance(points (N, 3))`` of
+    the points at 30–100% of ``reach`` along each, capped at ``cap`` (directions open beyond it tie and
+    keep the grid's order)."""
+    points = p + (_RAY_SHARES[None, :, None] * reach) * _GRID[:, None]  # (26, S, 3)
+    least = np.minimum(distance(points.reshape(-1, 3)).reshape(len(_GRID), -1).min(axis=1), cap)
+    return _GRID[np.argsort(-least, kind="stable")[:OPEN_DIRECTIONS]]
 
 
 def free_depths(
