@@ -171,11 +171,15 @@ class ObstacleStages:
         packed = _packed_scenes(scene, n)  # the scene converted once, for the TM and the check
         # The straight joint line first: the shortest path, so the plan wherever it is free, and then
         # the network need not run.
-        line_free = _lines_free(self, self._line(theta0, thetaT, steps), packed)
-        rows = [(ks.model_rows(), ks.floor) for ks in packed]
-        paths, order = self._proposals(theta0, ef0, thetaT, efT, rows, steps, skip=line_free)
-        pick, free = _first_free(self, paths, order, packed, line_free)
-        out = paths[np.arange(n), pick]
+        line = self._line(theta0, thetaT, steps)
+        line_free = _lines_free(self, line, packed)
+        if line_free.all():  # every plan is its straight line (a batch-1 plan often): nothing to propose
+            out, free, rows, paths = line[:, 0], line_free.copy(), None, None  # no later stage runs
+        else:
+            rows = [(ks.model_rows(), ks.floor) for ks in packed]
+            paths, order = self._proposals(theta0, ef0, thetaT, efT, rows, steps, skip=line_free)
+            pick, free = _first_free(self, paths, order, packed, line_free)
+            out = paths[np.arange(n), pick]
         stage = np.where(free, "learned", "none").astype(object)
         batched = len(scene.batch_shape) > 0
 
