@@ -12,7 +12,7 @@ import torch
 
 from kinlearn.body.robot import load_robot
 from kinlearn.collision import Box, Scene, check_path
-from kinlearn.collision.kernel import KernelBody, KernelScene, first_free, point_distances
+from kinlearn.collision.kernel import KernelBody, KernelScene, check_paths, first_free, point_distances
 from kinlearn.data.problems import ProblemSet
 from kinlearn.errors import ConfigError
 from kinlearn.models.chain import ChainFM
@@ -78,6 +78,15 @@ def test_bad_vias_settings_are_refused():
         Planner.load(DEFAULT_CHECKPOINTS / "panda", retreat="yes")
 
 
+def _checks(body, ks):
+    """The dense check's first colliding segment of a polyline, and its verdict of one configuration."""
+
+    def first_collision(path):
+        return int(check_paths(body, path[None], ks, max_travel=CHECK_TRAVEL, exact=False)[2][0])
+
+    return first_collision, lambda q: first_collision(q[None]) < 0
+
+
 def test_free_depths_stop_at_the_first_segment_torch_finds_colliding(panda, problems):
     """Each chain's depth agrees with torch's dense check (an independent implementation): its first
     `depth` segments free, the next one colliding."""
@@ -88,9 +97,19 @@ def test_free_depths_stop_at_the_first_segment_torch_finds_colliding(panda, prob
         theta = start.numpy()
         vias = panda._retreat_vias().vias(theta)
         ks = KernelScene(scene)
-        depth = R.free_depths(
-            lambda seg, ks=ks: first_free(body, seg[None], ks, max_travel=CHECK_TRAVEL) == 0, theta, vias
-        )
+        depth = R.free_depths(*_checks(body, ks), theta, vias)
+        # the same depths as checking every segment apart
+        for d in range(vias.shape[0]):
+            chain = np.concatenate((theta[None], vias[d]))
+            apart = next(
+                (
+                    k
+                    for k in range(vias.shape[1])
+                    if first_free(body, chain[None, k : k + 2], ks, max_travel=CHECK_TRAVEL) != 0
+                ),
+                vias.shape[1],
+            )
+            assert depth[d] == apart
         for d in range(vias.shape[0]):
             chain = np.concatenate((theta[None], vias[d]))
             for k in range(min(int(depth[d]) + 1, vias.shape[1])):
@@ -143,13 +162,10 @@ def test_an_end_with_no_free_fixed_retreat_retreats_where_its_scene_is_open(pand
     ks = KernelScene(scene)
     body = KernelBody(panda.body)
 
-    def segment_free(seg):
-        return first_free(body, seg[None], ks, max_travel=CHECK_TRAVEL) == 0
-
     vias = panda._retreat_vias()
-    fixed, depth = vias.free(theta, segment_free)
+    fixed, depth = vias.free(theta, *_checks(body, ks))
     assert not depth.any() and np.array_equal(fixed, vias.vias(theta))
-    opened, depth = vias.free(theta, segment_free, lambda x: point_distances(ks, x))
+    opened, depth = vias.free(theta, *_checks(body, ks), lambda x: point_distances(ks, x))
     assert depth.max() == len(R.RETREAT_DISTANCES) and opened.shape == fixed.shape
     for d in np.flatnonzero(depth):
         chain = torch.from_numpy(np.concatenate((theta[None], opened[d, : depth[d]])))

@@ -251,8 +251,11 @@ class ObstacleStages:
         def first_free(paths, order):
             return k.first_free(body, paths, nscene, order, max_travel=CHECK_TRAVEL)
 
-        def segment_free(segment):
-            return k.first_free(body, segment[None], nscene, max_travel=CHECK_TRAVEL) == 0
+        def first_collision(path):  # the walk alone (a chain's depth is where it first collides)
+            return int(k.check_paths(body, path[None], nscene, max_travel=CHECK_TRAVEL, exact=False)[2][0])
+
+        def config_free(q):
+            return first_collision(q[None]) < 0
 
         transfer = None
         if self.obstacle_tm is not None:
@@ -267,8 +270,8 @@ class ObstacleStages:
             return k.point_distances(nscene, points)
 
         (v0, d0), (vT, dT) = (
-            vias.free(theta0, segment_free, distance),
-            vias.free(thetaT, segment_free, distance),
+            vias.free(theta0, first_collision, config_free, distance),
+            vias.free(thetaT, first_collision, config_free, distance),
         )
         return retreat_path(
             theta0,

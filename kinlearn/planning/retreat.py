@@ -120,17 +120,18 @@ class RetreatVias:
     def free(
         self,
         theta: np.ndarray,
-        segment_free: Callable[[np.ndarray], bool],
+        first_collision: Callable[[np.ndarray], int],
+        config_free: Callable[[np.ndarray], bool],
         distance: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """One end's retreats: ``(vias (D, L, dof), free depths (D,))`` (:func:`free_depths`) in
-        :data:`RETREAT_DIRECTIONS`; where none of those is free and the scene's ``distance`` is given,
-        in its most open directions."""
+        """One end's retreats: ``(vias (D, L, dof), free depths (D,))`` (:func:`free_depths`, with its
+        checks) in :data:`RETREAT_DIRECTIONS`; where none of those is free and the scene's ``distance``
+        is given, in its most open directions."""
         vias = self.vias(theta)
-        depth = free_depths(segment_free, theta, vias)
+        depth = free_depths(first_collision, config_free, theta, vias)
         if distance is not None and not depth.any():
             vias = self.vias(theta, distance)
-            depth = free_depths(segment_free, theta, vias)
+            depth = free_depths(first_collision, config_free, theta, vias)
         return vias, depth
 
     def _solve(self, theta: np.ndarray, p: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -182,20 +183,23 @@ def open_directions(
 
 
 def free_depths(
-    segment_free: Callable[[np.ndarray], bool], theta: np.ndarray, vias: np.ndarray
+    first_collision: Callable[[np.ndarray], int],
+    config_free: Callable[[np.ndarray], bool],
+    theta: np.ndarray,
+    vias: np.ndarray,
 ) -> np.ndarray:
     """``(D,)``: per direction, how many of ``vias (D, L, dof)``'s vias the chain from ``theta``
-    reaches through free segments (0: its first segment collides). ``segment_free(path (2, dof))``:
-    the dense check's verdict."""
+    reaches through free segments (0: its first segment collides). ``first_collision(path (W, dof))``:
+    the dense check's first colliding segment of a polyline (−1: none), its walk stopping there;
+    ``config_free(q (dof,))``: its verdict of one configuration. Each chain is walked once as a
+    polyline: a collision found in segment f (f > 0) lies in it or at its first knot, via f − 1, which
+    the segment before it ends at; checked alone, that via tells which (the depths of checking every
+    segment apart, to the bit)."""
     D, L, _ = vias.shape
     depth = np.zeros(D, dtype=np.int64)
     for d in range(D):
-        prev = theta
-        for k in range(L):
-            if not segment_free(np.stack((prev, vias[d, k]))):
-                break
-            depth[d] = k + 1
-            prev = vias[d, k]
+        f = first_collision(np.concatenate((theta[None], vias[d])))
+        depth[d] = L if f < 0 else f - 1 if f > 0 and not config_free(vias[d, f - 1]) else f
     return depth
 
 
