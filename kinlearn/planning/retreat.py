@@ -13,8 +13,8 @@ keeps the network for what it does well, the transfer between two points in the 
    reach, scaled by the arm's); each via solved from the one before by a fixed number of projected
    damped least-squares steps on the planner's kinematic chain (the identified one where the planner
    has it: :mod:`kinlearn.models.chain`), so that the joint line between neighbours moves the hand
-   nearly straight. How deep each chain is free from its end is found by the compiled dense check,
-   segment by segment (a chain is cut at its first colliding segment). An end with no free retreat in
+   nearly straight. How deep each chain is free from its end is found by the compiled dense check, one
+   walk along it (a chain is cut at its first colliding segment). An end with no free retreat in
    those directions (a cell that opens sideways or downward, a hand under a board) retreats instead in
    the :data:`OPEN_DIRECTIONS` directions along which the scene is most open from its end effector
    (:func:`open_directions`: of the 26 of a cube's faces, edges and corners, those whose points out to
@@ -28,8 +28,9 @@ keeps the network for what it does well, the transfer between two points in the 
    problem of its own (the straight line first, then its paths both ways), the shortest free.
 
 Every count is fixed: the solver's steps, the vias (an end's open directions at most once), the path
-checks, at most 2 × :data:`RETREAT_TRANSFERS` network passes. The stage runs only for problems the learned proposals
-left colliding, so the plans they clear do not change (:mod:`kinlearn.planning.stages`).
+checks, at most 2 × :data:`RETREAT_TRANSFERS` network passes. The stage runs only for problems the
+learned proposals left colliding, so the plans they clear do not change
+(:mod:`kinlearn.planning.stages`).
 """
 
 from __future__ import annotations
