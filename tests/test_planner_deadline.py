@@ -202,3 +202,44 @@ print(first[0], seen[-1])
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split("\n")[-2] == "(False, False, False) (True, True, True)"
+
+
+_COMPILED_AFTER_WARM_UP = """
+import sys, warnings, numba
+import kinlearn
+from kinlearn.data.problems import ProblemSet
+
+def compiled():
+    return {
+        f"{m.__name__}.{k}": len(v.signatures)
+        for m in list(sys.modules.values()) if getattr(m, "__name__", "").startswith("kinlearn")
+        for k, v in vars(m).items() if isinstance(v, numba.core.registry.CPUDispatcher)
+    }
+
+warnings.simplefilter("ignore")
+planner = kinlearn.Planner.default("panda")
+planner.warm_up()
+before = compiled()
+ps = ProblemSet.load(sys.argv[1], robot="panda")
+for i in (1, 4, 33, 60):  # retreats, a join, transfers, open directions, a network plan
+    start, goal, scene = ps.problem(i)
+    planner.plan(start, goal, obstacles=scene, refine_steps=0)
+    planner.plan(start, goal, obstacles=scene, deadline=0.05)
+print(sorted(k for k, n in compiled().items() if n != before.get(k, 0)))
+"""
+
+
+def test_no_plan_compiles_after_the_warm_up():
+    """Planner.warm_up (which plan calls before a deadline's clock starts) loads every compiled function
+    the stages call: the plans after it compile nothing (in a fresh process, where nothing else has)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-c", _COMPILED_AFTER_WARM_UP, str(SCENES)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=True,
+    )
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout + out.stderr
