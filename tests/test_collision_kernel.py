@@ -158,6 +158,8 @@ def test_point_distances_match_torch():
         K.point_distances(K.KernelScene(scene), np.zeros((3, 2)))
     with pytest.raises(ObstacleError):
         K.point_distances(scene, np.zeros((3, 3)))
+    with pytest.raises(NonFiniteError):
+        K.point_distances(K.KernelScene(scene), np.array([[0.0, np.nan, 0.0]]))
 
 
 def test_typed_errors():

@@ -1219,7 +1219,8 @@ def warm_up() -> None:
     from ..body.robot import load_robot
     from .body import body_spheres
 
-    body = KernelBody(body_spheres(load_robot("iiwa14")).double())
+    robot = load_robot("iiwa14")
+    body = KernelBody(body_spheres(robot).double())
     scene = KernelScene(Scene.from_spheres([[0.5, 0.0, 0.5, 0.1]], floor=0.0))
     path = np.zeros((1, 2, body.dof))
     check_paths(body, path, scene)
@@ -1230,6 +1231,6 @@ def warm_up() -> None:
     centres(body, path[0])
     point_distances(scene, np.zeros((1, 3)))
     scene.model_rows()
-    chain = KernelChain.of(load_robot("iiwa14"))
+    chain = KernelChain.of(robot)
     chain.position(path[0])
     chain.checked(path[0], 1e-6)

@@ -200,7 +200,12 @@ def free_depths(
     depth = np.zeros(D, dtype=np.int64)
     for d in range(D):
         f = first_collision(np.concatenate((theta[None], vias[d])))
-        depth[d] = L if f < 0 else f - 1 if f > 0 and not config_free(vias[d, f - 1]) else f
+        if f < 0:
+            depth[d] = L
+        elif f > 0 and not config_free(vias[d, f - 1]):  # the collision is at segment f's first knot
+            depth[d] = f - 1
+        else:
+            depth[d] = f
     return depth
 
 
