@@ -105,6 +105,34 @@ def test_path_checks_match_check_path(arm):
     assert 0 < sum(frees) < len(frees)
 
 
+def test_the_walk_reports_a_colliding_configuration_of_its_grid(arm):
+    """The walk's hit (segment, fraction) is a configuration of the dense check's grid that collides (it
+    becomes a probe hint for the next candidates: a hint that did not collide would only cost probes,
+    but one off the grid would make the probe see what the dense check does not)."""
+    robot, _, kb = arm
+    rng = np.random.default_rng(5)
+    f, n = kb.packed
+    hits = 0
+    for s in range(3):
+        scene = random_scene(rng, n=int(rng.integers(2, 6)))
+        ks = K.KernelScene(scene)
+        for path in _random_paths(robot, 12, int(rng.integers(2, 6)), seed=20 + s, spread=0.3):
+            first, _, frac = K._verdict_packed(path, 0.01, 0.0, f, n, ks.packed)
+            if first < 0:
+                continue
+            hits += 1
+            if first == len(path) - 1:  # the final knot
+                q = path[-1]
+            else:
+                steps = np.empty(len(path) - 1)
+                K._grid_steps(path, 0.01, kb.lever, steps)
+                assert float(frac * steps[first]) == pytest.approx(round(frac * steps[first]), abs=1e-9)
+                q = path[first] + frac * (path[first + 1] - path[first])
+            d, sc = K.clearances(kb, ks, q[None])
+            assert min(d[0], sc[0]) <= 0.0
+    assert hits >= 5
+
+
 def test_the_planners_verdicts_on_the_heldout_problems_are_unchanged():
     """On the committed held-out problems the kernel picks the candidate torch's check_path picks (the
     first collision-free one in the planner's order), as the NumPy check before it did."""

@@ -428,8 +428,9 @@ def _expiry_lever(b, k, i, absd, left, lever, row, steps, offset):
 
 @_jit
 def _verdict(path, max_travel, margin, body, scene):
-    """One path ``(W, dof)``: (first colliding segment or −1, configurations evaluated), the verdict of
-    checking every sub-step. Each sphere's clearance and each pair's distance, once computed, is a
+    """One path ``(W, dof)``: (first colliding segment or −1, configurations evaluated, the colliding
+    configuration's fraction of that segment, a sub-step of the grid), the verdict of checking every
+    sub-step. Each sphere's clearance and each pair's distance, once computed, is a
     budget that the spheres' travel bounds use up along the path; a configuration is evaluated only
     where some budget may be spent, and then only the spent items are recomputed. The pairs of a
     sphere with the spheres of one lower link go as one item, group g: sphere ``g_sphere[g]`` against
@@ -476,6 +477,7 @@ def _verdict(path, max_travel, margin, body, scene):
         while k < T and pos >= offset[k + 1]:
             k += 1
         i = pos - offset[k]
+        frac = 0.0
         if k < T:
             frac = i / steps[k]
             for j in range(dof):
@@ -495,7 +497,7 @@ def _verdict(path, max_travel, margin, body, scene):
                     c[m, 0], c[m, 1], c[m, 2], radii[m], on_floor[m], spheres, boxes, cylinders, floor
                 )
                 if d <= margin:
-                    return k, evaluated
+                    return k, evaluated, frac
                 due_m[m] = _expiry_lever(d - margin - _SLACK, k, i, absd, left, lever, m, steps, offset)
             nxt = min(nxt, due_m[m])
         for p in range(P):
@@ -505,7 +507,7 @@ def _verdict(path, max_travel, margin, body, scene):
                 dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
                 d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[a] - radii[b]
                 if d <= 0.0:
-                    return k, evaluated
+                    return k, evaluated, frac
                 due_p[p] = _expiry_lever(d - _SLACK, k, i, absd, left, p_lever, p, steps, offset)
             nxt = min(nxt, due_p[p])
         for g in range(G):
@@ -523,12 +525,12 @@ def _verdict(path, max_travel, margin, body, scene):
                         dx, dy, dz = c[x, 0] - c[b, 0], c[x, 1] - c[b, 1], c[x, 2] - c[b, 2]
                         d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[x] - radii[b]
                         if d <= 0.0:
-                            return k, evaluated
+                            return k, evaluated, frac
                         due = min(due, _expiry_lever(d - _SLACK, k, i, absd, left, m_lever, e, steps, offset))
                     due_g[g] = due
             nxt = min(nxt, due_g[g])
         if nxt > end:
-            return -1, evaluated
+            return -1, evaluated, 0.0
         pos = nxt
 
 
@@ -650,9 +652,12 @@ def _first_free(paths, order, max_travel, margin, body, scene, n_hints):
         if hit:
             nh = _remember(hints, nh, h, k, frac)
             continue
-        first, _ = _verdict(paths[order[i]], max_travel, margin, body, scene)
+        first, _, frac = _verdict(paths[order[i]], max_travel, margin, body, scene)
         if first < 0:
             return order[i]
+        # the walk found a hit the probe missed: the next candidates are probed there first
+        last = paths.shape[1] - 2  # a hit at the final knot: the last sub-step before it
+        nh = _remember(hints, nh, -1, min(first, last), frac if first <= last else 1.0)
     return -1
 
 
@@ -1168,7 +1173,7 @@ def check_paths(
                 arr[i], float(max_travel), float(margin), True, *body.args(), body.lever, *scene.args()
             )
         else:
-            first[i], _ = _verdict_packed(
+            first[i], _, _ = _verdict_packed(
                 arr[i], float(max_travel), float(margin), *body.packed, scene.packed
             )
             clear[i] = np.nan
