@@ -8,7 +8,8 @@ The candidates are those ``plan(..., refine_steps=0)`` checks (the straight line
 network's paths both ways, shortest first) on the committed held-out problems of the seven scene families
 (``benchmarks/data/scene_problems_{robot}.npz``). Four ways to the same answer:
 
-- ``first_free``: each candidate probed first where the last candidates hit the scene, then at spread
+- ``first_free``: each candidate probed first where the last candidates hit the scene (where a probe
+  or a walk found their collision), then at spread
   grid configurations, scene only, link by link behind a ball per link (a hit is a collision), then
   walked with budgets (the planner's check); also without the places of the last hits;
 - the walk alone: the budgeted verdict of each candidate in order until one is free;

@@ -645,7 +645,7 @@ def _remember(hints, nh, h, k, frac):
 @_jit
 def _first_free(paths, order, max_travel, margin, body, scene, n_hints):
     """The first free path of ``order`` (−1: none), each probed (:func:`_probe`, with the ``n_hints`` last
-    places candidates hit) then walked (:func:`_verdict`)."""
+    places candidates hit, found by a probe or by a walk) then walked (:func:`_verdict`)."""
     hints, nh = np.empty((n_hints, 2)), 0
     for i in range(order.shape[0]):
         hit, k, frac, h = _probe(paths[order[i]], max_travel, margin, body, scene, hints, nh)
