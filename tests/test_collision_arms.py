@@ -11,11 +11,11 @@ import pytest
 import torch
 
 import kinlearn
-from kinlearn import load_robot
+from kinlearn import kinematics, load_robot
 from kinlearn.collision import Scene, body_obstacle_distance, body_spheres, self_collision_distance
 from kinlearn.collision.body import urdf_spheres
 from kinlearn.collision.geometry import Box, Cylinder, Sphere, rotation_from_quaternion
-from kinlearn.errors import RobotDescriptionError
+from kinlearn.errors import ConfigError, RobotDescriptionError
 
 ROBOTS = Path(__file__).resolve().parents[1] / "robots"
 #: The links of kinlearn's ur5 that carry spheres (the sensor and gripper under ee_link are not its).
@@ -80,12 +80,28 @@ def test_spheres_sit_where_pinocchio_puts_them(name, count):
         assert len(set(d.argmin(axis=1))) == count
 
 
-def test_ur5_keeps_its_arm_and_drops_the_gripper_and_stand():
+def test_ur5_keeps_its_arm_drops_the_stand_and_carries_the_gripper_on_request():
     robot = load_robot("ur5")
     spheres = urdf_spheres(robot, ROBOTS / "ur5" / "ur5_spherized.urdf", ("ee_link",))
     assert np.bincount(spheres[:, 0].astype(int)).tolist() == [1, 1, 5, 9, 3, 3, 1]
     everything = urdf_spheres(robot, ROBOTS / "ur5" / "ur5_spherized.urdf")  # gripper folded onto wrist 3
     assert len(everything) == 40 and int((everything[:, 0] == 6).sum()) == 1 + 17  # sensor 1, gripper 16
+    arm, tool = body_spheres(robot).double(), body_spheres(robot, sphere_set="gripper").double()
+    assert arm.num_spheres == 23 and tool.num_spheres == 40 and tool.name == "gripper"
+    assert np.allclose(np.sort(tool.radii.numpy()), np.sort(everything[:, 4]))
+    # The tool reaches 0.1 m and more past the flange (along the last joint's axis); the arm does not.
+    q = robot.sample(4, torch.Generator().manual_seed(2), dtype=torch.float64)
+    flange = kinematics(robot, "fast").position(q).numpy()[:, None]
+
+    def past(body):  # how far the last link's spheres reach from the flange
+        last = body.link.numpy() == 6
+        return (np.linalg.norm(body(q).numpy()[:, last] - flange, axis=-1) + body.radii.numpy()[last]).max(-1)
+
+    assert (past(tool) > past(arm) + 0.1).all()
+    with pytest.raises(RobotDescriptionError, match="no 'hand' sphere set"):
+        body_spheres(robot, sphere_set="hand")
+    with pytest.raises(ConfigError, match="not both"):
+        body_spheres(robot, dense=True, sphere_set="gripper")
 
 
 @pytest.mark.parametrize("name", ["panda", "ur5"])

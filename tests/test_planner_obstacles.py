@@ -338,3 +338,27 @@ def test_a_free_straight_line_is_the_plan_without_running_the_network(planner, p
 def _plan_one(planner, problems, i):
     s, g, scene = problems.problem(i)
     return planner.plan(s, g, obstacles=scene, refine_steps=0)
+
+
+def test_the_ur5_plans_with_the_tool_its_benchmarks_carry():
+    """The ur5's planner checks with its arm carrying the standard benchmarks' sensor and gripper
+    (planning_body): on a held-out problem a gripper-carrying UR5 can start and end in, the plan the arm's
+    body alone calls free sweeps the gripper through the scene; the default plan is free for the tool."""
+    from kinlearn import load_robot
+    from kinlearn.collision import body_spheres, planning_body
+
+    robot = load_robot("ur5")
+    planner = Planner.default("ur5")
+    assert planner.body.name == "gripper" and planner.body.num_spheres == 40
+    assert planning_body(load_robot("panda")).name == body_spheres(load_robot("panda")).name
+    tool = planning_body(robot).double()
+    problems = ProblemSet.load(BENCHMARK.with_name("scene_problems_ur5.npz"), robot="ur5")
+    start, goal, scene = problems.problem(10)
+    arm_plan = Planner.default("ur5", body=body_spheres(robot)).plan(
+        start, goal, obstacles=scene, refine_steps=0
+    )
+    assert bool(arm_plan.collision_free)
+    assert not bool(check_path(tool, arm_plan.joints, scene).collision_free)  # the gripper collides
+    plan = planner.plan(start, goal, obstacles=scene, refine_steps=0)
+    assert bool(plan.collision_free) and bool(plan.success)
+    assert bool(check_path(tool, plan.joints, scene).collision_free)

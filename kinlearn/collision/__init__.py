@@ -6,7 +6,7 @@ batch-1 kernels are :mod:`kinlearn.collision.kernel` (imported on its own: it lo
 Imports only from the robot, kinematics, errors and io layers.
 """
 
-from .body import BodySpheres, body_spheres, cover_cylinder, sphere_sets
+from .body import BodySpheres, body_spheres, cover_cylinder, planning_body, sphere_sets
 from .check import PathCheck, check_path, clearances, in_collision, segment_steps
 from .distance import (
     body_obstacle_distance,
@@ -36,6 +36,7 @@ __all__ = [
     "clearances",
     "cover_cylinder",
     "in_collision",
+    "planning_body",
     "segment_steps",
     "self_collision_distance",
     "sphere_box_distance",

@@ -26,7 +26,7 @@ from ..body.kinematics import FastKinematics, _snap, _z_to_axis, kinematics
 from ..body.robot import Robot, _bundled_dir
 from ..errors import ConfigError, RobotDescriptionError
 
-__all__ = ["SPHERE_FILE", "BodySpheres", "body_spheres", "cover_cylinder", "sphere_sets"]
+__all__ = ["SPHERE_FILE", "BodySpheres", "body_spheres", "cover_cylinder", "planning_body", "sphere_sets"]
 
 #: File name of a robot's sphere model inside its folder of the bundled ``robots/``.
 SPHERE_FILE = "collision_spheres.json"
@@ -483,21 +483,32 @@ def _from_urdf(
     return hit
 
 
-def body_spheres(robot: Robot, dense: bool = False, base: bool = True) -> BodySpheres:
+def body_spheres(
+    robot: Robot, dense: bool = False, base: bool = True, sphere_set: str | None = None
+) -> BodySpheres:
     """The collision spheres of ``robot``: its default set (the iiwa14: Drake's 12 spheres and 6 covering
-    the base; panda and ur5: the spherized URDFs of ``robots/``; a robot registered with
-    ``spheres=PATH``: that URDF), or with ``dense=True`` the iiwa14's 46-sphere set.
+    the base; panda and ur5: the spherized URDFs of ``robots/``, the panda's hand included, the ur5's arm
+    alone; a robot registered with ``spheres=PATH``: that URDF), or with ``dense=True`` the iiwa14's
+    46-sphere set, or the set named ``sphere_set`` (``robots/<robot>/collision_spheres.json`` lists them:
+    the ur5's ``"gripper"`` carries the force–torque sensor and Robotiq gripper of the standard
+    benchmarks' UR5).
 
     ``base=False`` leaves out the base's spheres (they never move: useful where only the arm matters).
-    Raises :class:`~kinlearn.errors.RobotDescriptionError` for a robot without a sphere model.
+    Raises :class:`~kinlearn.errors.RobotDescriptionError` for a robot without a sphere model or without
+    the set asked for.
     """
     own = getattr(robot, "sphere_urdf", None)
-    if own is not None and not dense:
+    if own is not None and not dense and sphere_set is None:
         spheres, pairs = _from_urdf(robot, Path(own), (), {})
         name = "spherized"
     else:
         model = sphere_sets(robot)
-        key = "dense" if dense else model.get("default_set", "sparse")
+        if sphere_set is not None and dense:
+            raise ConfigError("give dense=True or a sphere_set, not both")
+        if sphere_set is not None:
+            key = sphere_set
+        else:
+            key = "dense" if dense else model.get("default_set", "sparse")
         if key not in model["sets"]:
             raise RobotDescriptionError(
                 f"robot {robot.name!r} has no {key!r} sphere set (it has {', '.join(model['sets'])})"
@@ -529,3 +540,18 @@ def body_spheres(robot: Robot, dense: bool = False, base: bool = True) -> BodySp
         pairs = renumber[pairs[keep]] if len(pairs) else pairs
         spheres = spheres[moving]
     return BodySpheres(robot, spheres, pairs, name=name)
+
+
+def planning_body(robot: Robot) -> BodySpheres:
+    """The body a planner checks its plans with by default: the robot's planning set where its sphere
+    model names one (``planning_set`` in ``robots/<robot>/collision_spheres.json``: the ur5's
+    ``"gripper"``, its arm carrying the force–torque sensor and Robotiq gripper of the standard benchmarks'
+    UR5, never narrower than the arm with that tool), else :func:`body_spheres`' default. Problems are
+    generated, networks trained and paths judged with :func:`body_spheres` (the arm the robot's model
+    describes); a plan flagged collision-free by the planner is free for both."""
+    own = getattr(robot, "sphere_urdf", None)
+    if own is None:
+        name = sphere_sets(robot).get("planning_set")
+        if name is not None:
+            return body_spheres(robot, sphere_set=name)
+    return body_spheres(robot)

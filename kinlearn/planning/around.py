@@ -18,7 +18,7 @@ import copy
 import numpy as np
 import torch
 
-from ..collision.body import BodySpheres, body_spheres
+from ..collision.body import BodySpheres, planning_body
 from ..collision.scene import Scene
 from ..data.problem import positions
 from ..models.chain import ChainFM
@@ -66,9 +66,11 @@ class ObstacleStages:
 
     @property
     def body(self) -> BodySpheres:
-        """The collision spheres plans are checked with (float64; made once, the given body untouched)."""
+        """The collision spheres plans are checked with (float64; made once, the given body untouched): the
+        given one, else the robot's planning body (:func:`~kinlearn.collision.planning_body`: the ur5's
+        carries the standard benchmarks' gripper)."""
         if self._body64 is None:
-            body = body_spheres(self.robot) if self._body is None else self._body
+            body = planning_body(self.robot) if self._body is None else self._body
             self._body64 = body if body.radii.dtype == torch.float64 else copy.deepcopy(body).double()
         return self._body64
 

@@ -128,7 +128,9 @@ class Planner(ObstacleStages):
         restarts, within the joint limits, a fixed budget), instead of stepping the IM through the FM.
 
         ``obstacle_tm``: the obstacle-aware TM that plans when obstacles are given; ``body``: the arm's
-        collision spheres its plans are checked with (default: the robot's analytic sphere model).
+        collision spheres its plans are checked with (default: the robot's planning body,
+        :func:`~kinlearn.collision.planning_body`: its analytic sphere model, the ur5's carrying the
+        standard benchmarks' gripper; ``body_spheres(robot)`` for the arm alone).
         ``retreat``: where no proposed path is collision-free, the retreat stage
         (:mod:`kinlearn.planning.retreat`: out of the start's cell and into the goal's along fixed
         end-effector retreats, the straight line or the network across; fixed time) before anything
