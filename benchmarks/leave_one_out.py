@@ -71,14 +71,15 @@ def train(robot: str, family: str, args, run: Path) -> Path:
     return out
 
 
-def planner_with(network: Path, robot: str, folder: Path) -> kinlearn.Planner:
-    """The shipped planner of ``robot`` with ``network`` as its obstacle network (a folder copy)."""
+def planner_with(network: Path, robot: str, folder: Path, body) -> kinlearn.Planner:
+    """The shipped planner of ``robot`` with ``network`` as its obstacle network (a folder copy), checking
+    with ``body`` (the body the problems were made for)."""
     folder.mkdir(parents=True, exist_ok=True)
     shipped = Path(kinlearn.__file__).parent / "checkpoints" / robot
     for f in shipped.glob("*.pt"):
         shutil.copy2(f, folder / f.name)
     shutil.copy2(network, folder / "tm_obstacles.pt")
-    return kinlearn.Planner.load(folder)
+    return kinlearn.Planner.load(folder, body=body)
 
 
 def success(planner, problems, body, **kw) -> np.ndarray:
@@ -132,9 +133,9 @@ def main() -> None:
     body = body_spheres(robot).double()
     fam = problems.family.numpy()
     ref_folder = args.reference or Path(kinlearn.__file__).parent / "checkpoints" / args.robot
-    reference = kinlearn.Planner.load(ref_folder)
+    reference = kinlearn.Planner.load(ref_folder, body=body)  # every plan checked as it is judged
     has_retreat = "retreat" in inspect.signature(kinlearn.Planner.__init__).parameters
-    ref_alone = kinlearn.Planner.load(ref_folder, retreat=False) if has_retreat else reference
+    ref_alone = kinlearn.Planner.load(ref_folder, retreat=False, body=body) if has_retreat else reference
     if args.candidates is None:  # trained as the network it is compared with
         args.candidates = reference.obstacle_tm.config.candidates
     ref_ok = success(reference, problems, body, refine_steps=0)
@@ -148,11 +149,11 @@ def main() -> None:
             raise SystemExit(f"unknown family {f!r}")
         mine = fam == FAMILIES.index(f)
         net = train(args.robot, f, args, args.run_root / f"without-{f}")
-        planner = planner_with(net, args.robot, args.run_root / f"planner-without-{f}")
+        planner = planner_with(net, args.robot, args.run_root / f"planner-without-{f}", body)
         assert f not in planner.obstacle_tm.families, planner.obstacle_tm.families
         fixed = success(planner, problems, body, refine_steps=0)
         if has_retreat:  # the same folder again, without the retreat stage
-            alone = kinlearn.Planner.load(args.run_root / f"planner-without-{f}", retreat=False)
+            alone = kinlearn.Planner.load(args.run_root / f"planner-without-{f}", retreat=False, body=body)
             alone_ok = success(alone, problems, body, refine_steps=0)
         else:
             alone_ok = fixed

@@ -57,7 +57,7 @@ from kinlearn.planning.planner import DEFAULT_CHECKPOINTS
 DATA = Path(__file__).parent / "data"
 
 
-def _planner_rows(planner, folder: Path) -> dict:
+def _planner_rows(planner, folder: Path, body) -> dict:
     """kinlearn's plan as path functions, with and without a deadline (if this kinlearn has it); where
     this kinlearn has the retreat stage, its fixed-time stage also without it (the network alone) and
     without the network (the straight line and the retreat stage: what a planner trained on nothing
@@ -73,8 +73,8 @@ def _planner_rows(planner, folder: Path) -> dict:
 
     rows = {"kinlearn fixed time (refine_steps=0)": lambda s, g, sc: run(s, g, sc, refine_steps=0)}
     if has_retreat:
-        alone = kinlearn.Planner.load(folder, retreat=False)
-        bare = kinlearn.Planner.load(folder, obstacle_tm=None)
+        alone = kinlearn.Planner.load(folder, retreat=False, body=body)
+        bare = kinlearn.Planner.load(folder, obstacle_tm=None, body=body)
         rows["kinlearn fixed time, network alone (retreat=False)"] = lambda s, g, sc: run(
             s, g, sc, planner=alone, refine_steps=0
         )
@@ -89,7 +89,7 @@ def _planner_rows(planner, folder: Path) -> dict:
 
 def methods(planner, folder, body, budgets, ompl_budgets, opt_steps) -> dict:
     rows = {"joint line": lambda s, g, sc: (joint_line_path(s, g, sc, body=body)[0], None)}
-    rows.update(_planner_rows(planner, folder))
+    rows.update(_planner_rows(planner, folder, body))
     for b in budgets:
         rows[f"compiled RRT-Connect, {b:g} s"] = lambda s, g, sc, b=b: (
             compiled_rrt_connect(s, g, sc, time_limit=b, body=body)[0],
@@ -140,7 +140,9 @@ def main() -> None:
     print(f"{len(problems)} problems from {path} ({', '.join(f'{f} {len(problems.of(f))}' for f in fams)})")
     print(f"hard (straight joint line collides): {int(problems.hard.sum())}")
     folder = args.planner or DEFAULT_CHECKPOINTS / args.robot
-    planner = kinlearn.Planner.load(folder)
+    # Every row plans and is judged with the body the problems were made for (body_spheres: for the ur5
+    # its arm alone; its planner's default carries the gripper, benchmarks/ur5_gripper.py)
+    planner = kinlearn.Planner.load(folder, body=body)
     trained = None if planner.obstacle_tm is None else planner.obstacle_tm.families
     left_out = [f for f in fams if trained is not None and f not in trained]
     print(
