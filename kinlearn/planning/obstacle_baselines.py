@@ -4,8 +4,9 @@ Every function takes the start and goal joints ``(dof,)`` and a :class:`~kinlear
 (unbatched) and returns ``(path, seconds)``: the joint path ``(K, dof)`` (float64, CPU; executing it
 means moving linearly in joint space between consecutive rows; ``path[0]`` is the start and
 ``path[-1]`` the goal exactly) or ``None`` when the method found none, and the wall time of the call.
-The body is the robot's 12-sphere model with the base (:func:`~kinlearn.collision.body_spheres`)
-unless one is passed; its robot is the robot planned for.
+The body is the iiwa14's 12-sphere model with the base, or for another robot the body its planner checks
+with (:func:`default_body`, :func:`~kinlearn.collision.planning_body`), unless one is passed; its robot
+is the robot planned for.
 
 ===============================  =================================================================
 :func:`joint_line_path`          the straight joint-space line (:func:`kinlearn.planning.baselines.joint_line`
@@ -58,7 +59,13 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
 from ..checks import as_int
-from ..collision import BodySpheres, Scene, body_obstacle_distance, body_spheres, self_collision_distance
+from ..collision import (
+    BodySpheres,
+    Scene,
+    body_obstacle_distance,
+    planning_body,
+    self_collision_distance,
+)
 from ..collision.ompl import OmplRrtConnect
 from ..data.problem import Problem
 from ..errors import ConfigError, ShapeError, UnknownRobotError
@@ -118,11 +125,13 @@ _F64 = torch.float64
 
 @cache
 def _body_for(robot_name: str) -> BodySpheres:
-    return body_spheres(load_robot(robot_name)).double()
+    return planning_body(load_robot(robot_name)).double()
 
 
 def default_body(robot: str = "iiwa14") -> BodySpheres:
-    """The 12-sphere body with the base (float64) of a bundled robot, built once per process."""
+    """The body a bundled robot's planners check with (float64, built once per process): its
+    :func:`~kinlearn.collision.planning_body` (the iiwa14's 12 spheres with the base; the ur5's arm with
+    the standard benchmarks' gripper), the body kinlearn's own planner uses."""
     return _body_for(robot)
 
 
@@ -423,7 +432,8 @@ def trajectory_optimiser(
 class _PathPlanner(Baseline):
     """A one-problem-at-a-time path function as a planner of problem batches (see the module docstring).
     ``robot``: a :class:`~kinlearn.body.robot.Robot`, its name or its :class:`~kinlearn.collision.BodySpheres`
-    (the spheres it plans around; by default the robot's 12-sphere body with the base, float64)."""
+    (the spheres it plans around; by default the body kinlearn's planner checks with, float64:
+    :func:`default_body`)."""
 
     avoids_obstacles: ClassVar[bool] = True
     one_at_a_time: ClassVar[bool] = True
@@ -436,7 +446,7 @@ class _PathPlanner(Baseline):
                 bundled = load_robot(self.robot.name) is self.robot
             except UnknownRobotError:  # a Robot made from a URDF, under no registered name
                 bundled = False
-            body = default_body(self.robot.name) if bundled else body_spheres(self.robot).double()
+            body = default_body(self.robot.name) if bundled else planning_body(self.robot).double()
             object.__setattr__(self, "body", body)
 
     def _path(self, start: torch.Tensor, goal: torch.Tensor, scene: Scene) -> torch.Tensor | None:
