@@ -546,9 +546,10 @@ def planning_body(robot: Robot) -> BodySpheres:
     """The body a planner checks its plans with by default: the robot's planning set where its sphere
     model names one (``planning_set`` in ``robots/<robot>/collision_spheres.json``: the ur5's
     ``"gripper"``, its arm carrying the force–torque sensor and Robotiq gripper of the standard benchmarks'
-    UR5, never narrower than the arm with that tool), else :func:`body_spheres`' default. Problems are
-    generated, networks trained and paths judged with :func:`body_spheres` (the arm the robot's model
-    describes); a plan flagged collision-free by the planner is free for both."""
+    UR5, never narrower than the arm with that tool), else :func:`body_spheres`' default. ``judge`` and the
+    obstacle baselines check with it too; problems are generated and networks trained with
+    :func:`body_spheres` (the arm the robot's model describes). A plan flagged collision-free is free for
+    both."""
     own = getattr(robot, "sphere_urdf", None)
     if own is None:
         name = sphere_sets(robot).get("planning_set")

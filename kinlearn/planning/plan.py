@@ -13,7 +13,7 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import Robot
 from ..checks import as_real, check_finite, check_last_dim
-from ..collision.body import BodySpheres, body_spheres
+from ..collision.body import BodySpheres, planning_body
 from ..collision.check import check_path
 from ..data.problem import LIMIT_TOLERANCE, SMALL_BATCH, Problem
 from ..errors import ConfigError, ShapeError
@@ -327,7 +327,8 @@ def judge(
     ``found (...)``: where the planner found a path at all (a search that ran out of time gives a
     stand-in path with ``found`` False): ``success`` requires it, and that the path starts at the
     problem's start (within :data:`START_TOLERANCE`). ``body``: the collision spheres to check with
-    (default: :func:`~kinlearn.collision.body_spheres` of the robot, built for this call).
+    (default: :func:`~kinlearn.collision.planning_body` of the robot, the body its planners check with,
+    built for this call).
     ``collision_free (...)``: verdicts of this very dense check already computed by the caller (the
     learned planner checks its candidates with it, and passes the chosen ones'), taken instead of
     checking again; it is ignored without obstacles. ``stage``: the plan's :attr:`Plan.stage`.
@@ -407,7 +408,7 @@ def judge(
         if collision_free is not None:
             free = torch.as_tensor(collision_free, dtype=torch.bool).reshape(problem.batch_shape)
         else:
-            body = body_spheres(robot) if body is None else body
+            body = planning_body(robot) if body is None else body
             free = check_path(body, joints, problem.obstacles, max_travel=max_travel).collision_free
     state = problem.goal_kind == "state"
     goal = problem.goal if state else torch.cat((joints[..., -1, :], ef[..., -1, :]), dim=-1)
@@ -485,7 +486,7 @@ def _judge_small(
         else:
             from ..collision import kernel
 
-            kb = kernel.KernelBody.of(body_spheres(robot) if body is None else body)
+            kb = kernel.KernelBody.of(planning_body(robot) if body is None else body)
             scene = problem.obstacles
             unbatched = len(scene.batch_shape) == 0
             flat_scene = None if unbatched else scene.reshape(n)
