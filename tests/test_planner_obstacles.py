@@ -362,3 +362,36 @@ def test_the_ur5_plans_with_the_tool_its_benchmarks_carry():
     plan = planner.plan(start, goal, obstacles=scene, refine_steps=0)
     assert bool(plan.collision_free) and bool(plan.success)
     assert bool(check_path(tool, plan.joints, scene).collision_free)
+
+
+def test_the_plan_command_takes_a_sphere_set(tmp_path, capsys):
+    """``kinlearn plan --sphere-set``: the ur5's arm alone calls problem 10's plan free, its default body
+    (with the gripper) plans around it; an unknown set, or a set without obstacles, is refused."""
+    from kinlearn.cli.main import main
+
+    problems = ProblemSet.load(BENCHMARK.with_name("scene_problems_ur5.npz"), robot="ur5")
+    start, goal, scene = problems.problem(10)
+    scene.save(tmp_path / "scene.npz")
+    joints = [",".join(f"{v:.17g}" for v in q.tolist()) for q in (start, goal)]
+    args = [
+        "plan",
+        "--robot",
+        "ur5",
+        "--start",
+        joints[0],
+        "--goal",
+        joints[1],
+        "--refine-steps",
+        "0",
+        "--joints",
+    ]
+    obstacles = ["--obstacles", str(tmp_path / "scene.npz")]
+    assert main([*args, *obstacles]) == 0
+    with_tool = capsys.readouterr().out
+    assert main([*args, *obstacles, "--sphere-set", "spherized"]) == 0
+    arm_alone = capsys.readouterr().out
+    assert "retreat" in with_tool and with_tool != arm_alone  # the tool takes another path
+    assert main([*args, *obstacles, "--sphere-set", "hand"]) == 2
+    assert "no 'hand' sphere set" in capsys.readouterr().err
+    assert main([*args, "--sphere-set", "spherized"]) == 2
+    assert "--sphere-set" in capsys.readouterr().err

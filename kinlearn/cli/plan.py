@@ -104,6 +104,14 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
         "fixed end-effector retreats), so the network's proposals alone make the fixed-time plan",
     )
     p.add_argument(
+        "--sphere-set",
+        default=None,
+        metavar="NAME",
+        help="with obstacles: check plans with this sphere set of the robot's (robots/<robot>/"
+        "collision_spheres.json; the ur5's 'spherized' is its arm alone, a bare flange); default: the "
+        "robot's planning body (the ur5's carries the standard benchmarks' gripper)",
+    )
+    p.add_argument(
         "--deadline",
         type=number_type(float, low=0, open_low=True),
         default=None,
@@ -117,6 +125,11 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
 def plan_from_args(args: argparse.Namespace, strict: bool = False):
     """``(planner, plan, scene or None)`` for the options of :func:`add_plan_inputs`."""
     options = {"retreat": False} if args.no_retreat else {}
+    if args.sphere_set is not None:
+        from ..body.robot import load_robot
+        from ..collision.body import body_spheres
+
+        options["body"] = body_spheres(load_robot(args.robot), sphere_set=args.sphere_set)
     if args.model:
         planner = Planner.load(args.model, robot=args.robot, **options)
     else:
@@ -152,6 +165,10 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
     if args.no_retreat and obstacles is None:
         raise ConfigError(
             "--no-retreat leaves out a stage of planning around obstacles: give --obstacles or --scene too"
+        )
+    if args.sphere_set is not None and obstacles is None:
+        raise ConfigError(
+            "--sphere-set is the body plans around obstacles are checked with: give --obstacles or --scene too"
         )
     options = {
         "obstacles": obstacles,
