@@ -36,7 +36,6 @@ import torch
 from _common import header, markdown_table
 
 import kinlearn
-from kinlearn.collision import body_spheres
 from kinlearn.data.problems import FAMILIES, ProblemSet, select_families
 from kinlearn.errors import NoObstacleModelWarning
 from kinlearn.evaluation.obstacles import obstacle_outcome
@@ -130,7 +129,7 @@ def main() -> None:
     print(header(f"Leave one family out ({args.robot})", 1))
     problems = ProblemSet.load(args.problems or DATA / f"scene_problems_{args.robot}.npz", robot=args.robot)
     robot = kinlearn.load_robot(args.robot)
-    body = body_spheres(robot).double()
+    body = problems.body(robot).double()  # the body the problems were made for
     fam = problems.family.numpy()
     ref_folder = args.reference or Path(kinlearn.__file__).parent / "checkpoints" / args.robot
     reference = kinlearn.Planner.load(ref_folder, body=body)  # every plan checked as it is judged

@@ -4,6 +4,8 @@
         [--out benchmarks/data/obstacle_problems_heldout.npz]            # iiwa14, the first three families
     python benchmarks/make_obstacle_problems.py --robot panda --families scenes --per-family 20 \\
         [--out benchmarks/data/scene_problems_panda.npz]                 # the seven scene families
+    python benchmarks/make_obstacle_problems.py --robot ur5 --families scenes --per-family 20 \
+        --sphere-set spherized --out benchmarks/data/scene_problems_ur5_arm.npz  # the ur5 without its tool
 
 Families: tabletop, shelf, barrier (the default set), or the seven of ``kinlearn/data/scenes.py``
 (``--families scenes``), or any names (see ``kinlearn/data/problems.py``), each from a fixed
@@ -52,6 +54,11 @@ def main() -> None:
         default=["legacy"],
         help="family names, or 'legacy' (the first three) or 'scenes'",
     )
+    ap.add_argument(
+        "--sphere-set",
+        default=None,
+        help="the sphere set problems are made for (default: the robot's planning body, the ur5's with its gripper)",
+    )
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
@@ -63,7 +70,7 @@ def main() -> None:
         args.out = Path(__file__).parent / "data" / name
     robot = load_robot(args.robot)
     print(header(f"obstacle benchmark problems ({args.robot})", args.threads))
-    cfg = ProblemConfig()
+    cfg = ProblemConfig(sphere_set=args.sphere_set)
     parts: dict[str, list[ProblemSet]] = {f: [] for f in families}
     spent = {f: 0.0 for f in families}
     t_start = time.perf_counter()
@@ -87,6 +94,7 @@ def main() -> None:
             "per_family": rounds,
             "problem_config": dataclasses.asdict(cfg),
             "generated_in_s": round(elapsed, 1),
+            "body": problems.body_name,  # the sphere set starts and goals are free for
         },
     )
     path = problems.save(args.out)

@@ -41,7 +41,6 @@ from _common import header, markdown_table
 
 import kinlearn
 from kinlearn import load_robot
-from kinlearn.collision import body_spheres
 from kinlearn.data.problems import FAMILIES, ProblemSet
 from kinlearn.errors import NoObstacleModelWarning
 from kinlearn.evaluation.obstacles import obstacle_outcome
@@ -135,13 +134,13 @@ def main() -> None:
     if args.n:
         problems = problems[: args.n]
     robot = load_robot(args.robot)
-    body = body_spheres(robot).double()
+    body = problems.body(robot).double()  # the body the problems were made for
     fams = [f for f in FAMILIES if len(problems.of(f))]
     print(f"{len(problems)} problems from {path} ({', '.join(f'{f} {len(problems.of(f))}' for f in fams)})")
     print(f"hard (straight joint line collides): {int(problems.hard.sum())}")
     folder = args.planner or DEFAULT_CHECKPOINTS / args.robot
-    # Every row plans and is judged with the body the problems were made for (body_spheres: for the ur5
-    # its arm alone; its planner's default carries the gripper, benchmarks/ur5_gripper.py)
+    # Every row plans and is judged with the body the problems were made for (the ur5's committed set:
+    # its arm with the gripper, its planning body; scene_problems_ur5_arm.npz: the arm alone)
     planner = kinlearn.Planner.load(folder, body=body)
     trained = None if planner.obstacle_tm is None else planner.obstacle_tm.families
     left_out = [f for f in fams if trained is not None and f not in trained]

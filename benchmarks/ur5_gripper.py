@@ -8,7 +8,7 @@ the spherized URDF kinlearn's bodies come from carries a force–torque sensor a
 default (``kinlearn.collision.planning_body``); ``body_spheres(robot)`` is the arm alone, the body the
 scene families are generated and its network trained with.
 
-On the committed held-out scene problems (``benchmarks/data/scene_problems_ur5.npz``, made for the arm
+On the committed held-out scene problems (``benchmarks/data/scene_problems_ur5_arm.npz``, made for the arm
 alone), those whose start and goal are free for the arm with the tool too, every plan judged by the
 dense check with the tool: the shipped planner checking with the arm alone (plans it calls free that the
 tool collides on), and with its default body (fixed time, the default, a deadline of 0.05 s).
@@ -41,7 +41,7 @@ def main() -> None:
     robot = kinlearn.load_robot("ur5")
     tool, arm = planning_body(robot).double(), body_spheres(robot).double()
     kt = kernel.KernelBody(tool)
-    problems = ProblemSet.load(DATA / "scene_problems_ur5.npz", robot="ur5")
+    problems = ProblemSet.load(DATA / "scene_problems_ur5_arm.npz", robot="ur5")
     keep = []
     for i in range(len(problems)):
         start, goal, scene = problems.problem(i)

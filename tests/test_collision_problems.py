@@ -181,3 +181,33 @@ def test_the_first_three_families_scale_with_the_arm(family):
     assert torch.allclose(half[1], 0.5 * one[1], atol=1e-15) and torch.allclose(
         half[2], 0.5 * one[2], atol=1e-15
     )
+
+
+def test_problems_are_made_for_the_planning_body_and_record_it():
+    """A ur5's problems are made for the body its planner checks with (the arm carrying the gripper) by
+    default, recorded in the set: their starts and goals are free for the tool, and a set read back
+    judges with it. Another set is chosen by name; sets made before the record read as the default body."""
+    from kinlearn import load_robot
+    from kinlearn.collision import body_spheres, planning_body
+
+    ur5 = load_robot("ur5")
+    cfg = ProblemConfig(verify=False)
+    tool = make_problems("bin", 2, seed=1007, robot=ur5, config=cfg)  # bins: raised by the tool's length
+    assert tool.body_name == "gripper" and tool.body(ur5).num_spheres == planning_body(ur5).num_spheres
+    _assert_valid(tool, planning_body(ur5).double())
+    arm = make_problems(
+        "bin", 1, seed=1007, robot=ur5, config=ProblemConfig(verify=False, sphere_set="spherized")
+    )
+    assert arm.body_name == "spherized" and arm.body(ur5).num_spheres == body_spheres(ur5).num_spheres
+    mixed = ProblemSet.concat([tool, arm])
+    with pytest.raises(DatasetError, match="different bodies"):
+        mixed.body(ur5)
+    assert ProblemSet.concat([tool, tool]).body_name == "gripper"
+    older = ProblemSet(**{**tool.__dict__, "config": {"family": "bin"}})  # written before the record
+    assert older.body_name is None and older.body(ur5).name == body_spheres(ur5).name
+    with pytest.raises(ConfigError, match="sphere_set"):
+        ProblemConfig(sphere_set="gripper", dense_body=True)
+    from kinlearn.errors import RobotDescriptionError
+
+    with pytest.raises(RobotDescriptionError, match="no 'hand' sphere set"):
+        make_problems("bin", 1, seed=1, robot=ur5, config=ProblemConfig(verify=False, sphere_set="hand"))

@@ -202,13 +202,12 @@ def test_a_bad_record_of_training_families_is_refused(robot, tmp_path):
     from kinlearn.models.obstacle_path import export_obstacle_model
 
     tm = _model(robot)
-    tm.families = ("cage", "bin")
+    assert tm.body is None
+    tm.families, tm.body = ("cage", "bin"), "gripper"
     path = save_obstacle_model(tm, tmp_path / "tm_obstacles.pt")
     assert load_obstacle_model(path).families == ("cage", "bin")
-    assert load_obstacle_model(export_obstacle_model(path, tmp_path / "exported.pt")).families == (
-        "cage",
-        "bin",
-    )
+    exported = load_obstacle_model(export_obstacle_model(path, tmp_path / "exported.pt"))
+    assert exported.families == ("cage", "bin") and exported.body == "gripper"
     payload = load_checkpoint(path, kind=ObstaclePathModel.kind)
     save_checkpoint(
         tmp_path / "bad.pt",
@@ -220,3 +219,13 @@ def test_a_bad_record_of_training_families_is_refused(robot, tmp_path):
     )
     with pytest.raises(CheckpointError, match="training families"):
         load_obstacle_model(tmp_path / "bad.pt")
+    save_checkpoint(
+        tmp_path / "bad_body.pt",
+        kind=ObstaclePathModel.kind,
+        robot=payload["robot"],
+        config=payload["config"],
+        state_dict=payload["state_dict"],
+        extra={"body": 3},
+    )
+    with pytest.raises(CheckpointError, match="training body"):
+        load_obstacle_model(tmp_path / "bad_body.pt")

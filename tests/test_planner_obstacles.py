@@ -352,7 +352,7 @@ def test_the_ur5_plans_with_the_tool_its_benchmarks_carry():
     assert planner.body.name == "gripper" and planner.body.num_spheres == 40
     assert planning_body(load_robot("panda")).name == body_spheres(load_robot("panda")).name
     tool = planning_body(robot).double()
-    problems = ProblemSet.load(BENCHMARK.with_name("scene_problems_ur5.npz"), robot="ur5")
+    problems = ProblemSet.load(BENCHMARK.with_name("scene_problems_ur5_arm.npz"), robot="ur5")
     start, goal, scene = problems.problem(10)
     arm_plan = Planner.default("ur5", body=body_spheres(robot)).plan(
         start, goal, obstacles=scene, refine_steps=0
@@ -369,7 +369,7 @@ def test_the_plan_command_takes_a_sphere_set(tmp_path, capsys):
     (with the gripper) plans around it; an unknown set, or a set without obstacles, is refused."""
     from kinlearn.cli.main import main
 
-    problems = ProblemSet.load(BENCHMARK.with_name("scene_problems_ur5.npz"), robot="ur5")
+    problems = ProblemSet.load(BENCHMARK.with_name("scene_problems_ur5_arm.npz"), robot="ur5")
     start, goal, scene = problems.problem(10)
     scene.save(tmp_path / "scene.npz")
     joints = [",".join(f"{v:.17g}" for v in q.tolist()) for q in (start, goal)]

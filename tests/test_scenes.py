@@ -67,3 +67,25 @@ def test_scale_follows_the_arm_and_bad_input_is_refused():
         build_scene("kitchen", torch.Generator())
     with pytest.raises(ConfigError, match="scale"):
         build_scene("bookcase", torch.Generator(), scale=-1.0)
+
+
+def test_a_tool_raises_the_targets_inside_a_bin_and_nothing_else():
+    """``tool``: a body reaching further past the end effector. The targets inside a bin are raised by it
+    (the same draws, the same scene), so that the tool is low in the bin; other families are unchanged."""
+    for seed in range(3):
+        bare = build_scene("bin", torch.Generator().manual_seed(seed), tool=0.0)
+        tool = build_scene("bin", torch.Generator().manual_seed(seed), tool=0.15)
+        assert tool.primitives == bare.primitives
+        lifted = tool.goal(32, torch.Generator().manual_seed(1)) - bare.goal(
+            32, torch.Generator().manual_seed(1)
+        )
+        assert torch.allclose(lifted[:, 2], torch.full((32,), 0.15, dtype=torch.float64), atol=1e-12)
+        assert torch.allclose(lifted[:, :2], torch.zeros(32, 2, dtype=torch.float64), atol=1e-12)
+        for family in ("cubby", "cage"):
+            a = build_scene(family, torch.Generator().manual_seed(seed), tool=0.15)
+            b = build_scene(family, torch.Generator().manual_seed(seed))
+            assert a.primitives == b.primitives
+            g1, g2 = torch.Generator().manual_seed(2), torch.Generator().manual_seed(2)
+            assert torch.equal(a.goal(8, g1), b.goal(8, g2))
+    with pytest.raises(ConfigError, match="tool"):
+        build_scene("bin", torch.Generator(), tool=-0.1)

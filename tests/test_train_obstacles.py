@@ -87,6 +87,8 @@ def test_training_lowers_the_loss_and_resumes_bit_identically(problems, tmp_path
     # The families it saw are recorded in the model and its checkpoint.
     assert full.families == ("tabletop", "shelf", "barrier")
     assert load_obstacle_model(tmp_path / "full" / "tm_obstacles.pt").families == full.families
+    assert full.body == body_spheres(load_robot("iiwa14")).name  # and the body it learned through
+    assert load_obstacle_model(tmp_path / "full" / "tm_obstacles.pt").body == full.body
     # The same run, killed in its ninth iteration (after the checkpoint at 8), then resumed.
     import kinlearn.training.obstacle_path as mod
 
@@ -171,6 +173,9 @@ def test_train_obstacle_planner_command(tmp_path):
     assert planner.obstacle_tm.families == ("tabletop", "shelf")  # barrier left out, and it says so
     # The same run directory is refused without --resume or --overwrite.
     assert main([*args, "--run-dir", str(run), "--no-progress"]) == 2
+    # An unknown sphere set is refused before anything is written.
+    assert main([*args, "--run-dir", str(tmp_path / "other"), "--sphere-set", "hand", "--no-progress"]) == 2
+    assert not (tmp_path / "other").exists()
 
 
 def test_train_obstacle_planner_refuses_a_planner_folder_without_a_planner(tmp_path, capsys):
@@ -197,6 +202,25 @@ def test_training_problems_of_the_named_families_only(tmp_path):
     for bad in ((), ("kitchen",)):
         with pytest.raises(ConfigError, match="training families"):
             make_training_problems(tmp_path, 1, families=bad)
+
+
+def test_training_problems_and_the_trained_body_follow_the_sphere_set(tmp_path):
+    """The ur5's training problems are made for its planning body (the arm with its gripper) unless a
+    set is named; the analytic body training goes through is the one its problems were made for, and a
+    folder of problems made for another body is refused rather than mixed."""
+    from kinlearn.data.problems import ProblemSet
+    from kinlearn.training.obstacle_path import ObstacleTrainConfig, build_body, make_training_problems
+
+    ur5 = load_robot("ur5")
+    tool = make_training_problems(tmp_path / "tool", 1, robot=ur5, families=("wall",))
+    pool = ProblemSet.load(tool[0], robot="ur5")
+    assert pool.body_name == "gripper"
+    cfg = ObstacleTrainConfig(robot="ur5", problems=tuple(map(str, tool)))
+    assert build_body(cfg, ur5, pool).num_spheres == pool.body(ur5).num_spheres == 40
+    arm = make_training_problems(tmp_path / "arm", 1, robot=ur5, families=("wall",), sphere_set="spherized")
+    assert build_body(cfg, ur5, ProblemSet.load(arm[0], robot="ur5")).num_spheres == 23
+    with pytest.raises(ConfigError, match="made for the 'gripper' body"):
+        make_training_problems(tmp_path / "tool", 1, robot=ur5, families=("wall",), sphere_set="spherized")
 
 
 def test_leave_one_family_out_bookkeeping():

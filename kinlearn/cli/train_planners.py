@@ -230,6 +230,13 @@ def _add_train_obstacle_planner(sub) -> None:
         "cached beside the problems): unverified problems include infeasible ones; a filter, no path is shown",
     )
     p.add_argument(
+        "--sphere-set",
+        default=None,
+        metavar="NAME",
+        help="the sphere set training problems are made for and the analytic body trains through "
+        "(default: the body the robot's planner checks with, the ur5's carrying its gripper)",
+    )
+    p.add_argument(
         "--init-checkpoint",
         type=EXISTING_FILE,
         default=None,
@@ -268,6 +275,10 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         from ..models.obstacle_path import load_obstacle_model
 
         load_obstacle_model(args.init_checkpoint, robot=robot.name)
+    from ..collision.body import body_spheres
+    from ..data.problems import ProblemConfig
+
+    body_name = ProblemConfig(sphere_set=args.sphere_set).body(robot).name  # an unknown set is refused here
     run = open_command_run(
         args,
         ("tm_obstacles.pt", "metrics.jsonl", "tensorboard", "problems"),
@@ -281,6 +292,8 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
             "candidates": args.candidates,
             **({"imitation": args.imitation} if args.imitation else {}),  # absent: self-supervised, as before
             **({"solvable_only": True} if args.solvable_only else {}),
+            # absent: the robot's default sphere body, as before sets could be chosen
+            **({"sphere_set": body_name} if body_name != body_spheres(robot).name else {}),
             "body": file_identity(args.body_checkpoint) if args.body_checkpoint else "analytic",
             "init": file_identity(args.init_checkpoint) if args.init_checkpoint else None,
         },
@@ -291,7 +304,9 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         f"training problems in {problems_dir} ({args.problems_per_family} per family of "
         f"{', '.join(families)}; generated once)"
     )
-    paths = make_training_problems(problems_dir, args.problems_per_family, robot=robot, families=families)
+    paths = make_training_problems(
+        problems_dir, args.problems_per_family, robot=robot, families=families, sphere_set=args.sphere_set
+    )
     cfg = ObstacleTrainConfig(
         robot=robot.name,
         problems=tuple(sorted(str(p) for p in paths)),

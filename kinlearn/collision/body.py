@@ -266,6 +266,18 @@ class BodySpheres(nn.Module):
             for i in range(robot.dof)
         ]
 
+    def reach_past_end_effector(self) -> float:
+        """How far (m) the body reaches past the end effector: the largest distance from the end
+        effector to the far side of a sphere of the last link (a bare flange's own spheres, or a tool's)."""
+        q = torch.as_tensor(np.clip(np.zeros(self.robot.dof), self.robot.lower, self.robot.upper))
+        q = q.to(self.local.dtype)
+        centres = self(q[None], validate=False)[0]
+        ee = self._kin.position(q[None], validate=False)[0]
+        last = self.link == self.robot.dof
+        if not bool(last.any()):
+            return 0.0
+        return float(((centres[last] - ee).norm(dim=-1) + self.radii[last]).max())
+
     @property
     def num_spheres(self) -> int:
         return int(self.radii.shape[0])

@@ -48,7 +48,7 @@ import torch
 
 from ..body.kinematics import dls_step, kinematics
 from ..body.robot import Robot, load_robot
-from ..collision.body import BodySpheres, body_spheres
+from ..collision.body import BodySpheres, body_spheres, planning_body
 from ..collision.check import check_path, clearances
 from ..collision.ompl import OmplRrtConnect, import_ompl
 from ..collision.scene import Scene
@@ -124,6 +124,9 @@ class ProblemConfig:
     time_limit: float = 5.0  # s, RRT-Connect's limit for a problem to count as solvable
     max_travel: float = 0.01  # m of sphere travel between checked configurations (motion checks)
     dense_body: bool = False  # the 46-sphere body instead of the 12-sphere one (+ base cover)
+    #: The body problems are made for: a sphere set of the robot's model, or None for the body its
+    #: planner checks with (:func:`~kinlearn.collision.body.planning_body`: the ur5's carries its tool).
+    sphere_set: str | None = None
 
     def __post_init__(self):
         for name in (
@@ -143,6 +146,18 @@ class ProblemConfig:
                 raise ConfigError(f"ProblemConfig.{name} must be an integer >= 1, got {value!r}")
         if self.time_limit <= 0 or self.max_travel <= 0:
             raise ConfigError("ProblemConfig.time_limit and max_travel must be > 0")
+        if self.sphere_set is not None and (not isinstance(self.sphere_set, str) or self.dense_body):
+            raise ConfigError(
+                f"ProblemConfig.sphere_set must be a set's name and not given with dense_body, got {self.sphere_set!r}"
+            )
+
+    def body(self, robot: Robot) -> BodySpheres:
+        """The body problems are made for (see ``sphere_set`` and ``dense_body``)."""
+        if self.dense_body:
+            return body_spheres(robot, dense=True)
+        if self.sphere_set is None:
+            return planning_body(robot)
+        return body_spheres(robot, sphere_set=self.sphere_set)
 
 
 def problem_seed(seed: int, index: int) -> int:
@@ -350,6 +365,25 @@ class ProblemSet:
             raise ConfigError(f"unknown problem family {family!r}; choose one of {', '.join(FAMILIES)}")
         return self[self.family == FAMILIES.index(family)]
 
+    @property
+    def body_name(self) -> str | None:
+        """The sphere set the problems were made for (their starts and goals are free for it), or None
+        for sets written before it was recorded (made for the robot's default body)."""
+        parts = self.config.get("parts", [self.config])
+        names = {p.get("body") for p in parts}
+        if len(names) > 1:
+            raise DatasetError(f"the set's parts were made for different bodies: {sorted(map(str, names))}")
+        return names.pop() if names else None
+
+    def body(self, robot: Robot) -> BodySpheres:
+        """The body the problems were made for: the one to judge plans on them with."""
+        name, default = self.body_name, body_spheres(robot)
+        if name is None or name == default.name:
+            return default
+        if name == "dense":
+            return body_spheres(robot, dense=True)
+        return body_spheres(robot, sphere_set=name)
+
     def problem(self, i: int) -> tuple[torch.Tensor, torch.Tensor, Scene]:
         """Problem ``i`` as ``(start (dof,), goal (dof,), unbatched scene without padding)``."""
         return self.start[i], self.goal[i], self.scene[i : i + 1].unstack()[0]
@@ -469,10 +503,10 @@ def _pick_valid(
     return q[ok][good][0]
 
 
-def _layout(family: str, gen: torch.Generator, scale: float):
+def _layout(family: str, gen: torch.Generator, scale: float, tool: float = 0.0):
     """One scene of ``family`` and its start and goal target samplers (base frame), or None."""
     if family not in LEGACY_FAMILIES:
-        layout = build_scene(family, gen, scale)
+        layout = build_scene(family, gen, scale, tool=tool)
         return layout.scene(), layout.start, layout.goal
     built = _BUILDERS[family](gen)
     if built is None:
@@ -494,11 +528,13 @@ def _layout(family: str, gen: torch.Generator, scale: float):
     return scene, turned(start_sampler), turned(goal_sampler)
 
 
-def _one_problem(family: str, body: BodySpheres, sub_seed: int, cfg: ProblemConfig, scale: float = 1.0):
+def _one_problem(
+    family: str, body: BodySpheres, sub_seed: int, cfg: ProblemConfig, scale: float = 1.0, tool: float = 0.0
+):
     gen = torch.Generator().manual_seed(sub_seed)
     kin = kinematics(body.robot, "fast")
     for attempt in range(cfg.max_attempts):
-        built = _layout(family, gen, scale)
+        built = _layout(family, gen, scale, tool)
         if built is None:
             continue
         scene, start_sampler, goal_sampler = built
@@ -553,14 +589,16 @@ def make_problems(
         raise ConfigError(f"first must be an integer >= 0, got {first!r}")
     cfg = config or ProblemConfig()
     robot = robot or load_robot("iiwa14")
-    body = body_spheres(robot, dense=cfg.dense_body).double()
+    body = cfg.body(robot).double()
     scale = round(scene_scale(robot), 2)
+    # A tool on the flange (the ur5's planning body): how much further than the bare arm it reaches.
+    tool = max(0.0, round(body.reach_past_end_effector() - body_spheres(robot).reach_past_end_effector(), 2))
     if cfg.verify:
         import_ompl(_VERIFY)
     starts, goals, scenes, hard, seeds, times = [], [], [], [], [], []
     for i in range(n):
         sub = problem_seed(seed, first + i)
-        start, goal, scene, is_hard, solve_time, _ = _one_problem(family, body, sub, cfg, scale)
+        start, goal, scene, is_hard, solve_time, _ = _one_problem(family, body, sub, cfg, scale, tool)
         starts.append(start)
         goals.append(goal)
         scenes.append(scene)
@@ -578,5 +616,13 @@ def make_problems(
         torch.tensor(hard, dtype=torch.bool),
         torch.tensor(seeds, dtype=torch.int64),
         torch.tensor(times, dtype=_F64),
-        {"family": family, "n": n, "seed": seed, "first": first, "scale": scale, **asdict(cfg)},
+        {
+            "family": family,
+            "n": n,
+            "seed": seed,
+            "first": first,
+            "scale": scale,
+            **asdict(cfg),
+            "body": body.name,
+        },
     )

@@ -157,7 +157,7 @@ def _open_box(x_open, yc, z0, depth, half_w, height, open_face: str) -> list[Pri
     return out
 
 
-def _bookcase(g, s):
+def _bookcase(g, s, _tool):
     x_open, depth = s * _u(g, 0.5, 0.7), s * _u(g, 0.3, 0.4)
     columns, levels = _randint(g, 1, 3), _randint(g, 2, 4)
     col_w = s * _u(g, 0.3, 0.45) if columns > 1 else s * _u(g, 0.5, 0.8)
@@ -207,7 +207,7 @@ def _one_or_two(g, s, half_w, p_two: float, max_gap: float) -> tuple[bool, list[
     return False, [centre]
 
 
-def _cubby(g, s):
+def _cubby(g, s, _tool):
     depth, half_w, height = s * _u(g, 0.25, 0.35), s * _u(g, 0.13, 0.2), s * _u(g, 0.24, 0.36)
     x_open, z0 = s * _u(g, 0.4, 0.6), s * _u(g, 0.0, 0.7)
     two, centres = _one_or_two(g, s, half_w, 0.5, 0.15)
@@ -237,7 +237,7 @@ def _cubby(g, s):
     return prims, start, inside(centres[k])
 
 
-def _cage(g, s):
+def _cage(g, s, _tool):
     depth, half_w, height = s * _u(g, 0.3, 0.45), s * _u(g, 0.2, 0.35), s * _u(g, 0.3, 0.5)
     x_open, z0, yc = s * _u(g, 0.4, 0.6), s * _u(g, 0.0, 0.4), s * _u(g, -0.15, 0.15)
     r = _u(g, 0.008, 0.015)
@@ -273,17 +273,17 @@ def _cage(g, s):
     return prims, start, goal
 
 
-def _bin(g, s):
+def _bin(g, s, tool):
     depth, half_w, height = s * _u(g, 0.3, 0.45), s * _u(g, 0.15, 0.25), s * _u(g, 0.15, 0.3)
     x_open, z0 = s * _u(g, 0.4, 0.6), s * _u(g, 0.0, 0.35)
     two, centres = _one_or_two(g, s, half_w, 0.6, 0.25)
     prims = [p for yc in centres for p in _open_box(x_open, yc, z0, depth, half_w, height, "top")]
     m = 0.08 * s
 
-    def inside(yc):
+    def inside(yc):  # the end effector low in the bin; a tool's length higher, so the tool is
         return _region(
-            (x_open + m, yc - half_w + m, z0 + 0.06 * s),
-            (x_open + depth - m, yc + half_w - m, z0 + height * 0.8),
+            (x_open + m, yc - half_w + m, z0 + 0.06 * s + tool),
+            (x_open + depth - m, yc + half_w - m, z0 + height * 0.8 + tool),
         )
 
     k = _randint(g, 0, len(centres) - 1)
@@ -297,7 +297,7 @@ def _bin(g, s):
     return prims, start, inside(centres[k])
 
 
-def _table(g, s):
+def _table(g, s, _tool):
     top, x0 = s * _u(g, 0.25, 0.5), s * _u(g, 0.3, 0.45)
     depth, half_w, yc = s * _u(g, 0.5, 0.75), s * _u(g, 0.4, 0.7), s * _u(g, -0.15, 0.15)
     t, leg = 0.03, _u(g, 0.02, 0.035)
@@ -358,7 +358,7 @@ def _table(g, s):
     return prims, behind(a, b), behind(b, a)
 
 
-def _wall(g, s):
+def _wall(g, s, _tool):
     xc, half_len, thick = s * _u(g, 0.45, 0.65), s * _u(g, 0.25, 0.5), _u(g, 0.01, 0.04)
     height = s * _u(g, 0.4, 0.95)
     turn = yaw_matrix(_u(g, -0.5, 0.5))  # the wall off square to the arm
@@ -401,7 +401,7 @@ def _wall(g, s):
     return prims, beside(side), beside(-side)
 
 
-def _clutter(g, s):
+def _clutter(g, s, _tool):
     def target():
         rad, ang, z = s * _u(g, 0.35, 0.85), _u(g, -1.3, 1.3), s * _u(g, 0.1, 1.0)
         return np.array([rad * math.cos(ang), rad * math.sin(ang), z])
@@ -486,16 +486,27 @@ def _turned(p: Primitive, R: np.ndarray) -> Primitive:
 
 
 def build_scene(
-    family: str, gen: torch.Generator, scale: float = 1.0, yaw: float | None = None, tries: int = 20
+    family: str,
+    gen: torch.Generator,
+    scale: float = 1.0,
+    yaw: float | None = None,
+    tries: int = 20,
+    tool: float = 0.0,
 ) -> SceneLayout:
     """One scene of ``family`` (one of :data:`SCENE_FAMILIES`) drawn from ``gen``, sized by ``scale``
-    (:func:`scene_scale` of the arm) and turned about z by ``yaw`` (default: drawn in [−π, π))."""
+    (:func:`scene_scale` of the arm) and turned about z by ``yaw`` (default: drawn in [−π, π)).
+
+    ``tool``: how much further (m) than the bare arm the body reaches past the end effector (a gripper
+    on the flange). The bin's targets inside a bin are raised by it, so that the tool, not the flange,
+    is low in the bin; no other family's targets change, and ``tool = 0`` draws the same scenes."""
     if family not in _BUILDERS:
         raise ConfigError(f"unknown scene family {family!r}; choose one of {', '.join(SCENE_FAMILIES)}")
     if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
         raise ConfigError(f"scale must be a finite number > 0, got {scale!r}")
+    if not (isinstance(tool, (int, float)) and math.isfinite(tool) and tool >= 0):
+        raise ConfigError(f"tool must be a finite number >= 0 (m), got {tool!r}")
     for _ in range(tries):
-        built = _BUILDERS[family](gen, float(scale))
+        built = _BUILDERS[family](gen, float(scale), float(tool))
         if built is not None:
             break
     else:

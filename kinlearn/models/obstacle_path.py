@@ -197,6 +197,9 @@ class ObstaclePathModel(nn.Module):
         #: Whether its training also pulled a candidate towards the offline sampler's paths
         #: (:mod:`kinlearn.training.obstacle_path`, distillation); kept in its checkpoint.
         self.distilled: bool = False
+        #: The sphere set its training went through (``BodySpheres.name``: the ur5's ``"gripper"``), kept in
+        #: its checkpoint; None where none was recorded (a learned body, or an older checkpoint).
+        self.body: str | None = None
 
     @property
     def robot_name(self) -> str:
@@ -262,11 +265,7 @@ def save_obstacle_model(
 ) -> Path:
     """Save an obstacle-aware TM: weights, its config, robot, the families it was trained on and format
     version (atomically)."""
-    extra = dict(extra or {})
-    if tm.families is not None:
-        extra["families"] = list(tm.families)
-    if tm.distilled:
-        extra["distilled"] = True
+    extra = {**(extra or {}), **_record(tm)}
     return save_checkpoint(
         path,
         kind=ObstaclePathModel.kind,
@@ -276,6 +275,16 @@ def save_obstacle_model(
         extra=extra,
         depends=depends,
     )
+
+
+def _record(tm: ObstaclePathModel) -> dict:
+    """What a checkpoint keeps of how the model was trained."""
+    extra: dict = {} if tm.families is None else {"families": list(tm.families)}
+    if tm.distilled:
+        extra["distilled"] = True
+    if tm.body is not None:
+        extra["body"] = tm.body
+    return extra
 
 
 def _families(payload: dict, path) -> tuple[str, ...] | None:
@@ -299,6 +308,10 @@ def load_obstacle_model(path: str | Path, robot: str | None = None) -> ObstacleP
         ) from exc
     tm.families = _families(payload, path)
     tm.distilled = payload["extra"].get("distilled", False) is True
+    body = payload["extra"].get("body")
+    if body is not None and not isinstance(body, str):
+        raise CheckpointError(f"{path}: its record of the training body is not a name: {body!r}")
+    tm.body = body
     return tm.eval()
 
 
@@ -310,9 +323,7 @@ def export_obstacle_model(src: str | Path, dst: str | Path, half: bool = True) -
     payload = load_checkpoint(src, kind=ObstaclePathModel.kind)
     tm = load_obstacle_model(src)  # it must load
     state = half_weights(payload["state_dict"]) if half else payload["state_dict"]
-    extra = {} if tm.families is None else {"families": list(tm.families)}
-    if tm.distilled:
-        extra["distilled"] = True
+    extra = _record(tm)
     return save_checkpoint(
         dst,
         kind=ObstaclePathModel.kind,

@@ -163,17 +163,22 @@ def make_training_problems(
     robot: Robot | None = None,
     progress=None,
     families: tuple[str, ...] = LEGACY_FAMILIES,
+    sphere_set: str | None = None,
 ) -> list[Path]:
     """Generate (or reuse) unverified training problems: ``per_family`` of each of ``families`` (default
     the three the shipped iiwa14 network was trained on) with :data:`TRAINING_SEEDS`, in files of
-    ``chunk`` problems under ``out_dir``. Deterministic: chunk c of a family is problems ``c·chunk …`` of
-    its seed's sequence, whoever generates it."""
+    ``chunk`` problems under ``out_dir``, for the body ``sphere_set`` names (default the robot's planning
+    body, :class:`~kinlearn.data.problems.ProblemConfig`). Deterministic: chunk c of a family is problems
+    ``c·chunk …`` of its seed's sequence, whoever generates it. A file already there made for another
+    body is a :class:`~kinlearn.errors.ConfigError` (choose another ``out_dir``)."""
     unknown = [f for f in families if f not in FAMILIES]
     if not families or unknown:
         raise ConfigError(f"training families must be some of {', '.join(FAMILIES)}, got {list(families)}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    cfg = ProblemConfig(verify=False)
+    cfg = ProblemConfig(verify=False, sphere_set=sphere_set)
+    robot = robot or load_robot("iiwa14")
+    want = cfg.body(robot).name
     paths = []
     for c in range(math.ceil(per_family / chunk)):
         n = min(chunk, per_family - c * chunk)
@@ -183,6 +188,10 @@ def make_training_problems(
                 make_problems(fam, n, TRAINING_SEEDS[fam], robot=robot, config=cfg, first=c * chunk).save(
                     path
                 )
+            else:
+                held = ProblemSet.load(path, robot=robot.name).body(robot).name
+                if held != want:
+                    raise ConfigError(f"{path} holds problems made for the {held!r} body, not {want!r}")
             paths.append(path)
             if progress is not None:
                 progress(len(paths))
@@ -220,7 +229,14 @@ def expert_paths(
     problems = Path(problems)
     cache = problems.with_name(f"{problems.stem}.experts{knots}.npz")
     pset = ProblemSet.load(problems, robot=robot.name)
-    want = {"problems": problems.name, "knots": knots, "iterations": EXPERT_ITERATIONS, "n": len(pset)}
+    body = pset.body(robot).double()
+    want = {
+        "problems": problems.name,
+        "knots": knots,
+        "iterations": EXPERT_ITERATIONS,
+        "n": len(pset),
+        "body": body.name,
+    }
     if cache.is_file():
         try:
             meta, arrays = load_npz(cache, kind=EXPERT_KIND, robot=robot.name)
@@ -228,7 +244,7 @@ def expert_paths(
                 return torch.from_numpy(arrays["paths"]), torch.from_numpy(arrays["found"])
         except DatasetError:
             pass  # unreadable: made again below
-    body = kernel.KernelBody.of(body_spheres(robot).double())
+    body = kernel.KernelBody.of(body)
     lo, hi = np.asarray(robot.lower, np.float64), np.asarray(robot.upper, np.float64)
     paths = np.zeros((len(pset), knots + 1, robot.dof))
     found = np.zeros(len(pset), dtype=bool)
@@ -246,10 +262,11 @@ def expert_paths(
     return torch.from_numpy(paths), torch.from_numpy(found)
 
 
-def build_body(config: ObstacleTrainConfig, robot: Robot):
-    """The frozen body model ``config`` names, in float32."""
+def build_body(config: ObstacleTrainConfig, robot: Robot, problems: ProblemSet | None = None):
+    """The frozen body model ``config`` names, in float32: the analytic one is the sphere set the
+    training ``problems`` were made for (:meth:`ProblemSet.body`; without them the robot's default)."""
     if config.body == "analytic":
-        body = body_spheres(robot)
+        body = problems.body(robot) if problems is not None else body_spheres(robot)
     else:
         from ..models.body import load_body_model
 
@@ -444,11 +461,11 @@ def train_obstacle_model(
     iterations and at the end (atomically), and resume from it. Logs to ``run_dir/metrics.jsonl``."""
     run_dir = Path(run_dir)
     robot = load_robot(config.robot)
-    body = build_body(config, robot)
+    pool = _load_pool(config.problems, robot)
+    body = build_body(config, robot, pool)
     gen = seed_everything(config.seed)
     tm = ObstaclePathModel(config.model_config(robot))
     kin = kinematics(robot)
-    pool = _load_pool(config.problems, robot)
     experts = found = None
     if config.loss.imitation > 0 or config.solvable_only:  # the offline sampler's paths, in the pool's order
         parts = [expert_paths(p, robot, tm.config.steps) for p in config.problems]
@@ -482,6 +499,7 @@ def train_obstacle_model(
         )
     tm.families = tuple(f for f in FAMILIES if f in seen)  # recorded in its checkpoints
     tm.distilled = config.loss.imitation > 0
+    tm.body = body.name if config.body == "analytic" else None  # the sphere set it learned through
     if not tm.distilled:  # the sampler's paths filtered the pool; they are no target
         experts = None
     loop = iteration_loop(
