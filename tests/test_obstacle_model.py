@@ -209,23 +209,14 @@ def test_a_bad_record_of_training_families_is_refused(robot, tmp_path):
     exported = load_obstacle_model(export_obstacle_model(path, tmp_path / "exported.pt"))
     assert exported.families == ("cage", "bin") and exported.body == "gripper"
     payload = load_checkpoint(path, kind=ObstaclePathModel.kind)
-    save_checkpoint(
-        tmp_path / "bad.pt",
-        kind=ObstaclePathModel.kind,
-        robot=payload["robot"],
-        config=payload["config"],
-        state_dict=payload["state_dict"],
-        extra={"families": "cage"},
-    )
-    with pytest.raises(CheckpointError, match="training families"):
-        load_obstacle_model(tmp_path / "bad.pt")
-    save_checkpoint(
-        tmp_path / "bad_body.pt",
-        kind=ObstaclePathModel.kind,
-        robot=payload["robot"],
-        config=payload["config"],
-        state_dict=payload["state_dict"],
-        extra={"body": 3},
-    )
-    with pytest.raises(CheckpointError, match="training body"):
-        load_obstacle_model(tmp_path / "bad_body.pt")
+    for extra, why in (({"families": "cage"}, "training families"), ({"body": 3}, "training body")):
+        save_checkpoint(
+            tmp_path / "bad.pt",
+            kind=ObstaclePathModel.kind,
+            robot=payload["robot"],
+            config=payload["config"],
+            state_dict=payload["state_dict"],
+            extra=extra,
+        )
+        with pytest.raises(CheckpointError, match=why):
+            load_obstacle_model(tmp_path / "bad.pt")
