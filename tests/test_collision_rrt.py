@@ -95,6 +95,24 @@ def test_colliding_ends_and_bad_input_are_refused(wall_problem):
         RrtConnect(kb, K.KernelScene(scene), start, goal, robot.lower, robot.upper, local_step=float("nan"))
 
 
+def test_the_default_step_is_ompls_range_capped(wall_problem):
+    """The default extension is 0.2 of the joint box's diagonal (OMPL's default range) but at most
+    MAX_STEP: the ur5's ±2π joints would make it 5.8 rad."""
+    from kinlearn import load_robot
+    from kinlearn.collision import body_spheres
+    from kinlearn.collision.rrt import MAX_STEP
+
+    robot, body, scene, start, goal = wall_problem
+    box = 0.2 * float(np.linalg.norm(robot.upper - robot.lower))
+    rrt = RrtConnect(K.KernelBody(body), K.KernelScene(scene), start, goal, robot.lower, robot.upper)
+    assert rrt.step == min(box, MAX_STEP)
+    ur5 = load_robot("ur5")
+    assert 0.2 * float(np.linalg.norm(ur5.upper - ur5.lower)) > 3 * MAX_STEP
+    q = np.zeros(6)
+    rrt = RrtConnect(K.KernelBody(body_spheres(ur5)), K.KernelScene(scene), q, q, ur5.lower, ur5.upper)
+    assert rrt.step == MAX_STEP and rrt.local_step == MAX_STEP
+
+
 def test_samples_near_the_root_extend_by_their_own_step(wall_problem):
     """A sample drawn near the extended tree's root moves that tree by at most ``local_step`` (a short
     step finds the way out of a cell that the long one jumps across); the connection still takes long
