@@ -11,7 +11,9 @@ used if its log says it finished, resumed if not), put into a copy of the shippe
 fixed-time plans (``refine_steps=0``: the learned proposals, then the retreat stage), the same without the
 retreat stage (``retreat=False``: the network alone) and plans with ``deadline=0.05`` on the held-out
 problems of ``--problems`` (seeds apart from every training seed; verified solvable).
-Every plan is judged by :func:`kinlearn.evaluation.obstacles.obstacle_outcome`.
+Every plan is judged by :func:`kinlearn.evaluation.obstacles.obstacle_outcome` with the body the held-out
+problems were made for, and the networks are trained for that body (``--sphere-set``; the ur5's committed
+set: its arm with the gripper; ``--problems benchmarks/data/scene_problems_ur5_arm.npz``: the arm alone).
 
 The table gives per left-out family its fixed-time success (the network never saw it), the network alone's
 on it, the same network's fixed-time success on the families it saw, the straight line's on the left-out
@@ -59,7 +61,7 @@ def train(robot: str, family: str, args, run: Path) -> Path:
         "--families", *args.base, "--leave-out", family,
         "--problems-per-family", str(args.problems_per_family), "--iterations", str(args.iterations),
         "--candidates", str(args.candidates), "--problems-dir", str(args.problems_dir),
-        "--run-dir", str(run), "--no-progress",
+        "--run-dir", str(run), "--no-progress", "--sphere-set", args.sphere_set,
     ]  # fmt: skip
     if args.solvable_only:
         cmd.append("--solvable-only")
@@ -130,6 +132,7 @@ def main() -> None:
     problems = ProblemSet.load(args.problems or DATA / f"scene_problems_{args.robot}.npz", robot=args.robot)
     robot = kinlearn.load_robot(args.robot)
     body = problems.body(robot).double()  # the body the problems were made for
+    args.sphere_set = body.name  # and the networks are trained for it
     fam = problems.family.numpy()
     ref_folder = args.reference or Path(kinlearn.__file__).parent / "checkpoints" / args.robot
     reference = kinlearn.Planner.load(ref_folder, body=body)  # every plan checked as it is judged
