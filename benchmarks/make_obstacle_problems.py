@@ -4,7 +4,7 @@
         [--out benchmarks/data/obstacle_problems_heldout.npz]            # iiwa14, the first three families
     python benchmarks/make_obstacle_problems.py --robot panda --families scenes --per-family 20 \\
         [--out benchmarks/data/scene_problems_panda.npz]                 # the seven scene families
-    python benchmarks/make_obstacle_problems.py --robot ur5 --families scenes --per-family 20 \
+    python benchmarks/make_obstacle_problems.py --robot ur5 --families scenes --per-family 20 \\
         --sphere-set spherized --out benchmarks/data/scene_problems_ur5_arm.npz  # the ur5 without its tool
 
 Families: tabletop, shelf, barrier (the default set), or the seven of ``kinlearn/data/scenes.py``

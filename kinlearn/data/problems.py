@@ -380,9 +380,7 @@ class ProblemSet:
         name, default = self.body_name, body_spheres(robot)
         if name is None or name == default.name:
             return default
-        if name == "dense":
-            return body_spheres(robot, dense=True)
-        return body_spheres(robot, sphere_set=name)
+        return body_spheres(robot, sphere_set=name)  # "dense" too: the iiwa14's dense body is a named set
 
     def problem(self, i: int) -> tuple[torch.Tensor, torch.Tensor, Scene]:
         """Problem ``i`` as ``(start (dof,), goal (dof,), unbatched scene without padding)``."""

@@ -280,7 +280,7 @@ def _bin(g, s, tool):
     prims = [p for yc in centres for p in _open_box(x_open, yc, z0, depth, half_w, height, "top")]
     m = 0.08 * s
 
-    def inside(yc):  # the end effector low in the bin; a tool's length higher, so the tool is
+    def inside(yc):  # the end effector low in the bin; a tool's length higher, so the tool is low in it
         return _region(
             (x_open + m, yc - half_w + m, z0 + 0.06 * s + tool),
             (x_open + depth - m, yc + half_w - m, z0 + height * 0.8 + tool),
