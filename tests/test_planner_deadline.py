@@ -98,6 +98,30 @@ def test_the_deadline_cuts_the_sampling_stage_off(panda, hard, monkeypatch):
         _plan(panda, start, goal, obstacles=scene, deadline=-1.0)
 
 
+def test_the_retreat_stage_leaves_the_sampler_the_rest_of_a_deadline(hard, monkeypatch):
+    """The retreat stage starts work only within its share of a deadline (RETREAT_SHARE), so that a slow
+    retreat cannot spend the time the sampling stage needs; without a deadline it always runs."""
+    base = Planner.default("panda")
+    planner = Planner(base.robot, base.tm, base.fm, base.im)  # the straight line alone, then retreat
+    calls = []
+    inner = planner._retreat
+
+    def counted(*args, **kw):
+        calls.append(1)
+        return inner(*args, **kw)
+
+    monkeypatch.setattr(planner, "_retreat", counted)
+    start, goal, scene = hard.problem(0)
+    _plan(planner, start, goal, obstacles=scene, refine_steps=0)
+    assert len(calls) == 1  # fixed time: the stage runs
+    monkeypatch.setattr(stages, "RETREAT_SHARE", 1.0)
+    _plan(planner, start, goal, obstacles=scene, deadline=30.0)
+    assert len(calls) == 2  # a deadline with its share left: it runs
+    monkeypatch.setattr(stages, "RETREAT_SHARE", 0.0)
+    plan = _plan(planner, start, goal, obstacles=scene, deadline=30.0)
+    assert len(calls) == 2 and plan.stage in ("rrt", "none")  # its share spent: the sampler goes next
+
+
 def test_plan_command_takes_a_deadline(hard, tmp_path, capsys):
     import yaml
 

@@ -30,6 +30,17 @@ def test_deadline_counts_down_on_its_clock_and_never_below_zero():
     clock.now += 1.0
     assert d.left() == 0.0 and d.expired()
     assert Deadline(None, clock=clock).left() == math.inf
+    assert not Deadline(None, clock=clock).spent(0.0)  # no deadline: no share of it ever goes
+
+
+def test_a_share_of_the_deadline_is_spent_once_that_much_time_has_gone():
+    clock = _Clock()
+    d = Deadline(0.05, clock=clock)
+    assert d.spent(0.0) and not d.spent(0.3)
+    clock.now += 0.014
+    assert not d.spent(0.3) and d.spent(0.2)
+    clock.now += 0.002
+    assert d.spent(0.3) and not d.spent(1.0)
     for bad in (0, -1.0, math.nan, math.inf, True, "1"):
         with pytest.raises(ConfigError, match="deadline"):
             Deadline(bad)

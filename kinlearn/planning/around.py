@@ -22,6 +22,7 @@ from ..collision.body import BodySpheres, planning_body
 from ..collision.scene import Scene
 from ..data.problem import positions
 from ..models.chain import ChainFM
+from . import stages
 from .plan import CHECK_TRAVEL
 from .retreat import RetreatVias, retreat_path
 from .stages import DEADLINE_RESERVE, Deadline, densify
@@ -188,7 +189,7 @@ class ObstacleStages:
         found: dict[int, tuple[np.ndarray, str]] = {}  # paths of other lengths, joined at the end
         if self.retreat and self._retreat_vias() is not None:
             for i in np.flatnonzero(~free):
-                if deadline.expired(DEADLINE_RESERVE):
+                if _retreat_over(deadline):
                     break
                 path = self._retreat(theta0[i], thetaT[i], packed[i], rows[i], steps, deadline)
                 if path is not None:
@@ -284,7 +285,7 @@ class ObstacleStages:
             dT,
             first_free,
             transfer,
-            stop=lambda: deadline.expired(DEADLINE_RESERVE),
+            stop=lambda: _retreat_over(deadline),
         )
 
     def _sample(
@@ -327,6 +328,12 @@ class ObstacleStages:
 # (:mod:`kinlearn.collision.kernel`), where torch's dense check evaluates every sub-step of every
 # candidate (on the CPU, 0.2 s for 200 held-out iiwa14 problems against a ConfigError for too many
 # configurations; 88 s for 17 of the panda's scene-family problems).
+
+
+def _retreat_over(deadline: Deadline) -> bool:
+    """Whether the retreat stage may start no more work: the deadline is (nearly) over, or its
+    :data:`~kinlearn.planning.stages.RETREAT_SHARE` is spent."""
+    return deadline.expired(DEADLINE_RESERVE) or deadline.spent(stages.RETREAT_SHARE)
 
 
 def _packed_scenes(scene: Scene, n: int) -> list:
