@@ -180,3 +180,38 @@ def test_rrt_connect_needs_a_bound_and_refuses_bad_ones(wall_problem):
     b = rrt_connect(*args, time_limit=float("inf"), max_iterations=3, seed=2)
     assert a[2] == b[2] <= 3
     assert (a[0] is None) == (b[0] is None) and (a[0] is None or np.array_equal(a[0], b[0]))
+
+
+def test_trees_grown_from_given_branches(wall_problem):
+    """Each tree can start with branches (the planner's free retreats): they are the tree's first nodes,
+    and a path through them is found at once where their tips see each other; bad branches are refused."""
+    robot, body, scene, start, goal = wall_problem
+    kb, ks = K.KernelBody(body), K.KernelScene(scene)
+    rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=3)
+    path = None
+    for _ in range(400):
+        path = rrt.run(25)
+        if path is not None:
+            break
+    assert path is not None and path.shape[0] >= 3
+    k = path.shape[0] // 2
+    branches = ([path[1:k]], [path[k:-1][::-1]])  # the found path cut in two, each half from its root
+    grown = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=5, branches=branches)
+    assert grown.size == path.shape[0]  # both roots and every branch vertex
+    assert np.array_equal(grown.nodes[0, 1:k], path[1:k])
+    again = None
+    for _ in range(40):
+        again = grown.run(1)
+        if again is not None:
+            break
+    assert again is not None
+    assert np.array_equal(again[0], start) and np.array_equal(again[-1], goal)
+    assert bool(check_path(body, torch.from_numpy(again), scene).collision_free)
+    with pytest.raises(ShapeError, match="branch"):
+        RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, branches=([path[1:k, :2]], []))
+    outside = path[1:k].copy()
+    outside[0, 0] = robot.upper[0] + 1.0
+    with pytest.raises(ConfigError, match="joint limits"):
+        RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, branches=([outside], []))
+    with pytest.raises(ConfigError, match="pair"):
+        RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, branches=[path[1:k]])

@@ -320,3 +320,38 @@ def test_a_deadline_that_runs_out_stops_the_stage_between_transfers(panda, probl
         lambda a, b: calls.append(1), stop=lambda: True,
     )  # fmt: skip
     assert out is None and not calls
+
+
+def test_free_chains_are_each_directions_free_prefix():
+    vias = np.arange(3 * 3 * 2, dtype=np.float64).reshape(3, 3, 2)
+    chains = R.free_chains(vias, np.array([2, 0, 3]))
+    assert len(chains) == 2  # the direction with no free via gives none
+    assert np.array_equal(chains[0], vias[0, :2]) and np.array_equal(chains[1], vias[2])
+
+
+@pytest.mark.filterwarnings("ignore::kinlearn.errors.NoObstacleModelWarning")
+def test_the_sampler_grows_from_the_retreats_the_stage_found_free(panda, problems, monkeypatch):
+    """Where the retreat stage leaves a problem colliding, the sampler's trees start from its free
+    retreats: every branch handed over is free by torch's dense check from its end."""
+    from kinlearn.collision import rrt
+
+    seen = []
+    real = rrt.rrt_connect
+
+    def spy(*args, **kw):
+        seen.append(kw.get("branches"))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(rrt, "rrt_connect", spy)
+    start, goal, scene = problems.problem(CELL_SIDEWAYS)
+    alone = Planner(
+        panda.robot, panda.tm, panda.fm, panda.im
+    )  # no network: the retreats' transfers are lines
+    plan = alone.plan(start, goal, obstacles=scene)
+    assert plan.stage == "rrt" and bool(plan.collision_free)  # no deadline: the same every run
+    (branches,) = seen
+    assert sum(len(b) for b in branches) > 0
+    for end, chains in zip((start, goal), branches, strict=True):
+        for chain in chains:
+            poly = torch.cat([end.double()[None], torch.from_numpy(chain)])
+            assert bool(check_path(alone.body, poly, scene).collision_free)

@@ -190,6 +190,14 @@ class RrtConnect:
     48.1 → 49.3% for the ur5 (half its tuning problems are infeasible); the mean time to a path fell by
     a third to a half.
 
+    ``branches``: polylines each tree starts with, ``(start tree's, goal tree's)``, each ``(V, dof)`` from
+    its root (the root left out), its segments already found free by the same check: the planner gives
+    the retreat stage's free retreats, so the trees start out of their cells. On the tuning problems the
+    fixed-time stages left colliding (the ur5 with its gripper, seeds 3004–3010: 30 problems, 12 seeds
+    each) the median iterations to a path fell from 192 to 131 (p90 805 → 612), the share solved within
+    25 ms rose from 89.2 to 92.2% and within 40 ms stayed level (96.4 against 95.6%); the panda's (6
+    problems) and the iiwa14's (2) were as before.
+
     ``run(iterations)`` grows the trees for that many more rounds and returns the path ``(V, dof)``
     once found (``None`` while not); ``valid_ends`` says whether start and goal are free at all.
     """
@@ -210,6 +218,7 @@ class RrtConnect:
         sigma: float = 0.8,
         local_step: float | None = None,
         balanced: bool = True,
+        branches: tuple = ((), ()),
     ):
         self.balanced = bool(balanced)
         lo, hi = np.ascontiguousarray(lower, np.float64), np.ascontiguousarray(upper, np.float64)
@@ -235,6 +244,7 @@ class RrtConnect:
         self.nodes[0, 0], self.nodes[1, 0] = q0, q1
         self.state = np.zeros(7, dtype=np.int64)
         self.state[_N0] = self.state[_N1] = 1
+        self._graft(branches, dof, lo, hi)
         self.state[_RNG] = (int(seed) * 0x632BE59BD9B4E019) % (1 << 62)
         self.iterations = 0
         self.valid_ends = all(
@@ -242,6 +252,28 @@ class RrtConnect:
             for q in (q0, q1)
         )
         self._path = None
+
+    def _graft(self, branches, dof: int, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Each tree starts with its ``branches``: polylines ``(V, dof)`` from its root (the root left
+        out) whose segments the caller has found free by the same check (the retreat stage's free
+        retreats). A path through them is checked again as every plan is."""
+        if not (isinstance(branches, (tuple, list)) and len(branches) == 2):
+            raise ConfigError("branches must be a pair (the start tree's, the goal tree's) of polyline lists")
+        for t, chains in enumerate(branches):
+            for chain in chains:
+                v = np.asarray(chain, dtype=np.float64)
+                if v.ndim != 2 or v.shape[1] != dof:
+                    raise ShapeError(f"a branch must have shape (V, {dof}), got {v.shape}")
+                if not (np.isfinite(v).all() and (v >= lo).all() and (v <= hi).all()):
+                    raise ConfigError("a branch must be finite and within the joint limits")
+                prev = 0
+                for q in v:
+                    m = int(self.state[_N0 + t])
+                    if m >= self.nodes.shape[1]:
+                        raise ConfigError(f"branches exceed the trees' {self.nodes.shape[1]} nodes")
+                    self.nodes[t, m], self.parent[t, m] = q, prev
+                    self.state[_N0 + t] = m + 1
+                    prev = m
 
     @property
     def found(self) -> bool:

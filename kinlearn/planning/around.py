@@ -24,7 +24,7 @@ from ..data.problem import positions
 from ..models.chain import ChainFM
 from . import stages
 from .plan import CHECK_TRAVEL
-from .retreat import RetreatVias, retreat_path
+from .retreat import RetreatVias, free_chains, retreat_path
 from .stages import DEADLINE_RESERVE, Deadline, densify
 
 __all__ = ["NO_MODEL_KNOTS", "ObstacleStages"]
@@ -187,11 +187,14 @@ class ObstacleStages:
         batched = len(scene.batch_shape) > 0
 
         found: dict[int, tuple[np.ndarray, str]] = {}  # paths of other lengths, joined at the end
+        branches: dict[int, tuple] = {}  # each problem's free retreats, the sampler's first branches
         if self.retreat and self._retreat_vias() is not None:
             for i in np.flatnonzero(~free):
                 if _retreat_over(deadline):
                     break
-                path = self._retreat(theta0[i], thetaT[i], packed[i], rows[i], steps, deadline)
+                path, branches[int(i)] = self._retreat(
+                    theta0[i], thetaT[i], packed[i], rows[i], steps, deadline
+                )
                 if path is not None:
                     found[int(i)] = (path, "retreat")
         open_ = ~free
@@ -210,7 +213,15 @@ class ObstacleStages:
             for i in np.flatnonzero(open_):
                 if deadline.expired(DEADLINE_RESERVE):  # never, without a deadline
                     break
-                path = self._sample(theta0[i], thetaT[i], packed[i], deadline, int(i), iterations)
+                path = self._sample(
+                    theta0[i],
+                    thetaT[i],
+                    packed[i],
+                    deadline,
+                    int(i),
+                    iterations,
+                    branches.get(int(i), ((), ())),
+                )
                 if path is not None:
                     found[int(i)] = (path, "rrt")
         if found:
@@ -245,10 +256,11 @@ class ObstacleStages:
 
     def _retreat(
         self, theta0: np.ndarray, thetaT: np.ndarray, nscene, rows, steps: int, deadline: Deadline
-    ) -> np.ndarray | None:
+    ) -> tuple[np.ndarray | None, tuple]:
         """The retreat stage (:mod:`kinlearn.planning.retreat`) for one problem: its path ``(V, dof)`` or
-        None. ``rows``: the problem's scene rows and floor for the network (as :meth:`_proposals` takes
-        them)."""
+        None, and the free retreats of either end (:func:`~kinlearn.planning.retreat.free_chains`: the
+        sampler grows its trees from them). ``rows``: the problem's scene rows and floor for the network
+        (as :meth:`_proposals` takes them)."""
         k, body, vias = _kernel(), self._np_body, self._retreat_vias()
 
         def first_free(paths, order):
@@ -276,7 +288,7 @@ class ObstacleStages:
             vias.free(theta0, first_collision, config_free, distance),
             vias.free(thetaT, first_collision, config_free, distance),
         )
-        return retreat_path(
+        path = retreat_path(
             theta0,
             thetaT,
             v0,
@@ -287,13 +299,22 @@ class ObstacleStages:
             transfer,
             stop=lambda: _retreat_over(deadline),
         )
+        return path, (free_chains(v0, d0), free_chains(vT, dT))
 
     def _sample(
-        self, start: np.ndarray, goal: np.ndarray, nscene, deadline: Deadline, seed: int, iterations: int
+        self,
+        start: np.ndarray,
+        goal: np.ndarray,
+        nscene,
+        deadline: Deadline,
+        seed: int,
+        iterations: int,
+        branches: tuple = ((), ()),
     ):
         """Stage 4: the compiled RRT-Connect from ``start`` to ``goal`` for what ``deadline`` leaves (less
         :data:`~kinlearn.planning.stages.DEADLINE_RESERVE`) and at most ``iterations`` iterations (0: no
-        budget but the deadline), shortcut; its path ``(V, dof)`` or None."""
+        budget but the deadline), shortcut; its path ``(V, dof)`` or None. ``branches``: the free
+        retreats of the start and of the goal, its trees' first branches (out of a cell already)."""
         from ..collision.rrt import rrt_connect
 
         left = deadline.left() - DEADLINE_RESERVE  # inf without a deadline
@@ -302,7 +323,7 @@ class ObstacleStages:
         path, _, _ = rrt_connect(
             self._np_body, nscene, start, goal, self._lo_np, self._hi_np, time_limit=left, seed=seed,
             max_travel=CHECK_TRAVEL, clock=deadline.clock,
-            max_iterations=iterations or None,
+            max_iterations=iterations or None, branches=branches,
         )  # fmt: skip
         return path
 

@@ -48,6 +48,7 @@ __all__ = [
     "RETREAT_DISTANCES",
     "RETREAT_TRANSFERS",
     "RetreatVias",
+    "free_chains",
     "free_depths",
     "open_directions",
     "retreat_path",
@@ -207,6 +208,12 @@ def free_depths(
         else:
             depth[d] = f
     return depth
+
+
+def free_chains(vias: np.ndarray, depth: np.ndarray) -> list[np.ndarray]:
+    """One end's free retreats as polylines from it (the end itself left out): per direction of ``vias
+    (D, L, dof)``, its first ``depth[d]`` vias (:func:`free_depths`), deepest prefixes only."""
+    return [vias[d, : int(n)] for d, n in enumerate(depth) if n]
 
 
 def _ends(theta: np.ndarray, vias: np.ndarray, depth: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
