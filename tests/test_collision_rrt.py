@@ -95,22 +95,23 @@ def test_colliding_ends_and_bad_input_are_refused(wall_problem):
         RrtConnect(kb, K.KernelScene(scene), start, goal, robot.lower, robot.upper, local_step=float("nan"))
 
 
-def test_the_default_step_is_ompls_range_capped(wall_problem):
-    """The default extension is 0.2 of the joint box's diagonal (OMPL's default range) but at most
-    MAX_STEP: the ur5's ±2π joints would make it 5.8 rad."""
+def test_the_default_step_is_ompls_range_with_each_joint_counted_at_most_one_turn(wall_problem):
+    """The default extension is 0.2 of the joint box's diagonal (OMPL's default range), each joint's
+    range counted at most one turn: the panda's and the iiwa14's are OMPL's own, the ur5's ±2π joints
+    count 2π each (3.1 rad, not 5.8)."""
     from kinlearn import load_robot
     from kinlearn.collision import body_spheres
-    from kinlearn.collision.rrt import MAX_STEP
+    from kinlearn.collision.rrt import TURN
 
     robot, body, scene, start, goal = wall_problem
     box = 0.2 * float(np.linalg.norm(robot.upper - robot.lower))
     rrt = RrtConnect(K.KernelBody(body), K.KernelScene(scene), start, goal, robot.lower, robot.upper)
-    assert rrt.step == min(box, MAX_STEP)
+    assert (robot.upper - robot.lower < TURN).all() and rrt.step == pytest.approx(box, rel=1e-12)
     ur5 = load_robot("ur5")
-    assert 0.2 * float(np.linalg.norm(ur5.upper - ur5.lower)) > 3 * MAX_STEP
+    assert 0.2 * float(np.linalg.norm(ur5.upper - ur5.lower)) > 5.5
     q = np.zeros(6)
     rrt = RrtConnect(K.KernelBody(body_spheres(ur5)), K.KernelScene(scene), q, q, ur5.lower, ur5.upper)
-    assert rrt.step == MAX_STEP and rrt.local_step == MAX_STEP
+    assert rrt.step == pytest.approx(0.2 * TURN * np.sqrt(6)) and rrt.local_step == rrt.step
 
 
 def test_samples_near_the_root_extend_by_their_own_step(wall_problem):

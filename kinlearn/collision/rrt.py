@@ -33,18 +33,20 @@ import numpy as np
 from ..errors import ConfigError, ShapeError
 from . import kernel
 
-__all__ = ["RrtConnect", "rrt_connect", "warm_up"]
+__all__ = ["TURN", "RrtConnect", "rrt_connect", "warm_up"]
 
 _jit = numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
-#: The default extension's cap, rad. OMPL's default range, 0.2 of the joint box's diagonal, is 2.6–2.8 rad
-#: for the panda and the iiwa14 but 5.8 rad for the ur5, whose joints turn ±2π: a step that long
-#: sweeps metres of the arm per motion check and is mostly trapped. On the ur5's tuning problems made
-#: for its gripper (seeds 3004–3010, 20 per family, one seed each, the machine shared with a training),
-#: 1.5 rad solved 98.6% within 50 ms against 95.0% (75.0 against 56.4% within 10 ms); 1.0 rad 97.1%.
-#: On the panda's and the iiwa14's it changed nothing but the time (99.3% and 100% within 50 ms either
-#: way; p50 4.0 against 4.4 ms and 0.95 against 1.00 ms).
-MAX_STEP = 1.5
+#: The most of a joint's range the default step counts, rad: one turn. The default step is OMPL's default
+#: range, 0.2 of the joint box's diagonal, with every joint's range counted at most once round: a range
+#: beyond a turn adds no pose to sample, only ways to reach one. The panda's and the iiwa14's (ranges
+#: under a turn) stay OMPL's, 2.6–2.8 rad; the ur5's ±2π joints would give 5.8 rad, a step that sweeps
+#: metres of the arm per motion check and is mostly trapped, and give 3.1 rad instead. On the ur5's
+#: tuning problems made for its gripper (seeds 3004–3010, 20 per family, one seed each): within 50 ms
+#: 95.0% at 5.8 rad (the machine shared), 97.9% at 3.1 rad, 96.4–97.9% at 2.0 and 97.9–98.6% at 1.5
+#: (two runs each); a flat cap of 1.5 rad (stop 32) cost the panda and the iiwa14 time (p50 3.9–4.4
+#: against 3.2–4.0 ms and 1.2–1.3 against 1.0–1.1 ms, two runs each), so the cap is by turns, not rad.
+TURN = 2.0 * math.pi
 
 _TRAPPED, _ADVANCED, _REACHED = 0, 1, 2
 #: State slots: the sizes of the two trees (0 rooted at the start, 1 at the goal), the generator's
@@ -171,7 +173,7 @@ class RrtConnect:
     """One RRT-Connect query on a compiled body and scene (:class:`~kinlearn.collision.kernel.KernelBody`,
     :class:`~kinlearn.collision.kernel.KernelScene`), from ``start`` to ``goal`` (joints ``(dof,)``
     inside ``[lower, upper]``). ``step``: the largest extension, rad (default: 0.2 of the joint box's
-    diagonal, OMPL's default range, at most :data:`MAX_STEP`); ``max_nodes``: each tree's capacity;
+    diagonal, OMPL's default range, each joint's range counted at most one :data:`TURN`); ``max_nodes``: each tree's capacity;
     ``seed`` fixes the samples.
     ``local``: the share of samples drawn near the extended tree's root, Gaussian with ``sigma`` rad
     per joint (the rest uniform in the limits): starts and goals inside shelves, cubbies and cages sit
@@ -229,7 +231,7 @@ class RrtConnect:
                 raise ShapeError(f"RRT-Connect's {name} must have shape ({dof},), got {v.shape}")
         if not (isinstance(max_nodes, int) and max_nodes >= 2):
             raise ConfigError(f"max_nodes must be an integer >= 2, got {max_nodes!r}")
-        self.step = min(0.2 * float(np.linalg.norm(hi - lo)), MAX_STEP) if step is None else float(step)
+        self.step = 0.2 * float(np.linalg.norm(np.minimum(hi - lo, TURN))) if step is None else float(step)
         if not (math.isfinite(self.step) and self.step > 0):
             raise ConfigError(f"step must be a number of radians > 0, got {step!r}")
         self.local_step = self.step if local_step is None else float(local_step)
