@@ -44,7 +44,7 @@ _jit = numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 #: metres of the arm per motion check and is mostly trapped, and give 3.1 rad instead. On the ur5's
 #: tuning problems made for its gripper (seeds 3004–3010, 20 per family, one seed each): within 50 ms
 #: 95.0% at 5.8 rad (the machine shared), 97.9% at 3.1 rad, 96.4–97.9% at 2.0 and 97.9–98.6% at 1.5
-#: (two runs each); a flat cap of 1.5 rad (stop 32) cost the panda and the iiwa14 time (p50 3.9–4.4
+#: (two runs each); a flat cap of 1.5 rad cost the panda and the iiwa14 time (p50 3.9–4.4
 #: against 3.2–4.0 ms and 1.2–1.3 against 1.0–1.1 ms, two runs each), so the cap is by turns, not rad.
 TURN = 2.0 * math.pi
 
