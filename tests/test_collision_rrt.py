@@ -38,15 +38,20 @@ def wall_problem(request):
     return robot, body, scene, start.numpy(), goal.numpy()
 
 
+def _solve(rrt: RrtConnect, rounds: int = 400, iterations: int = 25):
+    """Run ``rrt`` for up to ``rounds`` rounds of ``iterations``: its path, or None."""
+    for _ in range(rounds):
+        path = rrt.run(iterations)
+        if path is not None:
+            return path
+    return None
+
+
 def test_finds_a_path_free_by_the_torch_check_and_shortcuts_keep_it_free(wall_problem):
     robot, body, scene, start, goal = wall_problem
     kb, ks = K.KernelBody(body), K.KernelScene(scene)
     rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=3)
-    path = None
-    for _ in range(400):
-        path = rrt.run(25)
-        if path is not None:
-            break
+    path = _solve(rrt)
     assert path is not None and rrt.found and rrt.size > 2
     for p in (path, rrt.shortcut(path)):
         assert np.array_equal(p[0], start) and np.array_equal(p[-1], goal)
@@ -189,22 +194,14 @@ def test_trees_grown_from_given_branches(wall_problem):
     robot, body, scene, start, goal = wall_problem
     kb, ks = K.KernelBody(body), K.KernelScene(scene)
     rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=3)
-    path = None
-    for _ in range(400):
-        path = rrt.run(25)
-        if path is not None:
-            break
+    path = _solve(rrt)
     assert path is not None and path.shape[0] >= 3
     k = path.shape[0] // 2
     branches = ([path[1:k]], [path[k:-1][::-1]])  # the found path cut in two, each half from its root
     grown = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=5, branches=branches)
     assert grown.size == path.shape[0]  # both roots and every branch vertex
     assert np.array_equal(grown.nodes[0, 1:k], path[1:k])
-    again = None
-    for _ in range(40):
-        again = grown.run(1)
-        if again is not None:
-            break
+    again = _solve(grown, rounds=40, iterations=1)
     assert again is not None
     assert np.array_equal(again[0], start) and np.array_equal(again[-1], goal)
     assert bool(check_path(body, torch.from_numpy(again), scene).collision_free)
