@@ -213,3 +213,9 @@ def test_trees_grown_from_given_branches(wall_problem):
         RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, branches=([outside], []))
     with pytest.raises(ConfigError, match="pair"):
         RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, branches=[path[1:k]])
+    nan = path[1:k].copy()
+    nan[0, 0] = np.nan
+    with pytest.raises(ConfigError, match="finite"):
+        RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, branches=([nan], []))
+    with pytest.raises(ConfigError, match="exceed"):
+        RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, max_nodes=2, branches=([path[1:3]], []))

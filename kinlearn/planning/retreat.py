@@ -220,14 +220,12 @@ def _ends(theta: np.ndarray, vias: np.ndarray, depth: np.ndarray) -> tuple[list[
     """The free retreats of one end as vertex lists from it, ``[theta]`` (none) first, then each
     direction's free prefixes, shallow to deep; and each one's joint length."""
     ends, lengths = [theta[None]], [0.0]
-    for d in range(vias.shape[0]):
-        n = int(depth[d])
-        if n:
-            chain = np.concatenate((theta[None], vias[d, :n]))
-            steps = np.cumsum(np.linalg.norm(np.diff(chain, axis=0), axis=-1))
-            for k in range(n):
-                ends.append(chain[: k + 2])
-                lengths.append(float(steps[k]))
+    for free in free_chains(vias, depth):
+        chain = np.concatenate((theta[None], free))
+        steps = np.cumsum(np.linalg.norm(np.diff(chain, axis=0), axis=-1))
+        for k in range(len(free)):
+            ends.append(chain[: k + 2])
+            lengths.append(float(steps[k]))
     return ends, np.array(lengths)
 
 
