@@ -11,7 +11,8 @@ network's paths both ways, shortest first) on the committed held-out problems of
 - ``first_free``: each candidate probed first where the last candidates hit the scene (where a probe
   or a walk found their collision), then at spread
   grid configurations, scene only, link by link behind a ball per link (a hit is a collision), then
-  walked with budgets (the planner's check); also without the places of the last hits;
+  walked with budgets, without the self-collision pairs proven apart (the planner's check); also with
+  every pair, and without the places of the last hits;
 - the walk alone: the budgeted verdict of each candidate in order until one is free;
 - exact: every sub-step of every candidate evaluated (``check_paths``), the first free one taken.
 
@@ -68,12 +69,16 @@ def main() -> None:
     problems = ProblemSet.load(DATA / f"scene_problems_{args.robot}.npz", robot=args.robot)
     planner = kinlearn.Planner.default(args.robot)
     kb = K.KernelBody(planner.body)
-    f, n = kb.packed
+    f, n = kb.packed_within  # the candidates keep within the limits
+    f_all, n_all = kb.packed
     cands = candidates(planner, problems)
     scenes = [K.KernelScene(problems.problem(i)[2].to(torch.float64)) for i in range(len(problems))]
 
     def probe_then_walk(paths, order, ks):
         return int(K._first_free_packed(paths, order, TRAVEL, 0.0, f, n, ks.packed))
+
+    def every_pair(paths, order, ks):
+        return int(K._first_free_packed(paths, order, TRAVEL, 0.0, f_all, n_all, ks.packed))
 
     def unhinted(paths, order, ks):
         return int(K._first_free_packed(paths, order, TRAVEL, 0.0, f, n, ks.packed, 0))
@@ -90,6 +95,7 @@ def main() -> None:
 
     ways = {
         "first_free (probe where the last candidates hit, then spread; then walk)": probe_then_walk,
+        "first_free with every self-collision pair": every_pair,
         "probe spread only, then walk": unhinted,
         "the walk alone": walk,
         "exact": exact,

@@ -196,7 +196,7 @@ def test_pair_distance_changes_no_faster_than_the_axis_bound(name):
     body = body_spheres(arm).double()
     kb = kernel.KernelBody(body)
     pairs = body.pairs.numpy()
-    lever = torch.as_tensor(kb._item_lever(pairs, _axis_distances(arm, kb.link, body.local.numpy())))
+    lever = torch.as_tensor(kb._item_lever(pairs))  # with the body's axis distances (_axis_distances)
     gen = torch.Generator().manual_seed(4)
     q0 = arm.sample(300, gen, dtype=torch.float64)
     dq = (torch.rand(300, arm.dof, generator=gen, dtype=torch.float64) - 0.5) * 2.0

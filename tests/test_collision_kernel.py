@@ -269,3 +269,67 @@ def test_verdicts_where_self_collision_decides(arm):
     assert 0 < sum(f for f, _ in counts) < sum(n for _, n in counts)
     if robot.name != "iiwa14":  # its sparse set leaves out the pairs that can meet: rarely self-colliding
         assert counts[0][0] < counts[0][1]  # with no obstacle, some paths collide with themselves
+
+
+def _pair_gaps(body, q: torch.Tensor) -> torch.Tensor:
+    """``(N, P)``: each self-collision pair's distance at configurations ``q``, by torch."""
+    c, p = body(q), body.pairs
+    return (c[:, p[:, 0]] - c[:, p[:, 1]]).norm(dim=-1) - body.radii[p[:, 0]] - body.radii[p[:, 1]]
+
+
+def test_pairs_proven_apart_never_touch_within_the_limits(arm):
+    """The pairs the verdict leaves out (proven apart by branch and bound) keep a positive distance at
+    configurations the proof never saw; every pair seen touching is kept."""
+    robot, body, kb = arm
+    apart = kb.apart
+    assert 0 < apart.sum() < len(apart)
+    q = robot.sample(20_000, torch.Generator().manual_seed(7), dtype=torch.float64)
+    with torch.no_grad():
+        gap = _pair_gaps(body, q).numpy()
+    assert gap[:, apart].min() > 0.0
+    assert not (apart & (gap <= 0.0).any(0)).any()
+    assert K.proven_apart(kb) is apart or np.array_equal(K.proven_apart(kb), apart)  # one proof per body
+
+
+def test_verdicts_without_the_pairs_proven_apart_are_those_with_every_pair(arm):
+    """Whole-range motions in the limits, many colliding with themselves: the packing without the pairs
+    proven apart gives every path the same verdict and the same first colliding configuration."""
+    robot, _, kb = arm
+    paths = [p for k in range(4) for p in _random_paths(robot, 60, 2 + k % 3, seed=40 + k, spread=1.0)]
+    s = K.KernelScene(Scene()).packed  # self-collision alone decides
+    full = [K._verdict_packed(p, 0.01, 0.0, *kb.packed, s) for p in paths]
+    cut = [K._verdict_packed(p, 0.01, 0.0, *kb.packed_within, s) for p in paths]
+    assert [(f, x) for f, _, x in full] == [(f, x) for f, _, x in cut]  # (only the work differs)
+    assert sum(e for _, e, _ in cut) <= sum(e for _, e, _ in full)
+    assert kb.packing_of(paths[0]) is kb.packed_within
+    hits = sum(f[0] >= 0 for f in full)
+    assert hits < len(full) and (hits > 0 or robot.name == "iiwa14")  # its sparse set: rarely self-colliding
+
+
+def test_a_path_beyond_the_limits_is_checked_with_every_pair():
+    """Where a pair proven apart within the limits does touch (a configuration beyond them), the dense
+    check still finds the self-collision: a path with a knot outside the proof's box gets every pair."""
+    robot = load_robot("panda")
+    body = body_spheres(robot).double()
+    kb = K.KernelBody(body)
+    q = torch.rand(20_000, robot.dof, generator=torch.Generator().manual_seed(3), dtype=torch.float64) * 2 - 1
+    q = q * np.pi
+    with torch.no_grad():
+        touch = _pair_gaps(body, q) <= 0.0
+    apart = torch.as_tensor(kb.apart.copy())
+    only = touch[:, apart].any(1) & ~touch[:, ~apart].any(1)  # only pairs proven apart (in the limits) touch
+    assert only.any()
+    qo = q[only][0].numpy()
+    lo, hi = kb.box
+    assert ((qo < lo) | (qo > hi)).any()
+    path = np.ascontiguousarray(np.stack([qo, qo])[None])
+    ks = K.KernelScene(Scene())
+    assert kb.packing_of(path) is kb.packed
+    assert not check_path(body, torch.from_numpy(path), Scene()).collision_free.item()
+    assert K.first_free(kb, path, ks) == -1
+    assert not K.check_paths(kb, path, ks, exact=False)[0][0]
+    assert (
+        K._verdict_packed(path[0], 0.01, 0.0, *kb.packed_within, ks.packed)[0] < 0
+    )  # what pruning would say
+    assert kb.packing(robot.lower, robot.upper) is kb.packed_within
+    assert kb.packing(robot.lower - 0.1, robot.upper) is kb.packed

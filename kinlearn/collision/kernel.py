@@ -24,13 +24,19 @@ d_m, the next ⌊min_m (d_m − slack) / (t_m / n_k)⌋ sub-steps are free and a
 and the first colliding segment are those of checking every sub-step; only the clearance (a minimum
 over the evaluated configurations) needs ``exact=True``.
 
-Two refinements keep the verdict that of every sub-step and cut the work (``benchmarks/candidate_check_speed.py``):
+Three refinements keep the verdict that of every sub-step and cut the work (``benchmarks/candidate_check_speed.py``):
 
 - **A self-collision pair closes at its own rate.** Turning joint j changes the distance ‖B − A‖ of a
   sphere B after it from a sphere A before it by at most |Δθ_j| times A's distance from the joint's
   axis (as well as B's lever; :func:`~kinlearn.collision.body._axis_distances`), so a pair's budget is
   spent at Σ_j |Δθ_j| min(lever_Bj, axis_Aj) over the joints between them: a pair whose lower sphere
   sits on those axes keeps its budget however far the upper one swings (the panda's hand and forearm).
+- **Pairs that cannot touch are left out.** Within the joint limits many self-collision pairs can never
+  meet (the panda's hand and its upper arm): :func:`proven_apart` proves it for each pair by branch and
+  bound over the limits' box with the pairs' own rates, and the verdict drops them for paths whose
+  knots all lie in that box (:attr:`KernelBody.packed_within`; any other path gets every pair). The
+  verdicts and first colliding configurations are the same; a sampler's motion costs 0.81–0.91× the
+  time (panda, ur5 with its gripper, iiwa14; ``benchmarks/candidate_check_speed.py``).
 - **A probe first, where only the verdict is wanted** (:func:`first_free`, the sampler's motions): a
   few grid configurations spread along the path — its inner knots, then each segment's middle
   sub-step, its quarters, eighths and sixteenths — are checked against the scene, link by link behind a
@@ -64,6 +70,7 @@ __all__ = [
     "first_free",
     "near_pairs",
     "point_distances",
+    "proven_apart",
     "warm_up",
 ]
 
@@ -751,6 +758,81 @@ def _first_free_packed(paths, order, max_travel, margin, f, n, s, n_hints=_HINTS
     return _first_free(paths, order, max_travel, margin, _unpack_body(f, n), _unpack_scene(s), n_hints)
 
 
+@_jit
+def _within(paths, lo, hi):
+    """Whether every value of ``paths (..., dof)`` lies in ``[lo, hi]`` (NaN does not)."""
+    dof = lo.shape[0]
+    flat = paths.reshape(-1, dof)
+    for i in range(flat.shape[0]):
+        for j in range(dof):
+            v = flat[i, j]
+            if not (v >= lo[j] and v <= hi[j]):
+                return False
+    return True
+
+
+@_jit
+def _touching(qs, F, prismatic, link, folded, radii, pairs):
+    """``(P,)``: whether each pair of spheres touches (distance ≤ 0) at some configuration of ``qs (N, dof)``."""
+    M, P = link.shape[0], pairs.shape[0]
+    hit = np.zeros(P, dtype=np.bool_)
+    c, frames = np.empty((M, 3)), np.empty((qs.shape[1] + 1, 3, 4))
+    for i in range(qs.shape[0]):
+        _fk(qs[i], F, prismatic, link, folded, c, frames)
+        for p in range(P):
+            a, b = pairs[p, 0], pairs[p, 1]
+            dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
+            if math.sqrt(dx * dx + dy * dy + dz * dz) - radii[a] - radii[b] <= 0.0:
+                hit[p] = True
+    return hit
+
+
+@_jit
+def _apart(F, prismatic, a_link, a_folded, b_link, b_folded, gap, rates, lo, hi, max_cells):
+    """Whether two spheres (centres fixed in links ``a_link`` and ``b_link``, radii summing to ``gap``)
+    stay apart for every configuration in the box ``[lo, hi]``: 1 proven (branch and bound), −1 a
+    configuration where they touch found, 0 undecided within ``max_cells`` cells. A cell (centre c,
+    half-widths h) holds no contact when d(c) − Σ_j h_j · ``rates[j]`` > 0: ``rates[j]`` bounds how fast
+    the pair's distance changes per unit of joint j over all configurations (the verdict's own pair
+    rates, 0 for the joints that move both spheres or neither); else the cell is halved along the joint
+    that spends most of the bound."""
+    dof = lo.shape[0]
+    C, H = np.empty((max_cells + 2, dof)), np.empty((max_cells + 2, dof))
+    for j in range(dof):
+        C[0, j] = 0.5 * (lo[j] + hi[j])
+        H[0, j] = 0.5 * (hi[j] - lo[j]) if rates[j] > 0.0 else 0.0
+    frames, c, h = np.empty((dof + 1, 3, 4)), np.empty(dof), np.empty(dof)
+    n, used = 1, 0
+    while n > 0:
+        n -= 1
+        used += 1
+        if used > max_cells:
+            return 0
+        for j in range(dof):
+            c[j], h[j] = C[n, j], H[n, j]
+        _chain(c, F, prismatic, frames)
+        ax, ay, az = _point(frames, a_link, a_folded)
+        bx, by, bz = _point(frames, b_link, b_folded)
+        d = math.sqrt((ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2) - gap
+        if d <= 0.0:
+            return -1
+        spend, best, widest = 0.0, -1, 0.0
+        for j in range(dof):
+            w = h[j] * rates[j]
+            spend += w
+            if w > widest:
+                widest, best = w, j
+        if d - spend > _SLACK:
+            continue
+        h[best] *= 0.5
+        for side in (-1.0, 1.0):
+            for j in range(dof):
+                C[n, j], H[n, j] = c[j], h[j]
+            C[n, best] = c[best] + side * h[best]
+            n += 1
+    return 1
+
+
 # --------------------------------------------------------------------------------------------------
 # Python side: the body and the scene packed once, checked arguments
 # --------------------------------------------------------------------------------------------------
@@ -792,19 +874,7 @@ class KernelBody:
         self.on_floor = np.ascontiguousarray(body.floor_mask.cpu().numpy().astype(np.bool_))
         self.pairs = np.ascontiguousarray(body.pairs.cpu().numpy().astype(np.int64).reshape(-1, 2))
         self.lever = np.ascontiguousarray(body.lever.detach().cpu().double().numpy())
-        # For the verdict: a sphere's pairs with the spheres of one lower link (one that has at least
-        # _GROUP_MIN) go as one item, bounded by a ball around that link's spheres (centre: their mean, in
-        # its frame); the other pairs one by one.
         self._packed = None
-        la, lb = self.link[self.pairs[:, 0]], self.link[self.pairs[:, 1]]
-        upper = np.where(la > lb, self.pairs[:, 0], self.pairs[:, 1])  # the sphere on the higher link
-        lower = np.where(la > lb, self.pairs[:, 1], self.pairs[:, 0])
-        counts = np.bincount(self.link, minlength=self.dof + 1)
-        grouped = counts[self.link[lower]] >= _GROUP_MIN
-        self.other_pairs = np.ascontiguousarray(self.pairs[~grouped])
-        ball_links = np.unique(self.link[lower[grouped]])
-        index = {int(l): b for b, l in enumerate(ball_links)}
-        self.b_link = np.ascontiguousarray(ball_links.astype(np.int64))
         # A ball per link around its spheres (centre: their mean, in the link's frame; the spheres are
         # sorted by link, those of link l are l_start[l] to l_start[l + 1]): the probe's broad phase, and
         # the bound of a group of pairs with that link's spheres.
@@ -820,32 +890,56 @@ class KernelBody:
                 self.l_radius[lk] = float(
                     (np.linalg.norm(self.folded[a:b] - self.l_folded[lk], axis=1) + self.radii[a:b]).max()
                 )
-        self.b_folded = np.ascontiguousarray(self.l_folded[ball_links].reshape(-1, 3))
-        self.b_radius = np.ascontiguousarray(self.l_radius[ball_links])
+        self._axis = _axis_distances(robot, self.link, local)
+        # The joint box the pairs below are proven apart in: the robot's limits, widened by BOX_SLACK.
+        self.box = (
+            np.asarray(robot.lower, dtype=np.float64) - BOX_SLACK,
+            np.asarray(robot.upper, dtype=np.float64) + BOX_SLACK,
+        )
+        self._apart = None
+        self._packed_within = None
+
+    def _items(self, pairs: np.ndarray) -> dict:
+        """The verdict's self-collision items of ``pairs``, by name: a sphere's pairs with the
+        spheres of one lower link (one that has at least _GROUP_MIN) go as one item, bounded by a ball
+        around that link's spheres (centre: their mean, in its frame); the other pairs one by one."""
+        la, lb = self.link[pairs[:, 0]], self.link[pairs[:, 1]]
+        upper = np.where(la > lb, pairs[:, 0], pairs[:, 1])  # the sphere on the higher link
+        lower = np.where(la > lb, pairs[:, 1], pairs[:, 0])
+        counts = np.bincount(self.link, minlength=self.dof + 1)
+        grouped = counts[self.link[lower]] >= _GROUP_MIN
+        ball_links = np.unique(self.link[lower[grouped]])
+        index = {int(l): b for b, l in enumerate(ball_links)}
         up, low = upper[grouped], lower[grouped]
         key = up * (self.dof + 1) + self.link[low]
         order = np.argsort(key, kind="stable")
         keys, starts = np.unique(key[order], return_index=True)
-        self.g_sphere = np.ascontiguousarray((keys // (self.dof + 1)).astype(np.int64))
-        self.g_ball = np.array([index[int(l)] for l in keys % (self.dof + 1)], dtype=np.int64)
-        self.g_start = np.ascontiguousarray(np.append(starts, len(order)).astype(np.int64))
-        self.g_members = np.ascontiguousarray(low[order].astype(np.int64))
+        it = {
+            "pairs": np.ascontiguousarray(pairs[~grouped]),
+            "b_link": np.ascontiguousarray(ball_links.astype(np.int64)),
+            "b_folded": np.ascontiguousarray(self.l_folded[ball_links].reshape(-1, 3)),
+            "b_radius": np.ascontiguousarray(self.l_radius[ball_links]),
+            "g_sphere": np.ascontiguousarray((keys // (self.dof + 1)).astype(np.int64)),
+            "g_ball": np.array([index[int(l)] for l in keys % (self.dof + 1)], dtype=np.int64),
+            "g_start": np.ascontiguousarray(np.append(starts, len(order)).astype(np.int64)),
+            "g_members": np.ascontiguousarray(low[order].astype(np.int64)),
+        }
         # How fast each self-collision item can close, per radian of each joint between its links: the
         # smaller of the upper sphere's lever and the lower sphere's distance from the joint's axis
         # (:func:`~kinlearn.collision.body._axis_distances`); a group's, the largest over its members.
-        axis = _axis_distances(robot, self.link, local)
-        self.pair_lever = np.ascontiguousarray(self._item_lever(self.other_pairs, axis))
-        g_lever = np.zeros((len(self.g_sphere), self.dof))
-        m_lever = np.zeros((len(self.g_members), self.dof))
-        for g, x in enumerate(self.g_sphere):
-            span = slice(self.g_start[g], self.g_start[g + 1])
-            members = self.g_members[span]
-            m_lever[span] = self._item_lever(np.stack([np.full(len(members), x), members], axis=1), axis)
+        g_lever = np.zeros((len(it["g_sphere"]), self.dof))
+        m_lever = np.zeros((len(it["g_members"]), self.dof))
+        for g, x in enumerate(it["g_sphere"]):
+            span = slice(it["g_start"][g], it["g_start"][g + 1])
+            members = it["g_members"][span]
+            m_lever[span] = self._item_lever(np.stack([np.full(len(members), x), members], axis=1))
             g_lever[g] = m_lever[span].max(axis=0)
-        self.group_lever = np.ascontiguousarray(g_lever)
-        self.member_lever = np.ascontiguousarray(m_lever)
+        it["pair_lever"] = np.ascontiguousarray(self._item_lever(it["pairs"]))
+        it["group_lever"] = np.ascontiguousarray(g_lever)
+        it["member_lever"] = np.ascontiguousarray(m_lever)
+        return it
 
-    def _item_lever(self, pairs: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    def _item_lever(self, pairs: np.ndarray) -> np.ndarray:
         """``(P, dof)``: per pair and joint, min(lever of its upper sphere, axis distance of its lower one)
         for the joints between their links (those that move one and not the other), 0 for the rest."""
         la, lb = self.link[pairs[:, 0]], self.link[pairs[:, 1]]
@@ -853,7 +947,15 @@ class KernelBody:
         low = np.where(la > lb, pairs[:, 1], pairs[:, 0])
         j = np.arange(self.dof)
         between = (j[None] >= self.link[low][:, None]) & (j[None] < self.link[up][:, None])
-        return np.where(between, np.minimum(self.lever[up], axis[low]), 0.0)
+        return np.where(between, np.minimum(self.lever[up], self._axis[low]), 0.0)
+
+    @property
+    def apart(self) -> np.ndarray:
+        """``(P,)`` bool: the self-collision pairs proven never to touch while every joint is in
+        :attr:`box` (see :func:`proven_apart`); made on first use, kept per body's numbers."""
+        if self._apart is None:
+            self._apart = proven_apart(self)
+        return self._apart
 
     @property
     def num_spheres(self) -> int:
@@ -867,42 +969,70 @@ class KernelBody:
 
     @property
     def packed(self) -> tuple[np.ndarray, np.ndarray]:
-        """The verdict's arrays in two buffers (floats, integers), for the packed entry points."""
+        """The verdict's arrays in two buffers (floats, integers), for the packed entry points: every
+        self-collision pair, right for any path."""
         if self._packed is None:
-            M, P, G = len(self.radii), len(self.other_pairs), len(self.g_sphere)
-            E, L = len(self.g_members), len(self.b_link)
-            f = np.concatenate(
-                [
-                    self.F.ravel(),
-                    self.folded.ravel(),
-                    self.radii,
-                    self.lever.ravel(),
-                    self.b_folded.ravel(),
-                    self.b_radius,
-                    self.pair_lever.ravel(),
-                    self.group_lever.ravel(),
-                    self.member_lever.ravel(),
-                    self.l_folded.ravel(),
-                    self.l_radius,
-                ]
-            )
-            n = np.concatenate(
-                [
-                    [self.dof, M, P, G, E, L],
-                    self.prismatic.astype(np.int64),
-                    self.link,
-                    self.on_floor.astype(np.int64),
-                    self.other_pairs.ravel(),
-                    self.g_sphere,
-                    self.g_ball,
-                    self.g_start,
-                    self.g_members,
-                    self.b_link,
-                    self.l_start,
-                ]
-            ).astype(np.int64)
-            self._packed = (np.ascontiguousarray(f), np.ascontiguousarray(n))
+            self._packed = self._pack(self._items(self.pairs))
         return self._packed
+
+    @property
+    def packed_within(self) -> tuple[np.ndarray, np.ndarray]:
+        """:attr:`packed` without the pairs proven apart (:attr:`apart`): the same verdicts, for paths
+        whose every knot lies in :attr:`box` (the box is convex: so does every configuration between)."""
+        if self._packed_within is None:
+            self._packed_within = self._pack(self._items(self.pairs[~self.apart]))
+        return self._packed_within
+
+    def packing(self, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The packing for paths whose knots all lie in ``[lower, upper]``: :attr:`packed_within` if that
+        box is inside :attr:`box`, else :attr:`packed`."""
+        lo, hi = self.box
+        if bool(np.all(np.asarray(lower) >= lo)) and bool(np.all(np.asarray(upper) <= hi)):
+            return self.packed_within
+        return self.packed
+
+    def packing_of(self, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The packing for ``paths (..., dof)`` (float64, C-contiguous): :attr:`packed_within` when every
+        knot lies in :attr:`box`, else :attr:`packed`."""
+        if _within(paths, *self.box):
+            return self.packed_within
+        return self.packed
+
+    def _pack(self, it: dict) -> tuple[np.ndarray, np.ndarray]:
+        """The body and self-collision items ``it`` (:meth:`_items`) in two buffers (:func:`_unpack_body`)."""
+        M, P, G = len(self.radii), len(it["pairs"]), len(it["g_sphere"])
+        E, L = len(it["g_members"]), len(it["b_link"])
+        f = np.concatenate(
+            [
+                self.F.ravel(),
+                self.folded.ravel(),
+                self.radii,
+                self.lever.ravel(),
+                it["b_folded"].ravel(),
+                it["b_radius"],
+                it["pair_lever"].ravel(),
+                it["group_lever"].ravel(),
+                it["member_lever"].ravel(),
+                self.l_folded.ravel(),
+                self.l_radius,
+            ]
+        )
+        n = np.concatenate(
+            [
+                [self.dof, M, P, G, E, L],
+                self.prismatic.astype(np.int64),
+                self.link,
+                self.on_floor.astype(np.int64),
+                it["pairs"].ravel(),
+                it["g_sphere"],
+                it["g_ball"],
+                it["g_start"],
+                it["g_members"],
+                it["b_link"],
+                self.l_start,
+            ]
+        ).astype(np.int64)
+        return np.ascontiguousarray(f), np.ascontiguousarray(n)
 
     def __repr__(self) -> str:
         return f"KernelBody(robot={self.robot.name!r}, set={self.name!r}, spheres={self.num_spheres}, pairs={len(self.pairs)})"
@@ -1011,6 +1141,55 @@ class KernelScene:
             f"KernelScene(spheres={len(self.spheres)}, boxes={len(self.boxes)}, cylinders={len(self.cylinders)}, "
             f"floor={'none' if not self.floor[0] else f'{self.floor[1]:.3f} m'})"
         )
+
+
+#: Radians the box self-collision pairs are proven apart in reaches past each joint limit (a planner's
+#: paths keep within ``LIMIT_TOLERANCE``, 1e-6 rad, of them).
+BOX_SLACK = 1e-3
+#: Configurations (uniform in the box, seeded) every pair is first tried at: one that touches at any
+#: needs no proof. Then the most cells one pair's proof may split into before the pair is kept as
+#: undecided. Panda, iiwa14, ur5 with its gripper: 718 of 1,050, 73 of 103 and 194 of 434 pairs proven
+#: apart, in 0.4, 0.01 and 0.3 s on a shared 2-core machine (2,000 cells: 706, 73 and 150 in a quarter of
+#: the time; 60,000: 720, 73 and 204 in twice it).
+_APART_SAMPLES, _APART_CELLS = 4096, 20000
+#: Proofs made, by the numbers they depend on (bodies alike share them).
+_APART: dict[bytes, np.ndarray] = {}
+
+
+def proven_apart(body: KernelBody) -> np.ndarray:
+    """``(P,)`` bool: which of ``body``'s self-collision pairs are proven never to touch while every joint
+    lies in ``body.box`` (an SRDF's "never in collision" pairs, proven rather than sampled).
+
+    Each pair is first looked at in :data:`_APART_SAMPLES` configurations; one that touches in any is
+    kept. The others go to a branch and bound over the box (:func:`_apart`) bounded by the verdict's own
+    rates (how fast the pair's distance can change per radian of each joint between their links), so a
+    pair is dropped only where no configuration of the box brings it to contact; one undecided within
+    :data:`_APART_CELLS` cells is kept. A pair so dropped changes no verdict of a path inside the box:
+    its distance there is > 0 at every configuration."""
+    lo, hi = body.box
+    P = len(body.pairs)
+    if P == 0 or not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        return np.zeros(P, dtype=bool)
+    key = b"".join(
+        np.ascontiguousarray(a).tobytes()
+        for a in (body.F, body.prismatic, body.link, body.folded, body.radii, body.pairs, body._axis, lo, hi)
+    )
+    hit = _APART.get(key)
+    if hit is None:
+        qs = lo + (hi - lo) * np.random.default_rng(0).random((_APART_SAMPLES, body.dof))
+        touch = _touching(qs, *body.fk_args(), body.radii, body.pairs)
+        rates = np.ascontiguousarray(body._item_lever(body.pairs))
+        hit = np.zeros(P, dtype=bool)
+        for p in np.flatnonzero(~touch):
+            a, b = body.pairs[p]
+            found = _apart(
+                body.F, body.prismatic, body.link[a], body.folded[a], body.link[b], body.folded[b],
+                body.radii[a] + body.radii[b], rates[p], lo, hi, _APART_CELLS,
+            )  # fmt: skip
+            hit[p] = found == 1
+        hit.flags.writeable = False
+        _APART[key] = hit
+    return hit
 
 
 #: Bodies packed by :meth:`KernelBody.of`, dropped with their body.
@@ -1174,7 +1353,7 @@ def check_paths(
             )
         else:
             first[i], _, _ = _verdict_packed(
-                arr[i], float(max_travel), float(margin), *body.packed, scene.packed
+                arr[i], float(max_travel), float(margin), *body.packing_of(arr[i]), scene.packed
             )
             clear[i] = np.nan
         free[i] = first[i] < 0
@@ -1208,7 +1387,7 @@ def first_free(
         if not _all_finite(arr):
             raise NonFiniteError(f"joint paths hold {int((~np.isfinite(arr)).sum())} NaN/inf value(s)")
         return -1
-    f, n = body.packed
+    f, n = body.packing_of(arr)
     k = int(_first_free_packed(arr, idx, float(max_travel), float(margin), f, n, scene.packed))
     if k == -2:
         raise NonFiniteError(f"joint paths hold {int((~np.isfinite(arr)).sum())} NaN/inf value(s)")

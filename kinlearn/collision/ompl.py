@@ -78,6 +78,8 @@ class RrtChecker:
             self._clear, self._free = kernel._clearances, kernel._free_packed
             self._clear_args = (*kb.args(), *ks.args())
             self._verdict_args = (*kb.packed, ks.packed)
+            self._within_args, self._box = (*kb.packed_within, ks.packed), kb.box
+            self._within = kernel._within
             self._per = np.empty((1, kb.num_spheres))
             self._travel = float(max_travel)
 
@@ -95,7 +97,8 @@ class RrtChecker:
         self.motions += 1
         if self.compiled:
             path = np.stack([a, b]).astype(np.float64)
-            return bool(self._free(path, self._travel, 0.0, *self._verdict_args))
+            args = self._within_args if self._within(path, *self._box) else self._verdict_args
+            return bool(self._free(path, self._travel, 0.0, *args))
         path = torch.as_tensor(np.stack([a, b]), dtype=_F64)
         n = int(segment_steps(self.body, path, self.max_travel)[0])
         q = straight_line(path[0], path[1], n)
