@@ -333,3 +333,20 @@ def test_a_path_beyond_the_limits_is_checked_with_every_pair():
     )  # what pruning would say
     assert kb.packing(robot.lower, robot.upper) is kb.packed_within
     assert kb.packing(robot.lower - 0.1, robot.upper) is kb.packed
+
+
+def test_a_motion_whose_end_state_collides_is_not_free(arm):
+    """The sampler's motion check looks at the last knot first: a motion from a free state to one that
+    collides (an obstacle put on its last sphere there) is refused, as check_path refuses it."""
+    robot, body, kb = arm
+    q0 = (robot.lower + robot.upper) / 2
+    q1 = q0 + 0.3 * (robot.upper - robot.lower) / 2
+    tip = K.centres(kb, q1[None])[0, -1]  # the last sphere's centre there
+    scene = Scene.from_spheres([[*tip, 0.03]], floor=None)
+    ks = K.KernelScene(scene)
+    d, sc = K.clearances(kb, ks, np.stack([q0, q1]))
+    assert d[0] > 0 and sc[0] > 0 and d[1] <= 0  # free start, colliding end
+    path = np.ascontiguousarray(np.stack([q0, q1]))
+    assert not check_path(body, torch.from_numpy(path[None]), scene).collision_free.item()
+    assert not K._free_packed(path, 0.01, 0.0, *kb.packed_within, ks.packed)
+    assert not K._free_packed(path, 0.01, 0.0, *kb.packed, ks.packed)

@@ -742,9 +742,16 @@ def _verdict_packed(path, max_travel, margin, f, n, s):
 
 @_jit
 def _free_packed(path, max_travel, margin, f, n, s):
-    """Whether ``path`` is free under the dense check (:func:`_verdict`'s answer), probed first (:func:`_probe`):
-    the verdict alone, for callers that need no first colliding segment (a sampler's motions)."""
+    """Whether ``path`` is free under the dense check (:func:`_verdict`'s answer), for callers that need no
+    first colliding segment (a sampler's motions): its last knot first (a sampler's new state; OMPL's
+    discrete motion validator also looks at it first), then the probe (:func:`_probe`), then the walk.
+    Each is a configuration of the walk's grid: the same verdict. The compiled RRT-Connect on the tuning
+    scenes (seeds 3004–3010, the same searches, in one process by turns), against the probe without the
+    last knot first: total time 0.76 / 0.86 / 0.89 (ur5 with its gripper, panda, iiwa14), median problem
+    0.98 / 1.01 / 1.02; one halving in the probe instead of four, 0.85 / 0.94 / 0.90 and 1.07 / 1.33 / 0.98."""
     body, scene = _unpack_body(f, n), _unpack_scene(s)
+    if _scene_hit(path[path.shape[0] - 1], margin, body, scene, np.empty((path.shape[1] + 1, 3, 4))):
+        return False
     if _probe(path, max_travel, margin, body, scene, _NO_HINTS, 0)[0]:
         return False
     return _verdict(path, max_travel, margin, body, scene)[0] < 0
