@@ -331,8 +331,8 @@ def test_a_path_beyond_the_limits_is_checked_with_every_pair():
     assert (
         K._verdict_packed(path[0], 0.01, 0.0, *kb.packed_within, ks.packed)[0] < 0
     )  # what pruning would say
-    assert kb.packing(robot.lower, robot.upper) is kb.packed_within
-    assert kb.packing(robot.lower - 0.1, robot.upper) is kb.packed
+    assert kb.packing_of(np.stack([robot.lower, robot.upper])) is kb.packed_within
+    assert kb.packing_of(np.stack([robot.lower - 0.1, robot.upper])) is kb.packed
 
 
 def test_a_motion_whose_end_state_collides_is_not_free(arm):

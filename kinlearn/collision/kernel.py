@@ -779,22 +779,6 @@ def _within(paths, lo, hi):
 
 
 @_jit
-def _touching(qs, F, prismatic, link, folded, radii, pairs):
-    """``(P,)``: whether each pair of spheres touches (distance ≤ 0) at some configuration of ``qs (N, dof)``."""
-    M, P = link.shape[0], pairs.shape[0]
-    hit = np.zeros(P, dtype=np.bool_)
-    c, frames = np.empty((M, 3)), np.empty((qs.shape[1] + 1, 3, 4))
-    for i in range(qs.shape[0]):
-        _fk(qs[i], F, prismatic, link, folded, c, frames)
-        for p in range(P):
-            a, b = pairs[p, 0], pairs[p, 1]
-            dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
-            if math.sqrt(dx * dx + dy * dy + dz * dz) - radii[a] - radii[b] <= 0.0:
-                hit[p] = True
-    return hit
-
-
-@_jit
 def _apart(F, prismatic, a_link, a_folded, b_link, b_folded, gap, rates, lo, hi, max_cells):
     """Whether two spheres (centres fixed in links ``a_link`` and ``b_link``, radii summing to ``gap``)
     stay apart for every configuration in the box ``[lo, hi]``: 1 proven (branch and bound), −1 a
@@ -990,17 +974,10 @@ class KernelBody:
             self._packed_within = self._pack(self._items(self.pairs[~self.apart]))
         return self._packed_within
 
-    def packing(self, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The packing for paths whose knots all lie in ``[lower, upper]``: :attr:`packed_within` if that
-        box is inside :attr:`box`, else :attr:`packed`."""
-        lo, hi = self.box
-        if bool(np.all(np.asarray(lower) >= lo)) and bool(np.all(np.asarray(upper) <= hi)):
-            return self.packed_within
-        return self.packed
-
     def packing_of(self, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The packing for ``paths (..., dof)`` (float64, C-contiguous): :attr:`packed_within` when every
-        knot lies in :attr:`box`, else :attr:`packed`."""
+        knot lies in :attr:`box`, else :attr:`packed`. Paths between points that all lie in the box stay
+        in it (the box is convex): pass those points to choose for them all."""
         if _within(paths, *self.box):
             return self.packed_within
         return self.packed
@@ -1184,7 +1161,10 @@ def proven_apart(body: KernelBody) -> np.ndarray:
     hit = _APART.get(key)
     if hit is None:
         qs = lo + (hi - lo) * np.random.default_rng(0).random((_APART_SAMPLES, body.dof))
-        touch = _touching(qs, *body.fk_args(), body.radii, body.pairs)
+        # touching: a distance ≤ 0, i.e. below the smallest positive float
+        touch = _near_pairs(
+            _centres(qs, *body.fk_args()), body.radii, body.pairs, np.nextafter(0.0, 1.0)
+        ).any(0)
         rates = np.ascontiguousarray(body._item_lever(body.pairs))
         hit = np.zeros(P, dtype=bool)
         for p in np.flatnonzero(~touch):

@@ -77,9 +77,7 @@ class RrtChecker:
             # The kernels themselves, their arguments bound once: OMPL calls these thousands of times.
             self._clear, self._free = kernel._clearances, kernel._free_packed
             self._clear_args = (*kb.args(), *ks.args())
-            self._verdict_args = (*kb.packed, ks.packed)
-            self._within_args, self._box = (*kb.packed_within, ks.packed), kb.box
-            self._within = kernel._within
+            self._kb, self._scene_packed = kb, ks.packed
             self._per = np.empty((1, kb.num_spheres))
             self._travel = float(max_travel)
 
@@ -97,8 +95,7 @@ class RrtChecker:
         self.motions += 1
         if self.compiled:
             path = np.stack([a, b]).astype(np.float64)
-            args = self._within_args if self._within(path, *self._box) else self._verdict_args
-            return bool(self._free(path, self._travel, 0.0, *args))
+            return bool(self._free(path, self._travel, 0.0, *self._kb.packing_of(path), self._scene_packed))
         path = torch.as_tensor(np.stack([a, b]), dtype=_F64)
         n = int(segment_steps(self.body, path, self.max_travel)[0])
         q = straight_line(path[0], path[1], n)

@@ -239,10 +239,8 @@ class RrtConnect:
             raise ConfigError(f"local_step must be a number of radians > 0, got {local_step!r}")
         self.lo, self.hi, self.max_travel = lo, hi, float(max_travel)
         self.local, self.sigma = float(local), float(sigma)
-        # every node lies in the box of the limits, the ends and the branches (checked within the limits)
-        self._f, self._n = body.packing(
-            np.minimum(lo, np.minimum(q0, q1)), np.maximum(hi, np.maximum(q0, q1))
-        )
+        # every node lies between the limits, the ends and the branches (checked within the limits)
+        self._f, self._n = body.packing_of(np.stack([lo, hi, q0, q1]))
         self._s = scene.packed
         self.nodes = np.empty((2, max_nodes, dof))
         self.parent = np.full((2, max_nodes), -1, dtype=np.int64)
