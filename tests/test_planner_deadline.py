@@ -99,27 +99,36 @@ def test_the_deadline_cuts_the_sampling_stage_off(panda, hard, monkeypatch):
 
 
 def test_the_retreat_stage_leaves_the_sampler_the_rest_of_a_deadline(hard, monkeypatch):
-    """The retreat stage starts work only within its share of a deadline (RETREAT_SHARE), so that a slow
-    retreat cannot spend the time the sampling stage needs; without a deadline it always runs."""
+    """The retreat stage starts work only within the planner's share of a deadline (``retreat_share``),
+    so that a slow retreat cannot spend the time the sampling stage needs; without a deadline it always
+    runs. The arm's default share is the measured one; a bad share is refused."""
     base = Planner.default("panda")
-    planner = Planner(base.robot, base.tm, base.fm, base.im)  # the straight line alone, then retreat
     calls = []
-    inner = planner._retreat
 
-    def counted(*args, **kw):
-        calls.append(1)
-        return inner(*args, **kw)
+    def planner_with(share):
+        planner = Planner(base.robot, base.tm, base.fm, base.im, retreat_share=share)  # line, then retreat
+        inner = planner._retreat
 
-    monkeypatch.setattr(planner, "_retreat", counted)
+        def counted(*args, **kw):
+            calls.append(1)
+            return inner(*args, **kw)
+
+        monkeypatch.setattr(planner, "_retreat", counted)
+        return planner
+
     start, goal, scene = hard.problem(0)
-    _plan(planner, start, goal, obstacles=scene, refine_steps=0)
-    assert len(calls) == 1  # fixed time: the stage runs
-    monkeypatch.setattr(stages, "RETREAT_SHARE", 1.0)
-    _plan(planner, start, goal, obstacles=scene, deadline=30.0)
+    _plan(planner_with(0.0), start, goal, obstacles=scene, refine_steps=0)
+    assert len(calls) == 1  # fixed time: the stage runs, whatever the share
+    _plan(planner_with(1.0), start, goal, obstacles=scene, deadline=30.0)
     assert len(calls) == 2  # a deadline with its share left: it runs
-    monkeypatch.setattr(stages, "RETREAT_SHARE", 0.0)
-    plan = _plan(planner, start, goal, obstacles=scene, deadline=30.0)
+    plan = _plan(planner_with(0.0), start, goal, obstacles=scene, deadline=30.0)
     assert len(calls) == 2 and plan.stage in ("rrt", "none")  # its share spent: the sampler goes next
+    assert base.retreat_share == stages.RETREAT_SHARE == stages.retreat_share("panda")
+    assert Planner(base.robot, base.tm).retreat_share == stages.RETREAT_SHARE
+    assert stages.retreat_share("ur5") == 0.0
+    for bad in (-0.1, 1.5, float("nan"), True, "0.3"):
+        with pytest.raises(ConfigError, match="retreat_share"):
+            Planner(base.robot, base.tm, retreat_share=bad)
 
 
 def test_plan_command_takes_a_deadline(hard, tmp_path, capsys):

@@ -50,22 +50,62 @@ def test_vias_move_the_hand_the_fixed_distances_in_the_fixed_directions(problems
     vias = R.RetreatVias(chain, robot.lower, robot.upper, scale=1.0)
     theta = problems.start[CELL_STRAIGHT].numpy()
     out = vias.vias(theta)
-    D, L = len(R.RETREAT_DIRECTIONS), len(R.RETREAT_DISTANCES)
-    assert out.shape == (D, L, robot.dof)
+    H, D, L = len(R.RETREAT_HANDS), len(R.RETREAT_DIRECTIONS), len(R.RETREAT_DISTANCES)
+    assert out.shape == (H * D, L, robot.dof)
     assert (out >= robot.lower).all() and (out <= robot.upper).all()
     arrays = chain.kernel_arrays()
     p = chain_positions(*arrays, theta[None])[0]
     inward = -np.array([p[0], p[1], 0.0]) / np.linalg.norm(p[:2])
     up = np.array([0.0, 0.0, 1.0])
     directions = [inward, up, (inward + up) / np.sqrt(2)]
-    for d, u in enumerate(directions):
-        moved = chain_positions(*arrays, out[d]) - p
-        np.testing.assert_allclose(moved, np.outer(R.RETREAT_DISTANCES, u), atol=5e-3)
+    for h in range(H):  # the hand turning, then kept: the same targets
+        for d, u in enumerate(directions):
+            moved = chain_positions(*arrays, out[h * D + d]) - p
+            np.testing.assert_allclose(moved, np.outer(R.RETREAT_DISTANCES, u), atol=5e-3)
     # each via solved from the one before: neighbours are close in joint space (no jump to another branch)
     steps = np.linalg.norm(
-        np.diff(np.concatenate((np.broadcast_to(theta, (D, 1, 7)), out), 1), axis=1), axis=-1
+        np.diff(np.concatenate((np.broadcast_to(theta, (H * D, 1, 7)), out), 1), axis=1), axis=-1
     )
     assert steps.max() < 0.6
+
+
+def _hand(robot, theta):
+    """The end effector's rotation ``(N, 3, 3)`` at joints ``theta (N, dof)`` by Pinocchio's FK of the URDF
+    (independent of the chain the vias are solved on)."""
+    from kinlearn.body.kinematics import kinematics
+
+    pose = kinematics(robot, "pinocchio").pose(torch.from_numpy(np.atleast_2d(theta)))
+    return pose[:, :3, :3].numpy()
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_kept_chains_hold_the_hands_orientation_and_turning_ones_do_not(name):
+    """At configurations across the limits, a kept chain's vias hold the hand's orientation at the end
+    (by Pinocchio's FK of the URDF: the median turn under 5 degrees; a retreat out of reach or against a
+    limit turns it more), and the turning chains, solved for position alone, turn it tens of degrees."""
+    robot = load_robot(name)
+    chain = ChainFM.from_robot(robot)
+    vias = R.RetreatVias(chain, robot.lower, robot.upper, scale=1.0)
+    D = len(R.RETREAT_DIRECTIONS)
+    rng = np.random.default_rng(0)
+    turns: tuple[list, list] = ([], [])
+    for _ in range(20):
+        theta = rng.uniform(0.7 * np.asarray(robot.lower), 0.7 * np.asarray(robot.upper))
+        out = vias.vias(theta)
+        R0 = _hand(robot, theta)[0]
+        for h, chains in enumerate((out[:D], out[D:])):
+            for Rk in _hand(robot, chains.reshape(-1, robot.dof)):
+                turns[h].append(np.degrees(np.arccos(np.clip((np.trace(R0.T @ Rk) - 1) / 2, -1, 1))))
+    assert np.median(turns[1]) < 5.0
+    assert np.median(turns[0]) > 20.0
+
+
+def test_the_sampler_gets_the_turning_chains_only():
+    vias = np.arange(6 * 3 * 2, dtype=np.float64).reshape(6, 3, 2)
+    depth = np.array([2, 0, 3, 3, 3, 3])
+    branches = R.sampler_branches(vias, depth)
+    assert len(branches) == 2
+    assert np.array_equal(branches[0], vias[0, :2]) and np.array_equal(branches[1], vias[2])
 
 
 def test_bad_vias_settings_are_refused():

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["chain_positions", "solve_position_numba"]
+__all__ = ["chain_positions", "moves_keeping_orientation", "solve_position_numba"]
 
 
 @numba.njit(cache=True, fastmath=False)
@@ -212,3 +212,128 @@ def solve_position_numba(
         err,
     )
     return out, err
+
+
+@numba.njit(cache=True, fastmath=False)
+def _solve_spd(A, b, x):
+    """x ← A⁻¹ b for a small symmetric positive-definite A (Cholesky; A is overwritten)."""
+    m = A.shape[0]
+    for j in range(m):
+        s = A[j, j]
+        for k in range(j):
+            s -= A[j, k] * A[j, k]
+        A[j, j] = np.sqrt(s)
+        for i in range(j + 1, m):
+            s = A[i, j]
+            for k in range(j):
+                s -= A[i, k] * A[j, k]
+            A[i, j] = s / A[j, j]
+    for i in range(m):  # forward: L y = b
+        s = b[i]
+        for k in range(i):
+            s -= A[i, k] * x[k]
+        x[i] = s / A[i, i]
+    for i in range(m - 1, -1, -1):  # back: Lᵀ x = y
+        s = x[i]
+        for k in range(i + 1, m):
+            s -= A[k, i] * x[k]
+        x[i] = s / A[i, i]
+
+
+@numba.njit(cache=True, fastmath=False)
+def _moves_keeping(w, q, tip, ref, theta0, targets, lo, hi, iterations, damping, weight, out):
+    N, n = theta0.shape
+    L = targets.shape[1]
+    p, J = np.empty(3), np.empty((3, n))
+    R3, Ri, RR, t = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
+    axes, pts = np.empty((n, 3)), np.empty((n, 3))
+    R0 = np.empty((3, 3))
+    Jf = np.empty((6, n))
+    A = np.empty((6, 6))
+    e, y = np.empty(6), np.empty(6)
+    th = np.empty(n)
+    lam2 = damping * damping
+    for k in range(N):
+        for i in range(n):
+            th[i] = theta0[k, i]
+        _fk_jac(w, q, tip, ref, th, p, J, R3, Ri, RR, t, axes, pts)
+        for a in range(3):
+            for b in range(3):
+                R0[a, b] = R3[a, b]
+        for m in range(L):  # each target from the joints of the one before (continuation)
+            for _ in range(iterations):
+                _fk_jac(w, q, tip, ref, th, p, J, R3, Ri, RR, t, axes, pts)
+                # E = R0 R3ᵀ, the rotation still to make; its axis times sin(angle) from its skew part
+                for a in range(3):
+                    for b in range(3):
+                        RR[a, b] = R0[a, 0] * R3[b, 0] + R0[a, 1] * R3[b, 1] + R0[a, 2] * R3[b, 2]
+                for a in range(3):
+                    e[a] = targets[k, m, a] - p[a]
+                e[3] = weight * 0.5 * (RR[2, 1] - RR[1, 2])
+                e[4] = weight * 0.5 * (RR[0, 2] - RR[2, 0])
+                e[5] = weight * 0.5 * (RR[1, 0] - RR[0, 1])
+                for i in range(n):
+                    for a in range(3):
+                        Jf[a, i] = J[a, i]
+                        Jf[3 + a, i] = weight * axes[i, a]
+                for a in range(6):
+                    for b in range(a + 1):
+                        s = 0.0
+                        for i in range(n):
+                            s += Jf[a, i] * Jf[b, i]
+                        A[a, b] = s + (lam2 if a == b else 0.0)
+                        A[b, a] = A[a, b]
+                _solve_spd(A, e, y)
+                moved = 0.0
+                for i in range(n):
+                    s = 0.0
+                    for a in range(6):
+                        s += Jf[a, i] * y[a]
+                    v = min(max(th[i] + s, lo[i]), hi[i])
+                    moved = max(moved, abs(v - th[i]))
+                    th[i] = v
+                if moved < 1e-13:
+                    break
+            for i in range(n):
+                out[k, m, i] = th[i]
+
+
+def moves_keeping_orientation(
+    w: np.ndarray,
+    q: np.ndarray,
+    tip: np.ndarray,
+    ref: np.ndarray,
+    theta0: np.ndarray,
+    targets: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    *,
+    iterations: int,
+    damping: float,
+    weight: float,
+) -> np.ndarray:
+    """Joints ``(N, L, n)`` that move the chain's end effector from joints ``theta0 (N, n)`` through
+    ``targets (N, L, 3)`` in turn while keeping the hand's orientation at ``theta0``: ``iterations``
+    projected damped least-squares steps per target on the position error and the orientation error
+    (times ``weight``, metres per radian), each target's from the joints of the one before. The
+    orientation error is the axis of the rotation still to make times the sine of its angle (the
+    skew part of R₀Rᵀ: exact for small turns, which is all the steps see)."""
+    f = np.float64
+    theta0 = np.ascontiguousarray(theta0, dtype=f)
+    targets = np.ascontiguousarray(targets, dtype=f)
+    out = np.empty((theta0.shape[0], targets.shape[1], theta0.shape[1]))
+    _moves_keeping(
+        np.ascontiguousarray(w, dtype=f),
+        np.ascontiguousarray(q, dtype=f),
+        np.ascontiguousarray(tip, dtype=f),
+        np.ascontiguousarray(ref, dtype=f),
+        theta0,
+        targets,
+        np.ascontiguousarray(lower, dtype=f),
+        np.ascontiguousarray(upper, dtype=f),
+        int(iterations),
+        float(damping),
+        float(weight),
+        out,
+    )
+    return out

@@ -22,9 +22,8 @@ from ..collision.body import BodySpheres, planning_body
 from ..collision.scene import Scene
 from ..data.problem import positions
 from ..models.chain import ChainFM
-from . import stages
 from .plan import CHECK_TRAVEL
-from .retreat import RetreatVias, free_chains, retreat_path
+from .retreat import RetreatVias, retreat_path, sampler_branches
 from .stages import DEADLINE_RESERVE, Deadline, densify
 
 __all__ = ["NO_MODEL_KNOTS", "ObstacleStages"]
@@ -190,7 +189,7 @@ class ObstacleStages:
         branches: dict[int, tuple] = {}  # each problem's free retreats, the sampler's first branches
         if self.retreat and self._retreat_vias() is not None:
             for i in np.flatnonzero(~free):
-                if _retreat_over(deadline):
+                if _retreat_over(deadline, self.retreat_share):
                     break
                 path, branches[int(i)] = self._retreat(
                     theta0[i], thetaT[i], packed[i], rows[i], steps, deadline
@@ -258,7 +257,7 @@ class ObstacleStages:
         self, theta0: np.ndarray, thetaT: np.ndarray, nscene, rows, steps: int, deadline: Deadline
     ) -> tuple[np.ndarray | None, tuple]:
         """The retreat stage (:mod:`kinlearn.planning.retreat`) for one problem: its path ``(V, dof)`` or
-        None, and the free retreats of either end (:func:`~kinlearn.planning.retreat.free_chains`: the
+        None, and the free retreats of either end (:func:`~kinlearn.planning.retreat.sampler_branches`: the
         sampler grows its trees from them). ``rows``: the problem's scene rows and floor for the network
         (as :meth:`_proposals` takes them)."""
         k, body, vias = _kernel(), self._np_body, self._retreat_vias()
@@ -297,9 +296,9 @@ class ObstacleStages:
             dT,
             first_free,
             transfer,
-            stop=lambda: _retreat_over(deadline),
+            stop=lambda: _retreat_over(deadline, self.retreat_share),
         )
-        return path, (free_chains(v0, d0), free_chains(vT, dT))
+        return path, (sampler_branches(v0, d0), sampler_branches(vT, dT))
 
     def _sample(
         self,
@@ -351,10 +350,10 @@ class ObstacleStages:
 # configurations; 88 s for 17 of the panda's scene-family problems).
 
 
-def _retreat_over(deadline: Deadline) -> bool:
+def _retreat_over(deadline: Deadline, share: float) -> bool:
     """Whether the retreat stage may start no more work: the deadline is (nearly) over, or its
-    :data:`~kinlearn.planning.stages.RETREAT_SHARE` is spent."""
-    return deadline.expired(DEADLINE_RESERVE) or deadline.spent(stages.RETREAT_SHARE)
+    ``share`` of it is spent (the planner's ``retreat_share``)."""
+    return deadline.expired(DEADLINE_RESERVE) or deadline.spent(share)
 
 
 def _packed_scenes(scene: Scene, n: int) -> list:

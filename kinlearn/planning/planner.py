@@ -61,6 +61,7 @@ from .inference import NumpyObstacleModel, NumpyPathModel
 from .plan import DEFAULT_TOLERANCE, Plan, Tolerance, judge
 from .retreat import RetreatVias
 from .stages import Deadline
+from .stages import retreat_share as _retreat_share
 
 __all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position"]
 
@@ -119,6 +120,7 @@ class Planner(ObstacleStages):
         refine_steps: int = 0,
         chain: ChainFM | None = None,
         retreat: bool = True,
+        retreat_share: float | None = None,
     ):
         """``fm``/``im``: needed by a waypoint TM, and by a planner without ``chain`` for end-effector
         position goals.
@@ -135,6 +137,9 @@ class Planner(ObstacleStages):
         (:mod:`kinlearn.planning.retreat`: out of the start's cell and into the goal's along fixed
         end-effector retreats, the straight line or the network across; fixed time) before anything
         else; False leaves the proposals alone (the network's own fixed-time success).
+        ``retreat_share``: under a deadline, the share of it after which the retreat stage starts no
+        more work, so that the sampler keeps the rest (0: it does not run under a deadline; default the
+        arm's measured one, :func:`~kinlearn.planning.stages.retreat_share`: 0.3, the ur5's 0).
         ``refine_steps``: where no proposed path is collision-free, this many steps of the gradient
         trajectory optimiser (:func:`kinlearn.planning.obstacle_baselines.trajectory_optimiser`) from the least
         colliding one, kept if the dense check then finds it free (0: none; the plan's time stays
@@ -205,6 +210,15 @@ class Planner(ObstacleStages):
         if not isinstance(retreat, bool):
             raise ConfigError(f"retreat must be True or False, got {retreat!r}")
         self.retreat = retreat
+        if retreat_share is None:
+            retreat_share = _retreat_share(robot.name)
+        if (
+            isinstance(retreat_share, bool)
+            or not isinstance(retreat_share, (int, float))
+            or not 0.0 <= retreat_share <= 1.0
+        ):
+            raise ConfigError(f"retreat_share must be a number in [0, 1] (or None), got {retreat_share!r}")
+        self.retreat_share = float(retreat_share)
         self._vias: RetreatVias | bool | None = None  # made on the first retreat (False: not possible)
         self._np_body_cache = None
         self._warm = False
