@@ -6,6 +6,8 @@
         [--out benchmarks/data/scene_problems_panda.npz]                 # the seven scene families
     python benchmarks/make_obstacle_problems.py --robot ur5 --families scenes --per-family 20 \\
         --sphere-set spherized --out benchmarks/data/scene_problems_ur5_arm.npz  # the ur5 without its tool
+    python benchmarks/make_obstacle_problems.py --robot R --families bookcase cubby cage bin \\
+        --hand grasp --per-family 20 [--out benchmarks/data/grasp_problems_R.npz]  # hands held as grasps
 
 Families: tabletop, shelf, barrier (the default set), or the seven of ``kinlearn/data/scenes.py``
 (``--families scenes``), or any names (see ``kinlearn/data/problems.py``), each from a fixed
@@ -31,6 +33,7 @@ from _common import header, markdown_table
 from kinlearn import load_robot
 from kinlearn.data.problems import (
     FAMILIES,
+    HANDS,
     LEGACY_FAMILIES,
     ProblemConfig,
     ProblemSet,
@@ -41,6 +44,9 @@ from kinlearn.data.problems import (
 #: Held-out seeds, one per family (tabletop 1001, shelf 1002, barrier 1003, bookcase 1004, …). Training
 #: scenes use others (kinlearn.training.obstacle_path.TRAINING_SEEDS: 2001, …).
 HELDOUT_SEEDS = {name: 1001 + k for k, name in enumerate(FAMILIES)}
+#: Held-out seeds of the sets with the hand held as a grasp (``--hand grasp``): 1104, … (other scenes
+#: than the free sets').
+GRASP_SEEDS = {name: 1101 + k for k, name in enumerate(FAMILIES)}
 
 
 def main() -> None:
@@ -59,6 +65,12 @@ def main() -> None:
         default=None,
         help="the sphere set problems are made for (default: the robot's planning body, the ur5's with its gripper)",
     )
+    ap.add_argument(
+        "--hand",
+        choices=HANDS,
+        default="free",
+        help="'grasp': in the families with cells the hand points into the cell (ProblemConfig.hand)",
+    )
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
@@ -67,10 +79,13 @@ def main() -> None:
     if args.out is None:
         legacy = families == list(LEGACY_FAMILIES) and args.robot == "iiwa14"
         name = "obstacle_problems_heldout.npz" if legacy else f"scene_problems_{args.robot}.npz"
+        if args.hand == "grasp":
+            name = f"grasp_problems_{args.robot}.npz"
         args.out = Path(__file__).parent / "data" / name
     robot = load_robot(args.robot)
     print(header(f"obstacle benchmark problems ({args.robot})", args.threads))
-    cfg = ProblemConfig(sphere_set=args.sphere_set)
+    cfg = ProblemConfig(sphere_set=args.sphere_set, hand=args.hand)
+    seeds = GRASP_SEEDS if args.hand == "grasp" else HELDOUT_SEEDS
     parts: dict[str, list[ProblemSet]] = {f: [] for f in families}
     spent = {f: 0.0 for f in families}
     t_start = time.perf_counter()
@@ -80,7 +95,7 @@ def main() -> None:
             break
         for fam in families:
             t0 = time.perf_counter()
-            parts[fam].append(make_problems(fam, 1, HELDOUT_SEEDS[fam], robot=robot, config=cfg, first=i))
+            parts[fam].append(make_problems(fam, 1, seeds[fam], robot=robot, config=cfg, first=i))
             spent[fam] += time.perf_counter() - t0
         if (i + 1) % 10 == 0:
             print(f"  {i + 1} rounds, {time.perf_counter() - t_start:.0f} s", flush=True)
@@ -90,7 +105,7 @@ def main() -> None:
     problems = dataclasses.replace(
         problems,
         config={
-            "seeds": {f: HELDOUT_SEEDS[f] for f in families},
+            "seeds": {f: seeds[f] for f in families},
             "per_family": rounds,
             "problem_config": dataclasses.asdict(cfg),
             "generated_in_s": round(elapsed, 1),

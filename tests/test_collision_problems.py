@@ -170,7 +170,7 @@ def test_the_first_three_families_scale_with_the_arm(family):
     from kinlearn.data.problems import _layout
 
     def draw(scale):
-        scene, start, goal = _layout(family, torch.Generator().manual_seed(7), scale)
+        scene, start, goal, _ = _layout(family, torch.Generator().manual_seed(7), scale)
         g = torch.Generator().manual_seed(8)
         return scene, start(4, g), goal(4, g)
 
@@ -211,3 +211,37 @@ def test_problems_are_made_for_the_planning_body_and_record_it():
 
     with pytest.raises(RobotDescriptionError, match="no 'hand' sphere set"):
         make_problems("bin", 1, seed=1, robot=ur5, config=ProblemConfig(verify=False, sphere_set="hand"))
+
+
+@pytest.mark.parametrize("family", ["cubby", "bin"])
+def test_grasp_problems_point_the_hand_into_the_cell(family):
+    """``hand="grasp"``: starts and goals in a family with cells hold the hand's approach axis (by the
+    fast kinematics) within the tolerance of the way into the cell (horizontal in a cubby, down into a
+    bin), valid and seeded; ``"free"`` leaves the orientation to the IK (the problems made before this
+    setting, bit for bit); an unknown hand is refused."""
+    from kinlearn import load_robot
+    from kinlearn.body.kinematics import approach_axis
+    from kinlearn.collision import planning_body
+    from kinlearn.data.problems import GRASP_TOLERANCE
+
+    panda = load_robot("panda")
+    cfg = ProblemConfig(verify=False, hand="grasp")
+    grasp = make_problems(family, 2, seed=11, robot=panda, config=cfg)
+    _assert_valid(grasp, planning_body(panda).double())
+    kin = kinematics(panda, "fast")
+    for q in (grasp.start, grasp.goal):
+        if family == "cubby" and q is grasp.start:
+            continue  # a cubby's start may lie above or beside it: the hand still points the cell's way
+        a = kin.pose(q)[:, :3, :3] @ torch.as_tensor(approach_axis(panda))
+        if family == "bin":
+            assert bool((a[:, 2] <= -np.cos(GRASP_TOLERANCE) + 1e-9).all())
+        else:
+            assert bool((a[:, 2].abs() <= np.sin(GRASP_TOLERANCE) + 1e-9).all())
+    again = make_problems(family, 2, seed=11, robot=panda, config=cfg)
+    assert torch.equal(grasp.start, again.start) and torch.equal(grasp.goal, again.goal)
+    assert grasp.config["hand"] == "grasp"
+    free = make_problems(family, 1, seed=11, robot=panda, config=ProblemConfig(verify=False))
+    a = kin.pose(free.goal)[:, :3, :3] @ torch.as_tensor(approach_axis(panda))
+    assert free.config["hand"] == "free" and not torch.equal(free.goal, grasp.goal[:1])
+    with pytest.raises(ConfigError, match="hand"):
+        ProblemConfig(hand="pinch")

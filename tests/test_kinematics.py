@@ -191,3 +191,36 @@ def test_kinematics_cache_never_serves_another_robot():
         assert k.robot is robot
         seen.append(float(k.position(torch.zeros(robot.dof, dtype=torch.float64))[2]))
     assert seen[0] == seen[3] and seen[0] != seen[1]
+
+
+@pytest.mark.parametrize("name", ALL_ROBOTS)
+def test_approach_axis_is_the_last_joints_and_pointing_steps_reach_a_pose(name):
+    """The approach axis is the last joint's (in the base frame, by the position Jacobian: turning
+    the last joint does not move a point on that axis), pointing toward the end effector; pointing
+    steps from random joints reach reachable targets with the axis turned onto a given direction
+    (most of them, as position IK from random joints does), within the limits, its columns the
+    Jacobian's."""
+    import numpy as np
+
+    from kinlearn.body.kinematics import approach_axis, pointing_dls_step
+
+    robot = load_robot(name)
+    kin = kinematics(robot, "fast")
+    a = approach_axis(robot)
+    assert abs(np.linalg.norm(a) - 1.0) < 1e-12
+    g = torch.Generator().manual_seed(0)
+    q = robot.sample(64, g, dtype=torch.float64, margin=0.1)
+    T, J, W = kin.pose_and_axes(q)
+    torch.testing.assert_close(J, kin.jacobian(q))
+    world = T[:, :3, :3] @ torch.as_tensor(a)
+    torch.testing.assert_close(world, W[..., -1])  # the last joint's axis, its sign toward the tip
+    d = world
+    targets = T[:, :3, 3]
+    q0 = robot.sample(64, g, dtype=torch.float64, margin=0.05)
+    q1 = pointing_dls_step(kin, dls_step(kin, q0, targets, iterations=60, damping=0.02), targets, d, 60, 0.02)
+    lo, hi = robot.limits(torch.float64)
+    assert bool(((q1 >= lo) & (q1 <= hi)).all())
+    T1 = kin.pose(q1)
+    reached = (T1[:, :3, 3] - targets).norm(dim=-1) < 1e-3
+    pointed = ((T1[:, :3, :3] @ torch.as_tensor(a)) * d).sum(-1) > math.cos(math.radians(1.0))
+    assert float((reached & pointed).double().mean()) >= 0.4

@@ -36,8 +36,10 @@ __all__ = [
     "Kinematics",
     "PinocchioKinematics",
     "PkKinematics",
+    "approach_axis",
     "dls_step",
     "kinematics",
+    "pointing_dls_step",
 ]
 
 Backend = Literal["fast", "pk", "pinocchio"]
@@ -282,6 +284,19 @@ class FastKinematics(Kinematics):
             cols.append(z if self.prismatic[i] else torch.linalg.cross(z, p_ee - ps[i], dim=-1))
         return p_ee, torch.stack(cols, dim=-1)
 
+    def pose_and_axes(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """For ``q (N, dof)``: the end-effector pose ``(N, 4, 4)``, its position Jacobian ``(N, 3, dof)``
+        and every joint's axis in the base frame ``(N, 3, dof)`` (a revolute joint's column of the
+        angular Jacobian; a prismatic joint turns nothing: its column is zero). Not validated."""
+        Rs, ps, T = self._frames(q)
+        p_ee = T[:, :3, 3]
+        lin, ang = [], []
+        for i in range(self.dof):
+            z = Rs[i][..., 2]
+            lin.append(z if self.prismatic[i] else torch.linalg.cross(z, p_ee - ps[i], dim=-1))
+            ang.append(torch.zeros_like(z) if self.prismatic[i] else z)
+        return T, torch.stack(lin, dim=-1), torch.stack(ang, dim=-1)
+
 
 # --------------------------------------------------------------------------------------------------
 # pytorch-kinematics
@@ -441,6 +456,49 @@ def dls_step(
         q = q + dq
         if clamp:
             q = torch.clamp(q, lo, hi)
+    return q
+
+
+def approach_axis(robot: Robot) -> np.ndarray:
+    """The hand's approach axis in the end-effector frame ``(3,)`` (unit, float64): the last joint's
+    axis, the flange's normal on every arm kinlearn ships, pointing from that joint toward the end
+    effector (the way a gripper on the flange points)."""
+    joint = robot.joints[-1]
+    R, t = robot.T_tip[:3, :3], robot.T_tip[:3, 3]
+    axis = np.asarray(joint.axis, dtype=np.float64) / np.linalg.norm(joint.axis)
+    if float(t @ axis) < 0.0:
+        axis = -axis
+    return R.T @ axis
+
+
+def pointing_dls_step(
+    kin: FastKinematics,
+    q: torch.Tensor,
+    target: torch.Tensor,
+    direction: torch.Tensor,
+    iterations: int = 1,
+    damping: float = 1e-2,
+    weight: float = 0.2,
+) -> torch.Tensor:
+    """Damped-least-squares steps moving ``q (N, dof)`` so that its end effector approaches ``target
+    (N, 3)`` and its :func:`approach_axis` turns toward the unit ``direction (N, 3)`` (base frame), the
+    turn about the axis itself left free: dq = Jᵀ (J Jᵀ + λ² I)⁻¹ e with the position error and
+    ``weight`` (m/rad) × a × d, the rotation that takes the axis ``a`` onto ``d`` (its sine for the angle),
+    over the rows of the position Jacobian and of the angular one with its part about ``a`` taken out.
+    Kept within the joint limits."""
+    lo, hi = kin.robot.limits(q.dtype, q.device)
+    local = torch.as_tensor(approach_axis(kin.robot), dtype=q.dtype, device=q.device)
+    eye = torch.eye(6, dtype=q.dtype, device=q.device)
+    for _ in range(iterations):
+        T, Jp, W = kin.pose_and_axes(q)
+        a = T[:, :3, :3] @ local
+        Wp = W - a.unsqueeze(-1) * (a.unsqueeze(-2) @ W)  # no turn about the axis itself is asked for
+        J = torch.cat((Jp, weight * Wp), dim=-2)
+        err = torch.cat((target - T[:, :3, 3], weight * torch.linalg.cross(a, direction, dim=-1)), dim=-1)
+        dq = J.transpose(-1, -2) @ torch.linalg.solve(
+            J @ J.transpose(-1, -2) + damping**2 * eye, err.unsqueeze(-1)
+        )
+        q = torch.clamp(q + dq.squeeze(-1), lo, hi)
     return q
 
 

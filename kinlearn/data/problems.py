@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..body.kinematics import dls_step, kinematics
+from ..body.kinematics import approach_axis, dls_step, kinematics, pointing_dls_step
 from ..body.robot import Robot, load_robot
 from ..collision.body import BodySpheres, body_spheres, planning_body
 from ..collision.check import check_path, clearances
@@ -59,6 +59,8 @@ from .scenes import SCENE_FAMILIES, _randint, _u, build_scene, scene_scale
 __all__ = [
     "FAMILIES",
     "FAMILY_GROUPS",
+    "GRASP_TOLERANCE",
+    "HANDS",
     "LEGACY_FAMILIES",
     "PROBLEM_FORMAT",
     "ProblemConfig",
@@ -78,6 +80,12 @@ FAMILY_GROUPS: dict[str, tuple[str, ...]] = {
     "scenes": SCENE_FAMILIES,
     "all": FAMILIES,
 }
+#: How a problem's hand may be held at its targets (:attr:`ProblemConfig.hand`).
+HANDS: tuple[str, ...] = ("free", "grasp")
+#: How far (rad) a grasp's approach axis may be from the way into its cell.
+GRASP_TOLERANCE = math.radians(10.0)
+#: Weight (m/rad) of the approach axis's error against the position's in a grasp's IK steps.
+_GRASP_WEIGHT = 0.2
 #: Version of the problem-set ``.npz`` layout written by :meth:`ProblemSet.save`.
 PROBLEM_FORMAT = 1
 
@@ -127,6 +135,11 @@ class ProblemConfig:
     #: The body problems are made for: a sphere set of the robot's model, or None for the body its
     #: planner checks with (:func:`~kinlearn.collision.body.planning_body`: the ur5's carries its tool).
     sphere_set: str | None = None
+    #: How the hand is held at the targets: ``"free"`` (IK for the position alone, any orientation) or
+    #: ``"grasp"`` (in the families with cells, the hand's approach axis within
+    #: :data:`GRASP_TOLERANCE` of the way into the cell, as a gripper holding something there points:
+    #: :attr:`~kinlearn.data.scenes.SceneLayout.approach`; the other families as ``"free"``).
+    hand: str = "free"
 
     def __post_init__(self):
         for name in (
@@ -146,6 +159,8 @@ class ProblemConfig:
                 raise ConfigError(f"ProblemConfig.{name} must be an integer >= 1, got {value!r}")
         if self.time_limit <= 0 or self.max_travel <= 0:
             raise ConfigError("ProblemConfig.time_limit and max_travel must be > 0")
+        if self.hand not in HANDS:
+            raise ConfigError(f"ProblemConfig.hand must be one of {', '.join(HANDS)}, got {self.hand!r}")
         if self.sphere_set is not None and (not isinstance(self.sphere_set, str) or self.dense_body):
             raise ConfigError(
                 f"ProblemConfig.sphere_set must be a set's name and not given with dense_body, got {self.sphere_set!r}"
@@ -481,17 +496,32 @@ class ProblemSet:
 
 
 def _pick_valid(
-    body: BodySpheres, scene: Scene, sampler, gen: torch.Generator, cfg: ProblemConfig
+    body: BodySpheres,
+    scene: Scene,
+    sampler,
+    gen: torch.Generator,
+    cfg: ProblemConfig,
+    approach: np.ndarray | None = None,
 ) -> torch.Tensor | None:
-    """IK from random joints towards targets drawn by ``sampler``; the first valid solution, or None."""
+    """IK from random joints towards targets drawn by ``sampler``; the first valid solution, or None.
+    With ``approach`` (unit, base frame), the hand's approach axis must also lie within
+    :data:`GRASP_TOLERANCE` of it (a grasp: :attr:`ProblemConfig.hand`)."""
     robot = body.robot
     kin = kinematics(robot, "fast")
     targets = sampler(cfg.ik_batch, gen)
     q0 = robot.sample(cfg.ik_batch, gen, dtype=_F64, margin=cfg.joint_margin)
     q = dls_step(kin, q0, targets, iterations=cfg.ik_iterations, damping=0.02, clamp=True)
+    if approach is not None:  # then the hand turned into the cell, the position held
+        d = torch.as_tensor(approach, dtype=_F64).expand(cfg.ik_batch, 3)
+        q = pointing_dls_step(
+            kin, q, targets, d, iterations=cfg.ik_iterations, damping=0.02, weight=_GRASP_WEIGHT
+        )
     lo, hi = robot.limits(_F64)
     ok = (kin.position(q, validate=False) - targets).norm(dim=-1) <= cfg.ik_tolerance
     ok &= ((q >= lo + cfg.joint_margin) & (q <= hi - cfg.joint_margin)).all(dim=-1)
+    if approach is not None:
+        a = kin.pose(q, validate=False)[:, :3, :3] @ torch.as_tensor(approach_axis(robot), dtype=_F64)
+        ok &= (a @ torch.as_tensor(approach, dtype=_F64)) >= math.cos(GRASP_TOLERANCE)
     if not bool(ok.any()):
         return None
     d, s = clearances(body, q[ok], scene, validate=False)
@@ -502,10 +532,11 @@ def _pick_valid(
 
 
 def _layout(family: str, gen: torch.Generator, scale: float, tool: float = 0.0):
-    """One scene of ``family`` and its start and goal target samplers (base frame), or None."""
+    """One scene of ``family``, its start and goal target samplers (base frame) and the way a hand
+    points into its cells (None: no cells, or a legacy family), or None."""
     if family not in LEGACY_FAMILIES:
         layout = build_scene(family, gen, scale, tool=tool)
-        return layout.scene(), layout.start, layout.goal
+        return layout.scene(), layout.start, layout.goal, layout.approach
     built = _BUILDERS[family](gen)
     if built is None:
         return None
@@ -523,7 +554,7 @@ def _layout(family: str, gen: torch.Generator, scale: float, tool: float = 0.0):
             return lambda n, g: sampler(n, g) @ R.T
         return lambda n, g: scale * (sampler(n, g) @ R.T)
 
-    return scene, turned(start_sampler), turned(goal_sampler)
+    return scene, turned(start_sampler), turned(goal_sampler), None
 
 
 def _one_problem(
@@ -535,11 +566,13 @@ def _one_problem(
         built = _layout(family, gen, scale, tool)
         if built is None:
             continue
-        scene, start_sampler, goal_sampler = built
-        start = _pick_valid(body, scene, start_sampler, gen, cfg)
+        scene, start_sampler, goal_sampler, approach = built
+        if cfg.hand == "free":
+            approach = None
+        start = _pick_valid(body, scene, start_sampler, gen, cfg, approach)
         if start is None:
             continue
-        goal = _pick_valid(body, scene, goal_sampler, gen, cfg)
+        goal = _pick_valid(body, scene, goal_sampler, gen, cfg, approach)
         if goal is None:
             continue
         if float((kin.position(start) - kin.position(goal)).norm()) < cfg.min_ee_distance:

@@ -69,6 +69,9 @@ class SceneLayout:
     primitives: tuple[Primitive, ...]
     start: Sampler
     goal: Sampler
+    #: The way a hand holding a grasp in the family's cells points (unit, base frame): into a
+    #: bookcase's, a cubby's or a cage's cells, down into a bin; None for the open families.
+    approach: np.ndarray | None = None
 
     def scene(self, dtype: torch.dtype = _F64) -> Scene:
         """The obstacles as a :class:`~kinlearn.collision.Scene` with the floor at z = 0."""
@@ -485,6 +488,16 @@ def _turned(p: Primitive, R: np.ndarray) -> Primitive:
     return _post(centre, p.radius, p.half_length, rot)
 
 
+#: The way a hand reaching into each family's cells points, before the scene's yaw (every cell opens
+#: toward the robot, −x; a bin opens up).
+_APPROACH: dict[str, tuple[float, float, float]] = {
+    "bookcase": (1.0, 0.0, 0.0),
+    "cubby": (1.0, 0.0, 0.0),
+    "cage": (1.0, 0.0, 0.0),
+    "bin": (0.0, 0.0, -1.0),
+}
+
+
 def build_scene(
     family: str,
     gen: torch.Generator,
@@ -536,4 +549,5 @@ def build_scene(
 
         return sample
 
-    return SceneLayout(family, tuple(_turned(p, R) for p in prims), clear(start), clear(goal))
+    approach = None if family not in _APPROACH else R @ np.asarray(_APPROACH[family], dtype=np.float64)
+    return SceneLayout(family, tuple(_turned(p, R) for p in prims), clear(start), clear(goal), approach)
