@@ -245,3 +245,27 @@ def test_grasp_problems_point_the_hand_into_the_cell(family):
     assert free.config["hand"] == "free" and not torch.equal(free.goal, grasp.goal[:1])
     with pytest.raises(ConfigError, match="hand"):
         ProblemConfig(hand="pinch")
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5", "iiwa14"])
+def test_committed_grasp_sets(name):
+    """The committed held-out grasp sets: 20 problems of each family with cells, made with the hand held
+    as a grasp (recorded), every goal's approach axis within the tolerance of the way into its cell
+    (horizontal, or down into a bin), starts and goals valid for the body recorded."""
+    from kinlearn import load_robot
+    from kinlearn.body.kinematics import approach_axis
+    from kinlearn.data.problems import GRASP_TOLERANCE
+
+    robot = load_robot(name)
+    path = HELDOUT.parent / f"grasp_problems_{name}.npz"
+    problems = ProblemSet.load(path, robot=name)
+    assert problems.config["problem_config"]["hand"] == "grasp"
+    assert {f: len(problems.of(f)) for f in ("bookcase", "cubby", "cage", "bin")} == dict.fromkeys(
+        ("bookcase", "cubby", "cage", "bin"), 20
+    )
+    _assert_valid(problems, problems.body(robot).double())
+    kin = kinematics(robot, "fast")
+    a = kin.pose(problems.goal)[:, :3, :3] @ torch.as_tensor(approach_axis(robot))
+    binned = problems.family == FAMILIES.index("bin")
+    assert bool((a[binned, 2] <= -np.cos(GRASP_TOLERANCE) + 1e-9).all())
+    assert bool((a[~binned, 2].abs() <= np.sin(GRASP_TOLERANCE) + 1e-9).all())
