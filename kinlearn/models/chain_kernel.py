@@ -191,20 +191,21 @@ def solve_position_numba(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The compiled :func:`~kinlearn.models.chain.solve_position` (float64 arrays; ``seeds``: the restart
     configurations ``(R − 1, n)``, already scaled to the limits). Returns joints ``(N, n)`` and errors."""
-    f = np.float64
-    theta0 = np.ascontiguousarray(theta0, dtype=f)
+    w, q, tip, ref, theta0, target, lower, upper, seeds = _float64(
+        w, q, tip, ref, theta0, target, lower, upper, seeds
+    )
     out = np.empty_like(theta0)
     err = np.empty(theta0.shape[0])
     _solve(
-        np.ascontiguousarray(w, dtype=f),
-        np.ascontiguousarray(q, dtype=f),
-        np.ascontiguousarray(tip, dtype=f),
-        np.ascontiguousarray(ref, dtype=f),
+        w,
+        q,
+        tip,
+        ref,
         theta0,
-        np.ascontiguousarray(target, dtype=f),
-        np.ascontiguousarray(lower, dtype=f),
-        np.ascontiguousarray(upper, dtype=f),
-        np.ascontiguousarray(seeds, dtype=f).reshape(-1, theta0.shape[1]),
+        target,
+        lower,
+        upper,
+        seeds.reshape(-1, theta0.shape[1]),
         int(iterations),
         float(damping),
         float(tolerance),
@@ -318,22 +319,14 @@ def moves_keeping_orientation(
     (times ``weight``, metres per radian), each target's from the joints of the one before. The
     orientation error is the axis of the rotation still to make times the sine of its angle (the
     skew part of R₀Rᵀ: exact for small turns, which is all the steps see)."""
-    f = np.float64
-    theta0 = np.ascontiguousarray(theta0, dtype=f)
-    targets = np.ascontiguousarray(targets, dtype=f)
+    w, q, tip, ref, theta0, targets, lower, upper = _float64(w, q, tip, ref, theta0, targets, lower, upper)
     out = np.empty((theta0.shape[0], targets.shape[1], theta0.shape[1]))
     _moves_keeping(
-        np.ascontiguousarray(w, dtype=f),
-        np.ascontiguousarray(q, dtype=f),
-        np.ascontiguousarray(tip, dtype=f),
-        np.ascontiguousarray(ref, dtype=f),
-        theta0,
-        targets,
-        np.ascontiguousarray(lower, dtype=f),
-        np.ascontiguousarray(upper, dtype=f),
-        int(iterations),
-        float(damping),
-        float(weight),
-        out,
+        w, q, tip, ref, theta0, targets, lower, upper, int(iterations), float(damping), float(weight), out
     )
     return out
+
+
+def _float64(*arrays) -> tuple[np.ndarray, ...]:
+    """Each array as a C-contiguous float64 array (the kernels' arguments)."""
+    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in arrays)
