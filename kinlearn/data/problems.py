@@ -24,6 +24,10 @@ Each of these three is turned by 0°, 90° or −90° about z (which keeps boxes
 joint configurations found by damped-least-squares IK from random initial joints towards sampled
 end-effector targets, kept only if they are within the joint limits by ``joint_margin``, at least
 ``min_clearance`` from the scene and from self-collision, and their end effectors are ≥ 0.2 m apart.
+With ``hand="grasp"`` (:class:`ProblemConfig`) the IK also turns the hand's approach axis (the last
+joint's, :func:`~kinlearn.body.kinematics.approach_axis`) within :data:`GRASP_TOLERANCE` of the way into
+the family's cells, as a gripper holding something there points (horizontal into a bookcase's, a
+cubby's or a cage's cell, down into a bin; the other families as ``"free"``).
 A problem is kept only if OMPL's RRT-Connect finds a path within ``time_limit`` seconds on the same
 checker (:class:`~kinlearn.collision.ompl.RrtChecker`: a state is valid when its body–scene clearance and self-clearance are
 > 0; a motion is valid when the dense check of :func:`~kinlearn.collision.check_path` finds it free,
