@@ -241,7 +241,6 @@ def test_grasp_problems_point_the_hand_into_the_cell(family):
     assert torch.equal(grasp.start, again.start) and torch.equal(grasp.goal, again.goal)
     assert grasp.config["hand"] == "grasp"
     free = make_problems(family, 1, seed=11, robot=panda, config=ProblemConfig(verify=False))
-    a = kin.pose(free.goal)[:, :3, :3] @ torch.as_tensor(approach_axis(panda))
     assert free.config["hand"] == "free" and not torch.equal(free.goal, grasp.goal[:1])
     with pytest.raises(ConfigError, match="hand"):
         ProblemConfig(hand="pinch")

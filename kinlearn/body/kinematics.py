@@ -277,25 +277,26 @@ class FastKinematics(Kinematics):
 
     def _position_and_jacobian_flat(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         Rs, ps, T = self._frames(q)
-        p_ee = T[:, :3, 3]
+        return T[:, :3, 3], self._position_jacobian(Rs, ps, T[:, :3, 3])
+
+    def _position_jacobian(self, Rs, ps, p_ee: torch.Tensor) -> torch.Tensor:
+        """``(N, 3, dof)`` from the joint frames of :meth:`_frames` and the end effector's position."""
         cols = []
         for i in range(self.dof):
             z = Rs[i][..., 2]
             cols.append(z if self.prismatic[i] else torch.linalg.cross(z, p_ee - ps[i], dim=-1))
-        return p_ee, torch.stack(cols, dim=-1)
+        return torch.stack(cols, dim=-1)
 
     def pose_and_axes(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """For ``q (N, dof)``: the end-effector pose ``(N, 4, 4)``, its position Jacobian ``(N, 3, dof)``
         and every joint's axis in the base frame ``(N, 3, dof)`` (a revolute joint's column of the
         angular Jacobian; a prismatic joint turns nothing: its column is zero). Not validated."""
         Rs, ps, T = self._frames(q)
-        p_ee = T[:, :3, 3]
-        lin, ang = [], []
-        for i in range(self.dof):
-            z = Rs[i][..., 2]
-            lin.append(z if self.prismatic[i] else torch.linalg.cross(z, p_ee - ps[i], dim=-1))
-            ang.append(torch.zeros_like(z) if self.prismatic[i] else z)
-        return T, torch.stack(lin, dim=-1), torch.stack(ang, dim=-1)
+        axes = [
+            torch.zeros_like(R[..., 2]) if prism else R[..., 2]
+            for R, prism in zip(Rs, self.prismatic, strict=True)
+        ]
+        return T, self._position_jacobian(Rs, ps, T[:, :3, 3]), torch.stack(axes, dim=-1)
 
 
 # --------------------------------------------------------------------------------------------------
