@@ -496,3 +496,20 @@ def test_a_drifted_block_fails(tmp_path, monkeypatch):
     ]
     run.shell("kinlearn make-endpoints --n 12000 --heldout 2000 --run-dir runs/e", 1)  # runs, tiny
     assert (tmp_path / "runs" / "e" / "config.json").is_file()
+
+
+#: A Markdown link or image: ``[text](target)`` / ``![alt](target)``; the target up to a space or ``)``.
+_LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+@pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.name)
+def test_links_point_at_files(doc):
+    """Every relative link and image of a doc (a figure, another doc, a source file) names a file of the
+    repository, so that a renamed or never-committed figure fails here, not in a reader's browser."""
+    missing = []
+    for target in _LINK.findall(doc.read_text()):
+        if re.match(r"[a-z]+:", target) or target.startswith("#"):  # a web address, a heading
+            continue
+        if not (doc.parent / target.split("#")[0]).exists():
+            missing.append(target)
+    assert not missing, f"{doc.name} links to files that do not exist: {missing}"
