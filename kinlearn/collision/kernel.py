@@ -616,7 +616,15 @@ def _probe(path, max_travel, margin, body, scene, hints, nh):
             n = steps[k]
             for h in range(1, parts, 2):
                 i = math.floor(n * h / parts)
-                if i <= 0.0 or i >= n or (parts > 2 and i == math.floor(n * 0.5)):
+                # Each grid configuration once: one a coarser level looked at (its neighbours h ± 1
+                # are that level's points) or a knot is not looked at again (a short segment has fewer
+                # sub-steps than a level has points).
+                if (
+                    i <= 0.0
+                    or i >= n
+                    or i == math.floor(n * (h - 1) / parts)
+                    or i == math.floor(n * (h + 1) / parts)
+                ):
                     continue
                 frac = i / n
                 for j in range(dof):
