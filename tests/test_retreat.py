@@ -206,13 +206,44 @@ def test_an_end_with_no_free_fixed_retreat_retreats_where_its_scene_is_open(pand
     fixed, depth = vias.free(theta, *_checks(body, ks))
     assert not depth.any() and np.array_equal(fixed, vias.vias(theta))
     opened, depth = vias.free(theta, *_checks(body, ks), lambda x: point_distances(ks, x))
-    assert depth.max() == len(R.RETREAT_DISTANCES) and opened.shape == fixed.shape
+    # the fixed chains (none free) and as many open ones, the hand turning first
+    assert opened.shape == (2 * fixed.shape[0], *fixed.shape[1:])
+    D = len(R.RETREAT_DIRECTIONS)
+    assert np.array_equal(opened[:D], fixed[:D]) and np.array_equal(opened[2 * D : 3 * D], fixed[D:])
+    assert not depth[:D].any() and not depth[2 * D : 3 * D].any()
+    assert depth.max() == len(R.RETREAT_DISTANCES)
     for d in np.flatnonzero(depth):
         chain = torch.from_numpy(np.concatenate((theta[None], opened[d, : depth[d]])))
         assert bool(check_path(panda.body, chain, scene).collision_free)
     plan = panda.plan(start, goal, obstacles=scene, refine_steps=0)
     assert plan.stage == "retreat" and bool(plan.success)
     assert bool(check_path(panda.body, plan.joints, scene).collision_free)
+
+
+def test_open_directions_join_the_fixed_ones_where_none_is_free_all_the_way(panda):
+    """An end whose fixed retreats all stop short (here: every chain's third segment collides) also
+    retreats in the scene's most open directions; one with a fixed retreat free to its farthest via does
+    not. The open ones follow the fixed ones of each kind of hand, the turning chains first, so the
+    sampler's branches are still the turning ones."""
+    vias = panda._retreat_vias()
+    theta = (panda._lo_np + panda._hi_np) / 2
+    L, D = len(R.RETREAT_DISTANCES), len(R.RETREAT_DIRECTIONS)
+    fixed = vias.vias(theta)
+
+    def far(points):  # an empty scene: every direction open, the grid's order kept
+        return np.full(len(points), 10.0)
+
+    def short(path):  # every chain collides in its third segment
+        return 2
+
+    opened, depth = vias.free(theta, short, lambda q: True, far)
+    assert opened.shape == (2 * len(fixed), L, theta.shape[0]) and depth.tolist() == [2] * (4 * D)
+    assert np.array_equal(opened[:D], fixed[:D]) and np.array_equal(opened[2 * D : 3 * D], fixed[D:])
+    assert np.array_equal(opened[D : 2 * D], vias.vias(theta, far)[:D])  # the turning open chains
+    assert len(R.sampler_branches(opened, depth)) == 2 * D  # turning: fixed and open
+
+    kept, depth = vias.free(theta, lambda path: -1, lambda q: True, far)  # free all the way
+    assert np.array_equal(kept, fixed) and depth.tolist() == [L] * (2 * D)
 
 
 def _chains(L=2, D=1, dof=2):
