@@ -206,11 +206,11 @@ def test_an_end_with_no_free_fixed_retreat_retreats_where_its_scene_is_open(pand
     fixed, depth = vias.free(theta, *_checks(body, ks))
     assert not depth.any() and np.array_equal(fixed, vias.vias(theta))
     opened, depth = vias.free(theta, *_checks(body, ks), lambda x: point_distances(ks, x))
-    # the fixed chains (none free) and as many open ones, the hand turning first
-    assert opened.shape == (2 * fixed.shape[0], *fixed.shape[1:])
-    D = len(R.RETREAT_DIRECTIONS)
-    assert np.array_equal(opened[:D], fixed[:D]) and np.array_equal(opened[2 * D : 3 * D], fixed[D:])
-    assert not depth[:D].any() and not depth[2 * D : 3 * D].any()
+    # the fixed chains (none free), then the open ones, of either kind of hand, the turning ones first
+    D, O = len(R.RETREAT_DIRECTIONS), R.OPEN_DIRECTIONS
+    assert opened.shape == (2 * (D + O), *fixed.shape[1:])
+    assert np.array_equal(opened[:D], fixed[:D]) and np.array_equal(opened[D + O : 2 * D + O], fixed[D:])
+    assert not depth[:D].any() and not depth[D + O : 2 * D + O].any()
     assert depth.max() == len(R.RETREAT_DISTANCES)
     for d in np.flatnonzero(depth):
         chain = torch.from_numpy(np.concatenate((theta[None], opened[d, : depth[d]])))
@@ -237,10 +237,11 @@ def test_open_directions_join_the_fixed_ones_where_none_is_free_all_the_way(pand
         return 2
 
     opened, depth = vias.free(theta, short, lambda q: True, far)
-    assert opened.shape == (2 * len(fixed), L, theta.shape[0]) and depth.tolist() == [2] * (4 * D)
-    assert np.array_equal(opened[:D], fixed[:D]) and np.array_equal(opened[2 * D : 3 * D], fixed[D:])
-    assert np.array_equal(opened[D : 2 * D], vias.vias(theta, far)[:D])  # the turning open chains
-    assert len(R.sampler_branches(opened, depth)) == 2 * D  # turning: fixed and open
+    O = R.OPEN_DIRECTIONS
+    assert opened.shape == (2 * (D + O), L, theta.shape[0]) and depth.tolist() == [2] * (2 * (D + O))
+    assert np.array_equal(opened[:D], fixed[:D]) and np.array_equal(opened[D + O : 2 * D + O], fixed[D:])
+    assert np.array_equal(opened[D : D + O], vias.vias(theta, far)[:O])  # the turning open chains
+    assert len(R.sampler_branches(opened, depth)) == D + O  # turning: fixed and open
 
     kept, depth = vias.free(theta, lambda path: -1, lambda q: True, far)  # free all the way
     assert np.array_equal(kept, fixed) and depth.tolist() == [L] * (2 * D)
