@@ -6,7 +6,8 @@ Jacobian, the same choice of solution — without a Python call per operation: a
 costs microseconds instead of milliseconds. ``tests/test_chain.py`` holds the two to each other.
 :func:`chain_positions` is the chain's FK on the same code (the retreat stage starts its vias from it,
 :mod:`kinlearn.planning.retreat`). :func:`moves_keeping_orientation` moves the hand through targets
-with its orientation held (the retreat stage's kept chains; compiled only, no torch twin). A rigid chain only (the residual MLP runs in torch).
+with its orientation held (the retreat stage's kept chains; compiled only, no torch twin). A rigid
+chain only (the residual MLP runs in torch).
 
 Nothing is compiled at import (and the planner imports this module only when it first solves a
 position goal): the first call compiles (seconds) and caches the machine code beside this file

@@ -153,10 +153,10 @@ class RetreatVias:
         distance) and the scene's ``distance`` is given, in its most open directions as well (the
         chains of either set, the hand turning first: :meth:`vias`' order). A retreat stopped short is
         often one that leads nowhere (toward the base under a table top): on the tuning problems (seeds
-        3004–3010 and the grasp-like ones, fixed time) the open directions added there cleared 86.4 /
-        86.0% (ur5 with its gripper), 97.9 / 99.0% (panda) and 98.6 / 99.0% (iiwa14), against 83.6 /
-        83.0, 97.1 / 99.0 and 98.6 / 98.0% with them only where no fixed retreat is free at all, and
-        lost no problem."""
+        3004–3010 and the grasp-like ones, fixed time; three open directions then) the open directions
+        added there cleared 86.4 / 86.0% (ur5 with its gripper), 97.9 / 99.0% (panda) and 98.6 / 99.0%
+        (iiwa14), against 83.6 / 83.0, 97.1 / 99.0 and 98.6 / 98.0% with them only where no fixed
+        retreat is free at all, and lost no problem."""
         vias = self.vias(theta)
         depth = free_depths(first_collision, config_free, theta, vias)
         if distance is not None and depth.max() < vias.shape[1]:
