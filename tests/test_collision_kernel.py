@@ -190,6 +190,26 @@ def test_point_distances_match_torch():
         K.point_distances(K.KernelScene(scene), np.array([[0.0, np.nan, 0.0]]))
 
 
+def test_every_sphere_at_once_is_each_sphere_alone():
+    """The distances of all a body's spheres computed together (the walk's vector loop) are those of each
+    sphere computed alone (bounding-ball culling and all), to the bit, floor included."""
+    rng = np.random.default_rng(11)
+    signs = set()
+    for s in range(6):
+        ks = K.KernelScene(random_scene(rng, n=int(rng.integers(1, 9)), floor=bool(s % 2)))
+        spheres, boxes, cylinders, floor = ks.args()
+        c = rng.uniform([0.1, -0.7, 0.0], [0.9, 0.7, 1.2], (40, 3))
+        radii, on_floor = rng.uniform(0.0, 0.1, 40), rng.random(40) < 0.7
+        out = np.empty(40)
+        K._spheres_scene(c, radii, on_floor, spheres, boxes, cylinders, floor, np.empty((3, 40)), out)
+        alone = [
+            K._sphere_scene(*c[m], radii[m], on_floor[m], spheres, boxes, cylinders, floor) for m in range(40)
+        ]
+        assert np.array_equal(out, alone)
+        signs |= set(np.sign(out).tolist())
+    assert {-1.0, 1.0} <= signs  # spheres inside and outside
+
+
 def test_typed_errors():
     robot = load_robot("iiwa14")
     kb = K.KernelBody(body_spheres(robot).double())

@@ -186,6 +186,23 @@ def test_rrt_connect_needs_a_bound_and_refuses_bad_ones(wall_problem):
     b = rrt_connect(*args, time_limit=float("inf"), max_iterations=3, seed=2)
     assert a[2] == b[2] <= 3
     assert (a[0] is None) == (b[0] is None) and (a[0] is None or np.array_equal(a[0], b[0]))
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ConfigError, match="rounds"):
+            rrt_connect(*args, rounds=bad)
+
+
+def test_rounds_sized_to_their_time_find_the_same_path(wall_problem):
+    """rrt_connect's default rounds grow with the time they take; the path is that of one iteration per
+    round (the same seed, the same iterations to it)."""
+    from kinlearn.collision.rrt import rrt_connect
+
+    robot, body, scene, start, goal = wall_problem
+    args = (K.KernelBody(body), K.KernelScene(scene), start, goal, robot.lower, robot.upper)
+    kw = dict(time_limit=float("inf"), max_iterations=5000, seed=4, shortcut=False, step=0.1)  # short steps
+    one = rrt_connect(*args, rounds=1, **kw)
+    sized = rrt_connect(*args, **kw)
+    assert one[0] is not None and one[2] > 10
+    assert np.array_equal(one[0], sized[0]) and one[2] == sized[2]
 
 
 def test_trees_grown_from_given_branches(wall_problem):

@@ -24,7 +24,14 @@ d_m, the next ⌊min_m (d_m − slack) / (t_m / n_k)⌋ sub-steps are free and a
 and the first colliding segment are those of checking every sub-step; only the clearance (a minimum
 over the evaluated configurations) needs ``exact=True``.
 
-Three refinements keep the verdict that of every sub-step and cut the work (``benchmarks/candidate_check_speed.py``):
+Four refinements keep the verdict that of every sub-step and cut the work (``benchmarks/candidate_check_speed.py``):
+
+- **Many spheres at once.** Where at least :data:`_VECTOR_MIN` spheres are due at a configuration, the
+  walk computes every sphere's distance in one loop over the spheres per primitive
+  (:func:`_spheres_scene`, vector instructions; the same values to the bit); fewer are computed one by
+  one. On motions like the sampler's (300 from each tuning problem's trees, seeds 3004–3010, by turns in
+  one process) the walks took 0.84 / 0.85 / 0.94 of the time (ur5 with its gripper, panda, iiwa14;
+  thresholds of 2 to 16 within 0.02 of each other).
 
 - **A self-collision pair closes at its own rate.** Turning joint j changes the distance ‖B − A‖ of a
   sphere B after it from a sphere A before it by at most |Δθ_j| times A's distance from the joint's
@@ -83,6 +90,9 @@ _SLACK = 1e-9
 _GROUP_MIN = 4
 #: Share of its budget's span after which an item is recomputed at a configuration evaluated anyway.
 _REFRESH = 0.5
+#: From this many spheres due at a configuration, the walk computes every sphere's distance at once
+#: (:func:`_spheres_scene`), else those due one by one.
+_VECTOR_MIN = 8
 
 #: Metres of slack when a primitive is culled by its bounding ball (far above a distance's rounding).
 _CULL = 1e-9
@@ -160,6 +170,34 @@ def _sphere_scene(x, y, z, r, on_floor, spheres, boxes, cylinders, floor):
 
 
 @_jit
+def _spheres_scene(c, radii, on_floor, spheres, boxes, cylinders, floor, xyz, out):
+    """Every sphere's signed distance to the scene, ``out (M,)`` for centres ``c (M, 3)`` (``xyz (3, M)``:
+    work space): :func:`_sphere_scene`'s values to the bit, primitive by primitive over all the spheres,
+    a loop the compiler turns into vector instructions. Where many spheres are wanted it is the faster:
+    on the ur5 with its gripper (40 spheres) among ten boxes, 0.9 against 3.5 µs per configuration."""
+    M = c.shape[0]
+    X, Y, Z = xyz[0], xyz[1], xyz[2]
+    for m in range(M):
+        X[m], Y[m], Z[m] = c[m, 0], c[m, 1], c[m, 2]
+        out[m] = np.inf
+    for i in range(spheres.shape[0]):
+        for m in range(M):
+            out[m] = min(out[m], _sd_sphere(X[m], Y[m], Z[m], spheres, i))
+    for i in range(boxes.shape[0]):
+        for m in range(M):
+            out[m] = min(out[m], _sd_box(X[m], Y[m], Z[m], boxes, i))
+    for i in range(cylinders.shape[0]):
+        for m in range(M):
+            out[m] = min(out[m], _sd_cylinder(X[m], Y[m], Z[m], cylinders, i))
+    for m in range(M):
+        out[m] = out[m] - radii[m]
+    if floor[0] > 0.5:
+        for m in range(M):
+            if on_floor[m]:
+                out[m] = min(out[m], Z[m] - radii[m] - floor[1])
+
+
+@_jit
 def _chain(q, F, prismatic, frames):
     """Frames ``(dof + 1, 3, 4)`` of joints ``q (dof,)``: T_0 = I, T_i = T_{i−1} F_i Z(q_i), Z a rotation
     about (or a shift along) z."""
@@ -201,16 +239,31 @@ def _fk(q, F, prismatic, link, folded, out, frames):
 
 @_jit
 def _evaluate(
-    q, F, prismatic, link, folded, radii, on_floor, pairs, spheres, boxes, cylinders, floor, c, dm, dp, frames
+    q,
+    F,
+    prismatic,
+    link,
+    folded,
+    radii,
+    on_floor,
+    pairs,
+    spheres,
+    boxes,
+    cylinders,
+    floor,
+    c,
+    dm,
+    dp,
+    frames,
+    xyz,
 ):
     """FK and every distance at ``q``: fills ``c (M, 3)``, ``dm (M,)`` (per sphere, to the scene) and
-    ``dp (P,)`` (per self-collision pair); returns (scene clearance, self clearance)."""
+    ``dp (P,)`` (per self-collision pair); returns (scene clearance, self clearance). ``frames``, ``xyz``:
+    work space."""
     _fk(q, F, prismatic, link, folded, c, frames)
+    _spheres_scene(c, radii, on_floor, spheres, boxes, cylinders, floor, xyz, dm)
     d = np.inf
     for m in range(link.shape[0]):
-        dm[m] = _sphere_scene(
-            c[m, 0], c[m, 1], c[m, 2], radii[m], on_floor[m], spheres, boxes, cylinders, floor
-        )
         d = min(d, dm[m])
     s = np.inf
     for p in range(pairs.shape[0]):
@@ -230,10 +283,11 @@ def _clearances(
     n, M = qs.shape[0], link.shape[0]
     d, s = np.empty(n), np.empty(n)
     c, dp, frames = np.empty((M, 3)), np.empty(pairs.shape[0]), np.empty((qs.shape[1] + 1, 3, 4))
+    xyz = np.empty((3, M))
     for i in range(n):
         d[i], s[i] = _evaluate(
             qs[i], F, prismatic, link, folded, radii, on_floor, pairs, spheres, boxes, cylinders, floor, c, per[i], dp,
-            frames,
+            frames, xyz,
         )  # fmt: skip
     return d, s
 
@@ -337,7 +391,7 @@ def _check(
     W, dof = path.shape
     M, P = link.shape[0], pairs.shape[0]
     c, dm, dp = np.empty((M, 3)), np.empty(M), np.empty(P)
-    frames = np.empty((dof + 1, 3, 4))
+    frames, xyz = np.empty((dof + 1, 3, 4)), np.empty((3, M))
     travel = np.empty(M)
     q = np.empty(dof)
     first = -1
@@ -362,7 +416,7 @@ def _check(
                 q[j] = path[k, j] + frac * (path[k + 1, j] - path[k, j]) if k < W - 1 else path[k, j]
             d, s = _evaluate(
                 q, F, prismatic, link, folded, radii, on_floor, pairs, spheres, boxes, cylinders, floor, c, dm, dp,
-                frames,
+                frames, xyz,
             )  # fmt: skip
             evaluated += 1
             clear, self_clear = min(clear, d), min(self_clear, s)
@@ -478,6 +532,7 @@ def _verdict(path, max_travel, margin, body, scene):
     from_m = np.zeros(M)
     from_p = np.zeros(P)
     c, frames, q = np.empty((M, 3)), np.empty((dof + 1, 3, 4)), np.empty(dof)
+    dm, xyz = np.empty(M), np.empty((3, M))
     pos, evaluated = 0.0, 0
     k = 0
     while True:
@@ -497,12 +552,22 @@ def _verdict(path, max_travel, margin, body, scene):
         _place(frames, b_link, b_folded, cb)
         evaluated += 1
         nxt = np.inf
+        due = 0
+        for m in range(M):
+            if due_m[m] <= pos or pos - from_m[m] >= _REFRESH * (due_m[m] - from_m[m]):
+                due += 1
+        every = due >= _VECTOR_MIN
+        if every:  # many spheres to look at: all of them at once, in vector instructions
+            _spheres_scene(c, radii, on_floor, spheres, boxes, cylinders, floor, xyz, dm)
         for m in range(M):
             if due_m[m] <= pos or pos - from_m[m] >= _REFRESH * (due_m[m] - from_m[m]):
                 from_m[m] = pos
-                d = _sphere_scene(
-                    c[m, 0], c[m, 1], c[m, 2], radii[m], on_floor[m], spheres, boxes, cylinders, floor
-                )
+                if every:
+                    d = dm[m]
+                else:
+                    d = _sphere_scene(
+                        c[m, 0], c[m, 1], c[m, 2], radii[m], on_floor[m], spheres, boxes, cylinders, floor
+                    )
                 if d <= margin:
                     return k, evaluated, frac
                 due_m[m] = _expiry_lever(d - margin - _SLACK, k, i, absd, left, lever, m, steps, offset)
