@@ -43,7 +43,7 @@ Four refinements keep the verdict that of every sub-step and cut the work (``ben
   bound over the limits' box with the pairs' own rates, and the verdict drops them for paths whose
   knots all lie in that box (:attr:`KernelBody.packed_within`; any other path gets every pair). The
   verdicts and first colliding configurations are the same; the compiled sampler's searches take 0.87 /
-  0.90 / 0.96× the time at the median (panda, ur5 with its gripper, iiwa14; ``benchmarks/sampler_pairs.py``).
+  0.90 / 0.96× the time at the median (panda, ur5 with its gripper, iiwa14; ``benchmarks/sampler_speed.py``).
 - **A probe first, where only the verdict is wanted** (:func:`first_free`, the sampler's motions): a
   few grid configurations spread along the path — its inner knots, then each segment's middle
   sub-step, its quarters, eighths and sixteenths — are checked against the scene, link by link behind a

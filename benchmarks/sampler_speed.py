@@ -1,14 +1,19 @@
-"""The compiled RRT-Connect with every self-collision pair against the pairs proven apart left out
-(:func:`kinlearn.collision.kernel.proven_apart`), on the committed held-out problems of the seven scene
-families, in the same run on one thread.
+"""The compiled RRT-Connect two ways, on the committed held-out problems of the seven scene families, in
+the same run on one thread:
 
-    python benchmarks/sampler_pairs.py [--robot panda] [--seeds 2] [--time-limit 2.0] [--threads 1]
+- ``--compare pairs`` (default): every self-collision pair against the pairs proven apart left out
+  (:func:`kinlearn.collision.kernel.proven_apart`);
+- ``--compare rounds``: one iteration per call from Python against rounds sized to their time (the
+  default of :func:`kinlearn.collision.rrt.rrt_connect`, :data:`~kinlearn.collision.rrt.ROUND_SECONDS`).
 
-Both ways give every motion the same verdict, so with the same seed each search is the same one (checked:
-the same path after the same iterations); only its time differs. The two take turns, problem by problem
-(which goes first alternates), so that each sees the machine's same minutes. Reported: the pairs proven
-apart and the proof's time, then per way the median, mean and p90 wall time and the share solved within
-10 and 50 ms, and the median over problems of the per-problem time ratio.
+    python benchmarks/sampler_speed.py [--robot panda] [--compare pairs|rounds] [--seeds 2] [--time-limit 2.0]
+        [--threads 1]
+
+Both ways give every search the same path after the same iterations (checked); only its time differs.
+The two take turns, problem by problem (which goes first alternates), so that each sees the machine's same
+minutes. Reported: per way the median, mean and p90 wall time and the share solved within 10 and 50 ms,
+and the median over problems of the per-problem time ratio to the first way (for pairs, also the pairs
+proven apart and the proof's time).
 """
 
 from __future__ import annotations
@@ -34,17 +39,17 @@ DATA = Path(__file__).parent / "data"
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--robot", default="panda")
+    ap.add_argument("--compare", choices=("pairs", "rounds"), default="pairs")
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--time-limit", type=float, default=2.0)
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    print(
-        header(
-            f"RRT-Connect: every self-collision pair against the pairs proven apart left out ({args.robot})",
-            args.threads,
-        )
-    )
+    what = {
+        "pairs": "every self-collision pair against the pairs proven apart left out",
+        "rounds": "one iteration per round against rounds sized to their time",
+    }[args.compare]
+    print(header(f"RRT-Connect: {what} ({args.robot})", args.threads))
     robot = load_robot(args.robot)
     problems = ProblemSet.load(DATA / f"scene_problems_{args.robot}.npz", robot=args.robot)
     K.warm_up()
@@ -57,7 +62,14 @@ def main() -> None:
     lo, hi = np.asarray(robot.lower, np.float64), np.asarray(robot.upper, np.float64)
     scenes = [problems.problem(i) for i in range(len(problems))]
     packed = [K.KernelScene(sc.to(torch.float64)) for _, _, sc in scenes]
-    ways = {"every pair": lambda self, a, b: self.packed, "pairs proven apart left out": K.KernelBody.packing}
+    packing = K.KernelBody.packing_of
+    if args.compare == "pairs":  # (the packing of the body, the rounds)
+        ways = {
+            "every pair": (lambda self, a, b: self.packed, None),
+            "pairs proven apart left out": (packing, None),
+        }
+    else:
+        ways = {"one iteration per round": (packing, 1), "rounds sized to their time": (packing, None)}
     times = {name: [] for name in ways}
     try:
         for seed in range(args.seeds):
@@ -65,18 +77,19 @@ def main() -> None:
                 order = list(ways) if (i + seed) % 2 == 0 else list(ways)[::-1]
                 found = {}
                 for name in order:
-                    K.KernelBody.packing = ways[name]
+                    K.KernelBody.packing_of, rounds = ways[name]
                     path, t, it = rrt_connect(
                         body, packed[i], start.double().numpy(), goal.double().numpy(), lo, hi,
-                        time_limit=args.time_limit, seed=1000 * seed + i,
+                        time_limit=args.time_limit, seed=1000 * seed + i, rounds=rounds,
                     )  # fmt: skip
                     times[name].append(t if path is not None else np.inf)
                     found[name] = (it, None if path is None else path.tobytes())
                 if len(set(found.values())) != 1 and np.isfinite([times[n][-1] for n in ways]).all():
                     raise SystemExit(f"problem {i}, seed {seed}: the two ways found different paths")
     finally:
-        K.KernelBody.packing = ways["pairs proven apart left out"]
-    base = np.array(times["every pair"])
+        K.KernelBody.packing_of = packing
+    first = next(iter(ways))
+    base = np.array(times[first])
     rows = []
     for name, t in times.items():
         t = np.array(t)
@@ -91,10 +104,12 @@ def main() -> None:
                 f"{np.median(t[both] / base[both]):.3f}",
             ]
         )
-    print(
-        f"\n{len(scenes)} held-out problems × {args.seeds} seeds; {int(apart.sum())} of {len(apart)} self-collision "
-        f"pairs proven apart in {proof:.2f} s (the planner's body); the same paths both ways\n"
+    proven = (
+        f"; {int(apart.sum())} of {len(apart)} self-collision pairs proven apart in {proof:.2f} s (the planner's body)"
+        if args.compare == "pairs"
+        else ""
     )
+    print(f"\n{len(scenes)} held-out problems × {args.seeds} seeds{proven}; the same paths both ways\n")
     print(
         markdown_table(
             [
@@ -103,7 +118,7 @@ def main() -> None:
                 "mean ms (both solved)",
                 "p90 ms",
                 "within 10 / 50 ms",
-                "time / every pair's (median)",
+                f"time / {first}'s (median)",
             ],
             rows,
         )
