@@ -210,8 +210,9 @@ class RrtConnect:
     25 ms rose from 89.2 to 92.2% and within 40 ms stayed level (96.4 against 95.6%); the panda's (6
     problems) and the iiwa14's (2) were as before.
 
-    ``run(iterations)`` grows the trees for that many more rounds and returns the path ``(V, dof)``
-    once found (``None`` while not); ``valid_ends`` says whether start and goal are free at all.
+    ``run(iterations)`` grows the trees for up to that many more iterations (fewer where they meet) and
+    returns the path ``(V, dof)`` once found (``None`` while not); ``iterations`` counts those run;
+    ``valid_ends`` says whether start and goal are free at all.
     """
 
     def __init__(
