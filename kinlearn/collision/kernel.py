@@ -244,24 +244,8 @@ def _fk(q, F, prismatic, link, folded, out, frames):
 
 @_jit
 def _evaluate(
-    q,
-    F,
-    prismatic,
-    link,
-    folded,
-    radii,
-    on_floor,
-    pairs,
-    spheres,
-    boxes,
-    cylinders,
-    floor,
-    c,
-    dm,
-    dp,
-    frames,
-    xyz,
-):
+    q, F, prismatic, link, folded, radii, on_floor, pairs, spheres, boxes, cylinders, floor, c, dm, dp, frames, xyz
+):  # fmt: skip
     """FK and every distance at ``q``: fills ``c (M, 3)``, ``dm (M,)`` (per sphere, to the scene) and
     ``dp (P,)`` (per self-collision pair); returns (scene clearance, self clearance). ``frames``, ``xyz``:
     work space."""
@@ -464,6 +448,13 @@ def _grid_steps(path, max_travel, lever, steps):
 
 
 @_jit_inline
+def _stale(due, since, pos):
+    """Whether an item of the walk is recomputed at global sub-step ``pos``: its budget is spent (``due``),
+    or more than :data:`_REFRESH` of its span from ``since`` (where it was last computed) has passed."""
+    return due <= pos or pos - since >= _REFRESH * (due - since)
+
+
+@_jit_inline
 def _expiry_lever(b, k, i, absd, left, lever, row, steps, offset):
     """The global sub-step index at which an item with ``b`` metres of budget at sub-step ``i`` of segment
     ``k`` must be looked at again: where its travel bound may have used the budget up (+inf if it lasts
@@ -559,13 +550,13 @@ def _verdict(path, max_travel, margin, body, scene):
         nxt = np.inf
         due = 0
         for m in range(M):
-            if due_m[m] <= pos or pos - from_m[m] >= _REFRESH * (due_m[m] - from_m[m]):
+            if _stale(due_m[m], from_m[m], pos):
                 due += 1
         every = due >= _VECTOR_MIN
         if every:  # many spheres to look at: all of them at once, in vector instructions
             _spheres_scene(c, radii, on_floor, spheres, boxes, cylinders, floor, xyz, dm)
         for m in range(M):
-            if due_m[m] <= pos or pos - from_m[m] >= _REFRESH * (due_m[m] - from_m[m]):
+            if _stale(due_m[m], from_m[m], pos):
                 from_m[m] = pos
                 if every:
                     d = dm[m]
@@ -578,7 +569,7 @@ def _verdict(path, max_travel, margin, body, scene):
                 due_m[m] = _expiry_lever(d - margin - _SLACK, k, i, absd, left, lever, m, steps, offset)
             nxt = min(nxt, due_m[m])
         for p in range(P):
-            if due_p[p] <= pos or pos - from_p[p] >= _REFRESH * (due_p[p] - from_p[p]):
+            if _stale(due_p[p], from_p[p], pos):
                 from_p[p] = pos
                 a, b = pairs[p, 0], pairs[p, 1]
                 dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
@@ -588,7 +579,7 @@ def _verdict(path, max_travel, margin, body, scene):
                 due_p[p] = _expiry_lever(d - _SLACK, k, i, absd, left, p_lever, p, steps, offset)
             nxt = min(nxt, due_p[p])
         for g in range(G):
-            if due_g[g] <= pos or pos - from_g[g] >= _REFRESH * (due_g[g] - from_g[g]):
+            if _stale(due_g[g], from_g[g], pos):
                 from_g[g] = pos
                 x, u = g_sphere[g], g_ball[g]
                 dx, dy, dz = c[x, 0] - cb[u, 0], c[x, 1] - cb[u, 1], c[x, 2] - cb[u, 2]
