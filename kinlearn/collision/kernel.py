@@ -648,6 +648,35 @@ def _scene_hit(q, margin, body, scene, frames):
 
 
 @_jit_inline
+def _self_hit(body, frames, c, cb):
+    """Whether the body, its links placed at ``frames`` (:func:`_chain`'s, already computed), touches itself:
+    every self-collision pair of the packing, a group's members only where the sphere reaches into
+    their link's ball (``c``, ``cb``: room for the sphere centres and the balls' centres)."""
+    link, folded, radii, pairs = body[2], body[3], body[4], body[6]
+    g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius = body[8:15]
+    if pairs.shape[0] == 0 and g_sphere.shape[0] == 0:
+        return False
+    _place(frames, link, folded, c)
+    _place(frames, b_link, b_folded, cb)
+    for p in range(pairs.shape[0]):
+        a, b = pairs[p, 0], pairs[p, 1]
+        dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
+        if math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[a] - radii[b] <= 0.0:
+            return True
+    for g in range(g_sphere.shape[0]):
+        x, u = g_sphere[g], g_ball[g]
+        dx, dy, dz = c[x, 0] - cb[u, 0], c[x, 1] - cb[u, 1], c[x, 2] - cb[u, 2]
+        if math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - b_radius[u] - radii[x] > 0.0:
+            continue  # clear of the ball that holds the members
+        for e in range(g_start[g], g_start[g + 1]):
+            b = g_members[e]
+            dx, dy, dz = c[x, 0] - c[b, 0], c[x, 1] - c[b, 1], c[x, 2] - c[b, 2]
+            if math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[x] - radii[b] <= 0.0:
+                return True
+    return False
+
+
+@_jit_inline
 def _point(frames, k, v):
     """R_k · v + p_k: a point fixed in link k's frame, placed."""
     return (
@@ -674,6 +703,7 @@ def _probe(path, max_travel, margin, body, scene, hints, nh):
     if W < 2:
         return False, 0, 0.0, -1
     frames, q = np.empty((dof + 1, 3, 4)), np.empty(dof)
+    c, cb = np.empty((body[2].shape[0], 3)), np.empty((body[12].shape[0], 3))
     steps = np.zeros(W - 1)  # each segment's sub-steps, counted where first needed (a hint, a level)
     for h in range(nh):
         k = int(hints[h, 0])
@@ -681,7 +711,8 @@ def _probe(path, max_travel, margin, body, scene, hints, nh):
         frac = min(math.floor(hints[h, 1] * n), n - 1.0) / n
         for j in range(dof):
             q[j] = path[k, j] + frac * (path[k + 1, j] - path[k, j])
-        if _scene_hit(q, margin, body, scene, frames):
+        # where another candidate hit, the body against itself too: a walk's hit may be one
+        if _scene_hit(q, margin, body, scene, frames) or _self_hit(body, frames, c, cb):
             return True, k, frac, h
     for k in range(1, W - 1):
         if _scene_hit(path[k], margin, body, scene, frames):
@@ -708,6 +739,12 @@ def _probe(path, max_travel, margin, body, scene, hints, nh):
                 if _scene_hit(q, margin, body, scene, frames):
                     return True, k, frac, -1
         parts *= 2
+    # Clear of the scene wherever it looked: the inner knots against the body itself (a network's
+    # candidates may fold the arm onto itself, where no scene point tells).
+    for k in range(1, W - 1):
+        _chain(path[k], body[0], body[1], frames)
+        if _self_hit(body, frames, c, cb):
+            return True, k, 0.0, -1
     return False, 0, 0.0, -1
 
 
