@@ -224,20 +224,36 @@ class ObstacleStages:
                 if path is not None:
                     found[int(i)] = (path, "rrt")
         if found:
-            K = max(out.shape[1], *(p.shape[0] for p, _ in found.values()))
-            if K > out.shape[1]:  # every path to the longest one's knots (the same polylines)
+            # Every plan at the knots of the longest: a later stage's path as it is where later stages
+            # replaced every proposal (a batch-1 plan), else at least at the proposals' knots.
+            longest = max(p.shape[0] for p, _ in found.values())
+            K = longest if len(found) == n else max(longest, out.shape[1])
+            cleared = self._cleared(found, K, packed)
+            if len(cleared) < n and K < out.shape[1]:  # a proposal stays after all: at its knots
+                K = out.shape[1]
+                cleared = self._cleared(found, K, packed)
+            if K > out.shape[1]:  # the same polylines, at K knots
                 out = np.stack([densify(p, K) for p in out])
-            for i, (path, name) in found.items():
-                dense = densify(path, K)
-                # The plan's knots are checked as the plan will be judged (sub-steps of its own
-                # segments), not only the sampler's motions: no plan is called free that the dense
-                # check of its joints would not call free. A retreat path's segments were checked as
-                # they are (the verdict of a polyline is its segments'): again only when split here.
-                if (name == "retreat" and dense.shape[0] == path.shape[0]) or _kernel().first_free(
-                    self._np_body, dense[None], packed[i], max_travel=CHECK_TRAVEL
-                ) == 0:
-                    out[i], free[i], stage[i] = dense, True, name
+            elif K < out.shape[1]:  # every row is a later stage's path (below)
+                out = np.empty((n, K, out.shape[2]))
+            for i, dense in cleared.items():
+                out[i], free[i], stage[i] = dense, True, found[i][1]
         return out, free, stage
+
+    def _cleared(self, found: dict, K: int, packed: list) -> dict[int, np.ndarray]:
+        """The later stages' paths ``found`` ({problem: (path, stage)}) at ``K`` knots each (:func:`densify`),
+        those the dense check of their own knots finds free: the plan's knots are checked as the plan
+        will be judged (sub-steps of its own segments), not only the sampler's motions, so no plan is
+        called free that the dense check of its joints would not call free. A retreat path's segments
+        were checked as they are (the verdict of a polyline is its segments'): again only when split."""
+        out = {}
+        for i, (path, name) in found.items():
+            dense = densify(path, K)
+            if (name == "retreat" and dense.shape[0] == path.shape[0]) or _kernel().first_free(
+                self._np_body, dense[None], packed[i], max_travel=CHECK_TRAVEL
+            ) == 0:
+                out[i] = dense
+        return out
 
     def _retreat_vias(self) -> RetreatVias | None:
         """The retreat stage's via solver (made once): on the planner's identified chain, else on the
