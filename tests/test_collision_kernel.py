@@ -291,6 +291,35 @@ def test_verdicts_where_self_collision_decides(arm):
         assert counts[0][0] < counts[0][1]  # with no obstacle, some paths collide with themselves
 
 
+def test_first_free_where_candidates_fold_onto_themselves(arm):
+    """Candidates of several knots, alike (base paths and small variations, as a network proposes), many
+    colliding with themselves where no obstacle is: the probe looks for self-collision at the hints and
+    the knots, and the first free one is the one check_path picks, whatever the order."""
+    robot, body, kb = arm
+    rng = np.random.default_rng(5)
+    picked, colliding = [], []
+    for s, scene in enumerate((Scene(), Scene.from_spheres([[0.45, 0.1, 0.5, 0.1]], floor=0.0))):
+        base = np.concatenate(  # whole-range paths (most fold onto themselves), then shorter ones
+            [
+                _random_paths(robot, 3, 6, seed=40 + s, spread=1.0),
+                _random_paths(robot, 3, 6, seed=50 + s, spread=0.1),
+            ]
+        )
+        noise = rng.normal(0.0, 0.05, (24, 6, robot.dof))
+        paths = np.ascontiguousarray(np.clip(np.repeat(base, 4, axis=0) + noise, robot.lower, robot.upper))
+        ks = K.KernelScene(scene)
+        free = check_path(body, torch.from_numpy(paths), scene).collision_free.numpy()
+        colliding.append(int((~free).sum()))
+        for _ in range(4):
+            order = rng.permutation(len(paths))
+            expect = next((int(i) for i in order if free[i]), -1)
+            assert K.first_free(kb, paths, ks, order) == expect
+            picked.append(expect)
+    assert sum(colliding) > 0 and max(picked) >= 0
+    if robot.name != "iiwa14":  # its sparse set leaves out the pairs that can meet
+        assert colliding[0] > 0  # with no obstacle: against themselves
+
+
 def _pair_gaps(body, q: torch.Tensor) -> torch.Tensor:
     """``(N, P)``: each self-collision pair's distance at configurations ``q``, by torch."""
     c, p = body(q), body.pairs
