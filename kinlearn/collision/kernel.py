@@ -50,7 +50,11 @@ Four refinements keep the verdict that of every sub-step and cut the work (``ben
   ball around each link's spheres. A colliding candidate usually collides inside, where the walk from
   its start arrives late; a probe hit is a grid configuration that collides, so the answer is the
   same. Among a problem's candidates (:func:`first_free`) the probe looks first where the last
-  candidates hit (the same segment, the same share of it): alike paths collide in one place.
+  candidates hit (the same segment, the same share of it): alike paths collide in one place. There,
+  and at the inner knots once the scene probe found nothing, it also looks for the body against
+  itself: a network's candidates can all fold the arm onto itself, where no scene point tells, and
+  each was then walked to its hit (the ur5's candidate checks took 0.55 of the time, the panda's and
+  the iiwa14's 1.03).
 """
 
 from __future__ import annotations
@@ -696,7 +700,9 @@ def _probe(path, max_travel, margin, body, scene, hints, nh):
     is taken to the grid's sub-step at or before its fraction), so a hit means the path collides; none
     says nothing. Returns (hit, its segment, its fraction of the segment, the hint that hit or −1). Most
     colliding paths (a planner's candidates, a sampler's long edges) collide somewhere inside, where a
-    walk from the start reaches late: a probe finds it in a few scene checks. ``path`` is finite (as
+    walk from the start reaches late: a probe finds it in a few scene checks. At the hints (another
+    candidate's hit may have been the body against itself) and, after the scene found nothing, at the
+    inner knots, it also looks at self-collision (:func:`_self_hit`). ``path`` is finite (as
     :func:`_verdict` takes it: :func:`_first_free_packed` checks every candidate first)."""
     lever = body[7]
     W, dof = path.shape
