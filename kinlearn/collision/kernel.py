@@ -146,6 +146,14 @@ def _sd_cylinder(x, y, z, t, i):
     return math.sqrt(max(o_r * o_r + o_a * o_a, _TINY)) + min(max(radial, axial), 0.0)
 
 
+@_jit_inline
+def _gap(p, a, ra, q, b, rb):
+    """The distance between two spheres, of centres ``p[a]`` and ``q[b]`` and radii ``ra`` and ``rb`` (the
+    centres' distance never below √tiny, as torch's self-collision distance takes it)."""
+    dx, dy, dz = p[a, 0] - q[b, 0], p[a, 1] - q[b, 1], p[a, 2] - q[b, 2]
+    return math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - ra - rb
+
+
 @_jit
 def _beyond(x, y, z, t, i, bound, d):
     """Whether primitive ``i`` of table ``t`` (centre in columns 0–2, held in a ball of radius ``bound``
@@ -262,8 +270,7 @@ def _evaluate(
     s = np.inf
     for p in range(pairs.shape[0]):
         a, b = pairs[p, 0], pairs[p, 1]
-        dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
-        dp[p] = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[a] - radii[b]
+        dp[p] = _gap(c, a, radii[a], c, b, radii[b])
         s = min(s, dp[p])
     return d, s
 
@@ -593,8 +600,7 @@ def _verdict(path, max_travel, margin, body, scene):
             if _stale(due_p[p], from_p[p], pos):
                 from_p[p] = pos
                 a, b = pairs[p, 0], pairs[p, 1]
-                dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
-                d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[a] - radii[b]
+                d = _gap(c, a, radii[a], c, b, radii[b])
                 if d <= 0.0:
                     return k, evaluated, frac
                 due_p[p] = _expiry_lever(d - _SLACK, k, i, absd, left, p_lever, p, steps, offset)
@@ -603,16 +609,14 @@ def _verdict(path, max_travel, margin, body, scene):
             if _stale(due_g[g], from_g[g], pos):
                 from_g[g] = pos
                 x, u = g_sphere[g], g_ball[g]
-                dx, dy, dz = c[x, 0] - cb[u, 0], c[x, 1] - cb[u, 1], c[x, 2] - cb[u, 2]
-                d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - b_radius[u] - radii[x]
+                d = _gap(c, x, b_radius[u], cb, u, radii[x])
                 if d > b_radius[u]:  # far from that link: the ball's budget, at its members' fastest rate
                     due_g[g] = _expiry_lever(d - _SLACK, k, i, absd, left, g_lever, g, steps, offset)
                 else:  # near it (the ball a loose bound): its spheres one by one, each with its own rate
                     due = np.inf
                     for e in range(g_start[g], g_start[g + 1]):
                         b = g_members[e]
-                        dx, dy, dz = c[x, 0] - c[b, 0], c[x, 1] - c[b, 1], c[x, 2] - c[b, 2]
-                        d = math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[x] - radii[b]
+                        d = _gap(c, x, radii[x], c, b, radii[b])
                         if d <= 0.0:
                             return k, evaluated, frac
                         due = min(due, _expiry_lever(d - _SLACK, k, i, absd, left, m_lever, e, steps, offset))
@@ -665,18 +669,15 @@ def _self_hit(body, frames, c, cb):
     _place(frames, b_link, b_folded, cb)
     for p in range(pairs.shape[0]):
         a, b = pairs[p, 0], pairs[p, 1]
-        dx, dy, dz = c[a, 0] - c[b, 0], c[a, 1] - c[b, 1], c[a, 2] - c[b, 2]
-        if math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[a] - radii[b] <= 0.0:
+        if _gap(c, a, radii[a], c, b, radii[b]) <= 0.0:
             return True
     for g in range(g_sphere.shape[0]):
         x, u = g_sphere[g], g_ball[g]
-        dx, dy, dz = c[x, 0] - cb[u, 0], c[x, 1] - cb[u, 1], c[x, 2] - cb[u, 2]
-        if math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - b_radius[u] - radii[x] > 0.0:
+        if _gap(c, x, b_radius[u], cb, u, radii[x]) > 0.0:
             continue  # clear of the ball that holds the members
         for e in range(g_start[g], g_start[g + 1]):
             b = g_members[e]
-            dx, dy, dz = c[x, 0] - c[b, 0], c[x, 1] - c[b, 1], c[x, 2] - c[b, 2]
-            if math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)) - radii[x] - radii[b] <= 0.0:
+            if _gap(c, x, radii[x], c, b, radii[b]) <= 0.0:
                 return True
     return False
 
