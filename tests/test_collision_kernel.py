@@ -117,7 +117,7 @@ def test_the_walk_reports_a_colliding_configuration_of_its_grid(arm):
         scene = random_scene(rng, n=int(rng.integers(2, 6)))
         ks = K.KernelScene(scene)
         for path in _random_paths(robot, 12, int(rng.integers(2, 6)), seed=20 + s, spread=0.3):
-            first, _, frac = K._verdict_packed(path, 0.01, 0.0, f, n, ks.packed)
+            first, _, frac, itself = K._verdict_packed(path, 0.01, 0.0, f, n, ks.packed)
             if first < 0:
                 continue
             hits += 1
@@ -129,7 +129,7 @@ def test_the_walk_reports_a_colliding_configuration_of_its_grid(arm):
                 assert float(frac * steps[first]) == pytest.approx(round(frac * steps[first]), abs=1e-9)
                 q = path[first] + frac * (path[first + 1] - path[first])
             d, sc = K.clearances(kb, ks, q[None])
-            assert min(d[0], sc[0]) <= 0.0
+            assert (sc[0] if itself else d[0]) <= 0.0  # the kind of hit it says: against itself or the scene
     assert hits >= 5
 
 
@@ -348,11 +348,12 @@ def test_verdicts_without_the_pairs_proven_apart_are_those_with_every_pair(arm):
     s = K.KernelScene(Scene()).packed  # self-collision alone decides
     full = [K._verdict_packed(p, 0.01, 0.0, *kb.packed, s) for p in paths]
     cut = [K._verdict_packed(p, 0.01, 0.0, *kb.packed_within, s) for p in paths]
-    assert [(f, x) for f, _, x in full] == [(f, x) for f, _, x in cut]  # (only the work differs)
-    assert sum(e for _, e, _ in cut) <= sum(e for _, e, _ in full)
+    assert [(f, x, t) for f, _, x, t in full] == [(f, x, t) for f, _, x, t in cut]  # (only the work differs)
+    assert sum(e for _, e, _, _ in cut) <= sum(e for _, e, _, _ in full)
     assert kb.packing_of(paths[0]) is kb.packed_within
     hits = sum(f[0] >= 0 for f in full)
     assert hits < len(full) and (hits > 0 or robot.name == "iiwa14")  # its sparse set: rarely self-colliding
+    assert all(itself for f, _, _, itself in full if f >= 0)  # no scene: every hit is the body against itself
 
 
 def test_a_path_beyond_the_limits_is_checked_with_every_pair():

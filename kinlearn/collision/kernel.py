@@ -514,8 +514,8 @@ def _expiry_lever(b, k, i, absd, left, lever, row, steps, offset):
 @_jit
 def _verdict(path, max_travel, margin, body, scene):
     """One path ``(W, dof)``: (first colliding segment or −1, configurations evaluated, the colliding
-    configuration's fraction of that segment, a sub-step of the grid), the verdict of checking every
-    sub-step. Each sphere's clearance and each pair's distance, once computed, is a
+    configuration's fraction of that segment (a sub-step of the grid), whether that hit is the body against
+    itself rather than the scene or the floor), the verdict of checking every sub-step. Each sphere's clearance and each pair's distance, once computed, is a
     budget that the spheres' travel bounds use up along the path; a configuration is evaluated only
     where some budget may be spent, and then only the spent items are recomputed. The pairs of a
     sphere with the spheres of one lower link go as one item, group g: sphere ``g_sphere[g]`` against
@@ -593,7 +593,7 @@ def _verdict(path, max_travel, margin, body, scene):
                         c[m, 0], c[m, 1], c[m, 2], radii[m], on_floor[m], spheres, boxes, cylinders, floor
                     )
                 if d <= margin:
-                    return k, evaluated, frac
+                    return k, evaluated, frac, False
                 due_m[m] = _expiry_lever(d - margin - _SLACK, k, i, absd, left, lever, m, steps, offset)
             nxt = min(nxt, due_m[m])
         for p in range(P):
@@ -602,7 +602,7 @@ def _verdict(path, max_travel, margin, body, scene):
                 a, b = pairs[p, 0], pairs[p, 1]
                 d = _gap(c, a, radii[a], c, b, radii[b])
                 if d <= 0.0:
-                    return k, evaluated, frac
+                    return k, evaluated, frac, True
                 due_p[p] = _expiry_lever(d - _SLACK, k, i, absd, left, p_lever, p, steps, offset)
             nxt = min(nxt, due_p[p])
         for g in range(G):
@@ -618,12 +618,12 @@ def _verdict(path, max_travel, margin, body, scene):
                         b = g_members[e]
                         d = _gap(c, x, radii[x], c, b, radii[b])
                         if d <= 0.0:
-                            return k, evaluated, frac
+                            return k, evaluated, frac, True
                         due = min(due, _expiry_lever(d - _SLACK, k, i, absd, left, m_lever, e, steps, offset))
                     due_g[g] = due
             nxt = min(nxt, due_g[g])
         if nxt > end:
-            return -1, evaluated, 0.0
+            return -1, evaluated, 0.0, False
         pos = nxt
 
 
@@ -780,27 +780,19 @@ def _first_free(paths, order, max_travel, margin, body, scene, n_hints):
     places candidates hit, found by a probe or by a walk) then walked (:func:`_verdict`)."""
     hints, nh = np.empty((n_hints, 2)), 0
     fold = False  # whether a walk's hit was the body against itself: the next probes look at the knots for it
-    frames, q = np.empty((paths.shape[2] + 1, 3, 4)), np.empty(paths.shape[2])
     for i in range(order.shape[0]):
         path = paths[order[i]]
         hit, k, frac, h = _probe(path, max_travel, margin, body, scene, hints, nh, fold)
         if hit:
             nh = _remember(hints, nh, h, k, frac)
             continue
-        first, _, frac = _verdict(path, max_travel, margin, body, scene)
+        first, _, frac, itself = _verdict(path, max_travel, margin, body, scene)
         if first < 0:
             return order[i]
         # the walk found a hit the probe missed: the next candidates are probed there first
         last = paths.shape[1] - 2  # a hit at the final knot: the last sub-step before it
         nh = _remember(hints, nh, -1, min(first, last), frac if first <= last else 1.0)
-        if not fold:  # the hit's configuration (the grid's, to the bit) clear of the scene: a fold
-            for j in range(q.shape[0]):
-                q[j] = (
-                    path[first, j] + frac * (path[first + 1, j] - path[first, j])
-                    if first <= last
-                    else path[first, j]
-                )
-            fold = not _scene_hit(q, margin, body, scene, frames)
+        fold = fold or itself
     return -1
 
 
@@ -1475,7 +1467,7 @@ def check_paths(
                 arr[i], float(max_travel), float(margin), True, *body.args(), body.lever, *scene.args()
             )
         else:
-            first[i], _, _ = _verdict_packed(
+            first[i], _, _, _ = _verdict_packed(
                 arr[i], float(max_travel), float(margin), *body.packing_of(arr[i]), scene.packed
             )
             clear[i] = np.nan
