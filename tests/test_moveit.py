@@ -132,6 +132,51 @@ def test_round_trip_through_moveit_yaml():
     assert float(slab[2] + slab[5]) == pytest.approx(0.1)
 
 
+def _as_lists(data):
+    """``data`` with every pose's position and orientation written as lists (x, y, z / x, y, z, w) and
+    primitive types as names: the layout robowflex writes, and so MotionBenchMaker's scene files."""
+    if isinstance(data, dict):
+        out = {k: _as_lists(v) for k, v in data.items()}
+        if "position" in out and isinstance(out["position"], dict):
+            out["position"] = [out["position"].get(k, 0.0) for k in "xyz"]
+        if "orientation" in out and isinstance(out["orientation"], dict):
+            out["orientation"] = [out["orientation"].get(k, 1.0 if k == "w" else 0.0) for k in "xyzw"]
+        if out.get("type") in (1, 2, 3):
+            out["type"] = {1: "box", 2: "sphere", 3: "cylinder"}[out["type"]]
+        return out
+    if isinstance(data, list):
+        return [_as_lists(v) for v in data]
+    return data
+
+
+def test_poses_written_as_lists_read_as_their_mappings(tmp_path):
+    """position: [x, y, z] and orientation: [x, y, z, w] (robowflex's layout) are the same poses."""
+    data = yaml.safe_load(SCENE_YAML)
+    listed = _as_lists(data)
+    assert listed["world"]["collision_objects"][0]["pose"]["orientation"] == [
+        0.0,
+        0.0,
+        0.3826834324,
+        0.9238795325,
+    ]
+    path = tmp_path / "listed.yaml"
+    path.write_text(yaml.safe_dump(listed, default_flow_style=None))
+    base = [0.1, -0.2, 0.05, 0.0, 0.0, np.sin(0.3), np.cos(0.3)]
+    for a, b in (
+        (Scene.from_moveit(path), Scene.from_moveit(data)),
+        (Scene.from_moveit(listed, base), Scene.from_moveit(data, base)),
+    ):
+        for t in ("spheres", "boxes", "cylinders"):
+            assert torch.equal(getattr(a, t), getattr(b, t))
+    bad = _as_lists(data)
+    bad["world"]["collision_objects"][1]["primitive_poses"][0]["orientation"] = [0.0, 0.0, 1.0]
+    with pytest.raises(SceneFormatError, match="'old_style_box' primitive 0 pose.orientation must be"):
+        Scene.from_moveit(bad)
+    bad["world"]["collision_objects"][1]["primitive_poses"][0]["orientation"] = "up"
+    with pytest.raises(SceneFormatError, match="orientation must be a mapping"):
+        Scene.from_moveit(bad)
+
+
 @pytest.mark.parametrize(
     "obj, match",
     [

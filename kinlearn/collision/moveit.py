@@ -2,7 +2,8 @@
 
 A MoveIt ``PlanningScene`` (as YAML, or the dict PyYAML reads from it) holds its obstacles in
 ``world.collision_objects``; each object has an ``id``, an optional object ``pose`` (position and
-orientation quaternion x, y, z, w) and ``primitives`` with one ``primitive_poses`` entry each, relative
+orientation quaternion x, y, z, w: mappings by name, as ROS writes messages, or lists in that order, as
+robowflex and MotionBenchMaker's scene files do) and ``primitives`` with one ``primitive_poses`` entry each, relative
 to the object's pose (or to the scene frame where the object has no pose, as older MoveIt writes).
 ``SolidPrimitive`` types: BOX = 1 (``dimensions`` = full side lengths x, y, z), SPHERE = 2 ([radius]),
 CYLINDER = 3 ([height, radius], axis along its local z), CONE = 4. Meshes, planes and cones are
@@ -89,19 +90,31 @@ def _number(value, where: str) -> float:
     return v
 
 
+def _components(value, names: str, where: str) -> list[float]:
+    """A point (``names`` "xyz") or a quaternion ("xyzw") of a pose: a mapping by name (ROS messages as
+    YAML; a missing name is 0, a missing w 1) or a list in that order (as robowflex, and so
+    MotionBenchMaker's scene files, write them). ``None``: the origin, or the identity rotation."""
+    if value is None:
+        value = {}
+    if isinstance(value, Mapping):
+        return [_number(value.get(k, 1.0 if k == "w" else 0.0), f"{where}.{k}") for k in names]
+    if isinstance(value, Sequence) and not isinstance(value, str) and len(value) == len(names):
+        return [_number(v, f"{where}.{k}") for k, v in zip(names, value, strict=True)]
+    raise SceneFormatError(
+        f"{where} must be a mapping ({', '.join(names)}) or a list [{', '.join(names)}], got {value!r}"
+    )
+
+
 def pose_matrix(pose, where: str = "pose") -> np.ndarray:
-    """A 4 × 4 transform from a MoveIt pose mapping (``position`` x, y, z; ``orientation`` x, y, z, w), a
-    sequence ``[x, y, z, qx, qy, qz, qw]``, or a 4 × 4 matrix. ``None`` is the identity."""
+    """A 4 × 4 transform from a MoveIt pose mapping (``position`` x, y, z; ``orientation`` x, y, z, w; each
+    a mapping by name or a list in that order), a sequence ``[x, y, z, qx, qy, qz, qw]``, or a 4 × 4
+    matrix. ``None`` is the identity."""
     T = np.eye(4)
     if pose is None:
         return T
     if isinstance(pose, Mapping):
-        pos = pose.get("position") or {}
-        ori = pose.get("orientation") or {}
-        if not isinstance(pos, Mapping) or not isinstance(ori, Mapping):
-            raise SceneFormatError(f"{where}: position and orientation must be mappings")
-        p = [_number(pos.get(k, 0.0), f"{where}.position.{k}") for k in "xyz"]
-        q = [_number(ori.get(k, 1.0 if k == "w" else 0.0), f"{where}.orientation.{k}") for k in "xyzw"]
+        p = _components(pose.get("position"), "xyz", f"{where}.position")
+        q = _components(pose.get("orientation"), "xyzw", f"{where}.orientation")
     else:
         a = (
             np.asarray(pose, dtype=np.float64)
