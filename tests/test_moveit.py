@@ -170,7 +170,7 @@ def test_poses_written_as_lists_read_as_their_mappings(tmp_path):
             assert torch.equal(getattr(a, t), getattr(b, t))
     bad = _as_lists(data)
     bad["world"]["collision_objects"][1]["primitive_poses"][0]["orientation"] = [0.0, 0.0, 1.0]
-    with pytest.raises(SceneFormatError, match="'old_style_box' primitive 0 pose.orientation must be"):
+    with pytest.raises(SceneFormatError, match=r"'old_style_box' primitive 0 pose\.orientation must be"):
         Scene.from_moveit(bad)
     bad["world"]["collision_objects"][1]["primitive_poses"][0]["orientation"] = "up"
     with pytest.raises(SceneFormatError, match="orientation must be a mapping"):
@@ -200,6 +200,12 @@ def test_poses_written_as_lists_read_as_their_mappings(tmp_path):
 def test_unsupported_geometry_is_a_typed_error_naming_the_object(obj, match):
     with pytest.raises(SceneFormatError, match=match):
         Scene.from_moveit({"world": {"collision_objects": [obj]}})
+
+
+def test_a_sensed_scene_is_refused_not_read_as_empty():
+    octomap = {"origin": {}, "octomap": {"binary": True, "id": "OcTree", "resolution": 0.02, "data": "78DA"}}
+    with pytest.raises(SceneFormatError, match="octomap"):
+        Scene.from_moveit({"world": {"octomap": octomap}})
 
 
 def test_unreadable_files(tmp_path):

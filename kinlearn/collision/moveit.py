@@ -8,7 +8,7 @@ to the object's pose (or to the scene frame where the object has no pose, as old
 ``SolidPrimitive`` types: BOX = 1 (``dimensions`` = full side lengths x, y, z), SPHERE = 2 ([radius]),
 CYLINDER = 3 ([height, radius], axis along its local z), CONE = 4. Meshes, planes and cones are
 refused with a :class:`~kinlearn.errors.SceneFormatError` naming the object (approximating them
-silently would plan against something else than the scene).
+silently would plan against something else than the scene), as is a sensed scene's octomap.
 
 :func:`primitives_from_moveit` returns the primitives in the robot's base frame, given the base's pose
 in the scene's frame, and :func:`primitives_to_moveit` writes them back; ``Scene.from_moveit`` and
@@ -212,6 +212,12 @@ def primitives_from_moveit(source: str | Path | Mapping, base_pose=None) -> list
     world = data.get("world", data)
     if not isinstance(world, Mapping):
         raise SceneFormatError("the planning scene's world must be a mapping holding collision_objects")
+    octomap = world.get("octomap")
+    if isinstance(octomap, Mapping) and (octomap.get("octomap") or {}).get("data"):
+        raise SceneFormatError(
+            "the planning scene holds an octomap (a sensed scene); kinlearn's scenes take boxes, spheres and "
+            "cylinders: give the scene's collision objects instead"
+        )
     objects = world.get("collision_objects") or []
     if not isinstance(objects, Sequence) or isinstance(objects, str):
         raise SceneFormatError("world.collision_objects must be a list of collision objects")
