@@ -181,3 +181,18 @@ def test_register_robot_with_spheres(tmp_path):
     )
     with pytest.raises(RobotDescriptionError, match="panda_finger_joint1"):
         urdf_spheres(panda, bad)
+
+
+def test_a_body_read_from_a_urdf_carries_its_models_joint_limits_within_the_robots():
+    """The ur5's sphere file (the benchmarks' UR5) limits every joint to ±π, kinlearn's ur5 turns ±2π: its
+    bodies carry ±π; the panda's file is a little wider than kinlearn's panda, so its body keeps the
+    robot's; the iiwa14's spheres come with no model, and keep the robot's."""
+    ur5 = load_robot("ur5")
+    assert (ur5.upper > 6.0).sum() == 5  # kinlearn's ur5: ±2π but the elbow
+    for name in ("spherized", "gripper"):
+        lo, hi = body_spheres(ur5, sphere_set=name).limits
+        np.testing.assert_allclose(np.stack([lo, hi]), [[-np.pi] * 6, [np.pi] * 6], atol=1e-7)
+    for name in ("panda", "iiwa14"):
+        robot = load_robot(name)
+        lo, hi = body_spheres(robot).limits
+        assert np.array_equal(lo, robot.lower) and np.array_equal(hi, robot.upper)

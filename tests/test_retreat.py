@@ -108,6 +108,19 @@ def test_the_sampler_gets_the_turning_chains_only():
     assert np.array_equal(branches[0], vias[0, :2]) and np.array_equal(branches[1], vias[2])
 
 
+def test_vias_within_a_narrower_box_stay_in_it():
+    """``within``: the same solver in a problem's box (the ur5's tool model's ±π, say), every via inside
+    it; the same limits give the same object."""
+    robot = load_robot("ur5")
+    vias = R.RetreatVias(ChainFM.from_robot(robot), robot.lower, robot.upper, scale=1.0)
+    assert vias.within(robot.lower.copy(), robot.upper.copy()) is vias
+    theta = np.array([3.0, -1.2, 1.5, -2.9, -1.6, 3.1])
+    lo, hi = theta - 0.2, theta + 0.2  # a box the retreats' moves leave
+    wide, box = vias.vias(theta), vias.within(lo, hi).vias(theta)
+    assert ((wide < lo) | (wide > hi)).any()
+    assert ((box >= lo) & (box <= hi)).all()
+
+
 def test_bad_vias_settings_are_refused():
     robot = load_robot("panda")
     with pytest.raises(ConfigError):

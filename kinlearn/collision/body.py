@@ -188,6 +188,9 @@ class BodySpheres(nn.Module):
     pairs checked for self-collision, ``floor_mask`` ``(M,)`` the spheres the floor applies to (all but
     the base's: the base stands on it), ``lever`` ``(M, dof)`` metres a sphere can travel per radian of
     each joint at most. Differentiable in the joints; dtype and device of the output follow ``q``.
+    ``limits``: the joint limits ``(lower, upper)`` of the model the spheres were read from, where it gives
+    the joints a narrower range than the robot's own (default: the robot's); :attr:`limits` holds them
+    within the robot's.
     """
 
     def __init__(
@@ -196,6 +199,7 @@ class BodySpheres(nn.Module):
         spheres: np.ndarray,
         pairs: np.ndarray,
         name: str = "",
+        limits: tuple[np.ndarray, np.ndarray] | None = None,
     ):
         super().__init__()
         spheres = np.asarray(spheres, dtype=np.float64)
@@ -212,6 +216,20 @@ class BodySpheres(nn.Module):
             raise RobotDescriptionError("sphere centres must be finite and radii > 0")
         self.robot = robot
         self.name = name
+        lo, hi = robot.lower.astype(np.float64), robot.upper.astype(np.float64)
+        if limits is not None:
+            lo, hi = (
+                np.maximum(lo, np.asarray(limits[0], np.float64)),
+                np.minimum(hi, np.asarray(limits[1], np.float64)),
+            )
+            if lo.shape != (robot.dof,) or not (lo < hi).all():
+                raise RobotDescriptionError(
+                    f"a body's joint limits must leave every joint of {robot.name} a range within its own, got "
+                    f"{lo.tolist()} … {hi.tolist()}"
+                )
+        #: The joint limits of the model the spheres describe, within the robot's own (lower, upper), float64
+        #: numpy: a planner keeps its plans among obstacles inside them (the ur5's tool model: ±π).
+        self.limits = (lo, hi)
         self._kin: FastKinematics = kinematics(robot, "fast")  # type: ignore[assignment]
         self.register_buffer("local", torch.as_tensor(spheres[:, 1:4]))
         self.register_buffer("radii", torch.as_tensor(spheres[:, 4]))
@@ -443,6 +461,32 @@ def urdf_spheres(robot: Robot, urdf: str | Path | bytes, drop_links: tuple[str, 
     return out[np.argsort(out[:, 0], kind="stable")]
 
 
+def urdf_limits(robot: Robot, urdf: str | Path | bytes) -> tuple[np.ndarray, np.ndarray]:
+    """The position limits a sphere URDF gives ``robot``'s joints (matched by name), each kept within the
+    robot's own: ``(lower, upper)``, float64 ``(dof,)``. A joint the file lacks, or gives no limit, keeps
+    the robot's. (The ur5's file, the standard benchmarks' UR5, limits every joint to ±π; kinlearn's ur5
+    turns ±2π.)"""
+    from ..body.robot import validate_urdf
+
+    data = urdf if isinstance(urdf, bytes) else Path(urdf).read_bytes()
+    root = validate_urdf(data, "the sphere URDF")
+    given = {}
+    for el in root.iter("joint"):
+        lim = el.find("limit")
+        if el.get("type") in ("revolute", "prismatic") and lim is not None:
+            try:
+                given[el.get("name")] = (float(lim.get("lower")), float(lim.get("upper")))
+            except (TypeError, ValueError) as exc:
+                raise RobotDescriptionError(
+                    f"joint {el.get('name')!r} of the sphere URDF has an unreadable limit"
+                ) from exc
+    lo, hi = robot.lower.astype(np.float64).copy(), robot.upper.astype(np.float64).copy()
+    for k, j in enumerate(robot.joints):
+        if j.name in given:
+            lo[k], hi[k] = max(lo[k], given[j.name][0]), min(hi[k], given[j.name][1])
+    return lo, hi
+
+
 def always_overlapping(
     robot: Robot,
     spheres: np.ndarray,
@@ -472,12 +516,12 @@ def _default_pairs(link: np.ndarray, adjacent_gap: int = 2) -> np.ndarray:
 
 
 #: Per (robot, sphere URDF, dropped links): the spheres and self-collision pairs read from it.
-_URDF_BODIES: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+_URDF_BODIES: dict[tuple, tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]] = {}
 
 
 def _from_urdf(
     robot: Robot, path: Path, drop_links: tuple[str, ...], rule: dict
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
     key = (robot.name, robot.urdf, str(path), drop_links, tuple(sorted(rule.items())))
     hit = _URDF_BODIES.get(key)
     if hit is None:
@@ -491,7 +535,7 @@ def _from_urdf(
             share=float(rule.get("share", 0.95)),
             seed=int(rule.get("seed", 0)),
         )
-        hit = _URDF_BODIES[key] = (spheres, kept)
+        hit = _URDF_BODIES[key] = (spheres, kept, urdf_limits(robot, path))
     return hit
 
 
@@ -506,12 +550,13 @@ def body_spheres(
     benchmarks' UR5).
 
     ``base=False`` leaves out the base's spheres (they never move: useful where only the arm matters).
+    A set read from a URDF carries that model's joint limits (:func:`urdf_limits`, :attr:`BodySpheres.limits`).
     Raises :class:`~kinlearn.errors.RobotDescriptionError` for a robot without a sphere model or without
     the set asked for.
     """
     own = getattr(robot, "sphere_urdf", None)
     if own is not None and not dense and sphere_set is None:
-        spheres, pairs = _from_urdf(robot, Path(own), (), {})
+        spheres, pairs, limits = _from_urdf(robot, Path(own), (), {})
         name = "spherized"
     else:
         model = sphere_sets(robot)
@@ -527,8 +572,9 @@ def body_spheres(
             )
         entry = model["sets"][key]
         name = key
+        limits = None
         if "urdf" in entry:
-            spheres, pairs = _from_urdf(
+            spheres, pairs, limits = _from_urdf(
                 robot,
                 _model_path(robot).parent / entry["urdf"],
                 tuple(entry.get("drop_links", ())),
@@ -551,7 +597,7 @@ def body_spheres(
         keep = moving[pairs[:, 0]] & moving[pairs[:, 1]] if len(pairs) else np.zeros(0, dtype=bool)
         pairs = renumber[pairs[keep]] if len(pairs) else pairs
         spheres = spheres[moving]
-    return BodySpheres(robot, spheres, pairs, name=name)
+    return BodySpheres(robot, spheres, pairs, name=name, limits=limits)
 
 
 def planning_body(robot: Robot) -> BodySpheres:

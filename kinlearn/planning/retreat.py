@@ -38,6 +38,7 @@ learned proposals left colliding, so the plans they clear do not change
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 
 import numpy as np
@@ -121,6 +122,17 @@ class RetreatVias:
         self.upper = np.ascontiguousarray(upper, dtype=np.float64)
         self.distances = scale * np.asarray(RETREAT_DISTANCES, dtype=np.float64)
         self._no_seeds = np.zeros((0, self.dof))
+
+    def within(self, lower: np.ndarray, upper: np.ndarray) -> RetreatVias:
+        """These vias solved within ``lower``/``upper`` instead (a problem's box, inside the limits these
+        were made with); this object itself where the limits are the same."""
+        lower = np.ascontiguousarray(lower, dtype=np.float64)
+        upper = np.ascontiguousarray(upper, dtype=np.float64)
+        if np.array_equal(lower, self.lower) and np.array_equal(upper, self.upper):
+            return self
+        out = copy.copy(self)
+        out.lower, out.upper = lower, upper
+        return out
 
     def _position(self, theta: np.ndarray) -> np.ndarray:
         from ..models.chain_kernel import chain_positions
