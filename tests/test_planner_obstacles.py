@@ -385,6 +385,11 @@ def test_a_ur5_plan_between_configurations_within_its_tool_models_limits_stays_w
     assert float(max(start.abs().max(), goal.abs().max())) > np.pi
     plan = planner.plan(start, goal, obstacles=scene, refine_steps=0)
     assert bool(plan.success)
+    # one batch holding both: each problem in its own box, the batch-1 verdicts
+    both = problems[[131, 0]]
+    batch = planner.plan(both.start, both.goal, obstacles=both.scene, refine_steps=0)
+    assert bool(batch.success.all())
+    assert float(np.abs(np.asarray(batch.joints[0])).max()) <= np.pi + 1e-9
 
 
 def test_the_plan_command_takes_a_sphere_set(tmp_path, capsys):
