@@ -515,8 +515,9 @@ def _expiry_lever(b, k, i, absd, left, lever, row, steps, offset):
 def _verdict(path, max_travel, margin, body, scene):
     """One path ``(W, dof)``: (first colliding segment or −1, configurations evaluated, the colliding
     configuration's fraction of that segment (a sub-step of the grid), whether that hit is the body against
-    itself rather than the scene or the floor), the verdict of checking every sub-step. Each sphere's clearance and each pair's distance, once computed, is a
-    budget that the spheres' travel bounds use up along the path; a configuration is evaluated only
+    itself rather than the scene or the floor), the verdict of checking every sub-step. Each sphere's
+    clearance and each pair's distance, once computed, is a budget that the spheres' travel bounds use up
+    along the path; a configuration is evaluated only
     where some budget may be spent, and then only the spent items are recomputed. The pairs of a
     sphere with the spheres of one lower link go as one item, group g: sphere ``g_sphere[g]`` against
     ``g_members[g_start[g]:g_start[g + 1]]``, whose link's ball ``g_ball[g]`` (a sphere of radius
