@@ -69,10 +69,47 @@ def test_generation_is_seeded_and_shelf_goals_are_inside(robot, body):
         assert bool(((ee[i] > lo) & (ee[i] < hi)).all())
 
 
+def test_problems_within_the_bodys_limits_and_a_search_within_them():
+    """``ProblemConfig(within="body")``: the ur5's starts and goals within its tool model's ±π (the
+    benchmarks' UR5), where the robot's own ±2π is the default; OMPL's search keeps to given bounds."""
+    from kinlearn import load_robot
+
+    ur5 = load_robot("ur5")
+    cfg = ProblemConfig(verify=False, within="body")
+    problems = make_problems("bin", 2, seed=1007, robot=ur5, config=cfg)
+    ends = torch.cat([problems.start, problems.goal]).abs()
+    assert float(ends.max()) <= np.pi - cfg.joint_margin
+    assert problems.config["within"] == "body"
+    body = problems.body(ur5).double()
+    _assert_valid(problems, body)
+    start, goal, scene = problems.problem(0)
+    bounds = (np.full(6, -np.pi), np.full(6, np.pi))
+    path, _ = OmplRrtConnect(ur5, body, scene, bounds=bounds).solve(start, goal, time_limit=30.0, seed=0)
+    assert path is not None and float(np.abs(path).max()) <= np.pi
+    with pytest.raises(ConfigError, match="within"):
+        ProblemConfig(within="world")
+
+
+def test_committed_ur5_set_within_the_benchmarks_limits():
+    """The committed held-out ur5 set made within its tool model's ±π (``--within body``, recorded): the
+    seven families, 20 each, starts and goals valid for the tool and within ±π by the margin."""
+    from kinlearn import load_robot
+
+    ur5 = load_robot("ur5")
+    problems = ProblemSet.load(HELDOUT.parent / "scene_problems_ur5_within.npz", robot="ur5")
+    assert problems.config["problem_config"]["within"] == "body" and problems.body_name == "gripper"
+    assert {f: len(problems.of(f)) for f in FAMILIES[3:]} == dict.fromkeys(FAMILIES[3:], 20)
+    ends = torch.cat([problems.start, problems.goal]).abs()
+    assert float(ends.max()) <= np.pi - 0.05 + 1e-12
+    _assert_valid(problems, problems.body(ur5).double())
+
+
 def test_rrt_connect_path_passes_the_dense_check(body):
     problems = make_problems("barrier", 1, seed=11, config=ProblemConfig(verify=False))
     start, goal, scene = problems.problem(0)
-    path, elapsed = OmplRrtConnect(body.robot, body, scene).solve(start, goal, time_limit=5.0, seed=0)
+    path, elapsed = OmplRrtConnect(body.robot, body, scene).solve(
+        start, goal, time_limit=30.0, seed=0
+    )  # returns when found
     assert path is not None and elapsed > 0
     assert np.allclose(path[0], start.numpy()) and np.allclose(path[-1], goal.numpy())
     assert bool(check_path(body, torch.as_tensor(path), scene).collision_free)

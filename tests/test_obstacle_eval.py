@@ -108,6 +108,21 @@ def test_leaving_the_limits_self_collision_and_a_wrong_start_fail(robot, body, c
     assert math.isnan(float(out["joint_length"][3])) and math.isnan(float(out["goal_error"][3]))
 
 
+def test_a_path_is_judged_within_the_limits_given(robot, body, case):
+    """``limits``: a path within the robot's limits that leaves narrower ones given (a set made within its
+    body's limits) is not within them, and not a success."""
+    start, goal, _ = case
+    path = _line(start, goal, 5)
+    lo, hi = robot.lower.copy(), robot.upper.copy()
+    lo[0] = -0.5  # joint 1 turns from -0.8: the start itself lies beyond
+    one = (start.unsqueeze(0), goal.unsqueeze(0), Scene())
+    assert obstacle_outcome(body, [path], one)["success"].tolist() == [True]
+    out = obstacle_outcome(body, [path], one, limits=(lo, hi))
+    assert out["within_limits"].tolist() == [False] and out["success"].tolist() == [False]
+    lo[0] = -0.9
+    assert obstacle_outcome(body, [path], one, limits=(lo, hi))["success"].tolist() == [True]
+
+
 def test_paths_of_different_lengths_are_judged_as_one_at_a_time(body, case):
     start, goal, scene = case
     paths = [_line(start, goal, 3), _around(start, goal), _line(start, goal, 40), start.unsqueeze(0)]

@@ -116,7 +116,8 @@ class OmplRrtConnect:
     ``body`` and ``scene``: the collision spheres and the unbatched scene the states and motions are
     checked against (:class:`RrtChecker`, ``max_travel`` and ``compiled`` as there); ``scene=None``:
     free space, every state valid (``body`` unused). Built once; :meth:`solve` answers one query at a
-    time. ``why``: what the error without OMPL names as needing it.
+    time. ``why``: what the error without OMPL names as needing it. ``bounds``: ``(lower, upper)`` joint
+    limits to search within instead of the robot's (inside them).
     """
 
     def __init__(
@@ -128,19 +129,21 @@ class OmplRrtConnect:
         max_travel: float = 0.01,
         compiled: bool = True,
         why: str = "RRT-Connect",
+        bounds: tuple | None = None,
     ):
         ob, og, ou = import_ompl(why)
         self._ob, self._ou = ob, ou
         self.robot, self.dof = robot, robot.dof
         dof = self.dof
         self.checker = None
+        lo, hi = (robot.lower, robot.upper) if bounds is None else bounds
         with _quiet(ou):
             space = ob.RealVectorStateSpace(dof)
-            bounds = ob.RealVectorBounds(dof)
+            box = ob.RealVectorBounds(dof)
             for j in range(dof):
-                bounds.setLow(j, float(robot.lower[j]))
-                bounds.setHigh(j, float(robot.upper[j]))
-            space.setBounds(bounds)
+                box.setLow(j, float(lo[j]))
+                box.setHigh(j, float(hi[j]))
+            space.setBounds(box)
             setup = og.SimpleSetup(space)
             info = setup.getSpaceInformation()
             if scene is None:

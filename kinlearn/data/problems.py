@@ -144,6 +144,10 @@ class ProblemConfig:
     #: :data:`GRASP_TOLERANCE` of the way into the cell, as a gripper holding something there points:
     #: :attr:`~kinlearn.data.scenes.SceneLayout.approach`; the other families as ``"free"``).
     hand: str = "free"
+    #: Whose joint limits starts and goals (and the verifying search) keep within: ``"robot"`` (the
+    #: robot's) or ``"body"`` (the problem body's, :attr:`~kinlearn.collision.BodySpheres.limits`: the
+    #: ur5's tool model turns ±π, as the standard benchmarks' UR5 does, where kinlearn's ur5 turns ±2π).
+    within: str = "robot"
 
     def __post_init__(self):
         for name in (
@@ -163,6 +167,8 @@ class ProblemConfig:
                 raise ConfigError(f"ProblemConfig.{name} must be an integer >= 1, got {value!r}")
         if self.time_limit <= 0 or self.max_travel <= 0:
             raise ConfigError("ProblemConfig.time_limit and max_travel must be > 0")
+        if self.within not in ("robot", "body"):
+            raise ConfigError(f"ProblemConfig.within must be 'robot' or 'body', got {self.within!r}")
         if self.hand not in HANDS:
             raise ConfigError(f"ProblemConfig.hand must be one of {', '.join(HANDS)}, got {self.hand!r}")
         if self.sphere_set is not None and (not isinstance(self.sphere_set, str) or self.dense_body):
@@ -499,6 +505,13 @@ class ProblemSet:
         return out
 
 
+def _limits(body: BodySpheres, cfg: ProblemConfig) -> tuple[torch.Tensor, torch.Tensor]:
+    """The joint limits problems keep within (:attr:`ProblemConfig.within`), float64 tensors."""
+    if cfg.within == "body":
+        return torch.as_tensor(body.limits[0], dtype=_F64), torch.as_tensor(body.limits[1], dtype=_F64)
+    return body.robot.limits(_F64)
+
+
 def _pick_valid(
     body: BodySpheres,
     scene: Scene,
@@ -513,16 +526,18 @@ def _pick_valid(
     robot = body.robot
     kin = kinematics(robot, "fast")
     targets = sampler(cfg.ik_batch, gen)
-    q0 = robot.sample(cfg.ik_batch, gen, dtype=_F64, margin=cfg.joint_margin)
+    lo, hi = _limits(body, cfg)
+    # uniform within the limits less the margin, drawn as Robot.sample draws (the robot's: the same numbers)
+    q_lo, q_hi = lo + cfg.joint_margin, hi - cfg.joint_margin
+    q0 = q_lo + (q_hi - q_lo) * torch.rand((cfg.ik_batch, robot.dof), generator=gen, dtype=_F64)
     q = dls_step(kin, q0, targets, iterations=cfg.ik_iterations, damping=0.02, clamp=True)
     if approach is not None:  # then the hand turned into the cell, the position held
         d = torch.as_tensor(approach, dtype=_F64).expand(cfg.ik_batch, 3)
         q = pointing_dls_step(
             kin, q, targets, d, iterations=cfg.ik_iterations, damping=0.02, weight=_GRASP_WEIGHT
         )
-    lo, hi = robot.limits(_F64)
     ok = (kin.position(q, validate=False) - targets).norm(dim=-1) <= cfg.ik_tolerance
-    ok &= ((q >= lo + cfg.joint_margin) & (q <= hi - cfg.joint_margin)).all(dim=-1)
+    ok &= ((q >= q_lo) & (q <= q_hi)).all(dim=-1)
     if approach is not None:
         a = kin.pose(q, validate=False)[:, :3, :3] @ torch.as_tensor(approach_axis(robot), dtype=_F64)
         ok &= (a @ torch.as_tensor(approach, dtype=_F64)) >= math.cos(GRASP_TOLERANCE)
@@ -584,7 +599,10 @@ def _one_problem(
         line = check_path(body, torch.stack([start, goal]), scene, max_travel=cfg.max_travel)
         solve_time = math.nan
         if cfg.verify:
-            rrt = OmplRrtConnect(body.robot, body, scene, max_travel=cfg.max_travel, why=_VERIFY)
+            bounds = tuple(t.numpy() for t in _limits(body, cfg))
+            rrt = OmplRrtConnect(
+                body.robot, body, scene, max_travel=cfg.max_travel, why=_VERIFY, bounds=bounds
+            )
             path, solve_time = rrt.solve(start, goal, time_limit=cfg.time_limit, seed=sub_seed + attempt)
             if path is None:
                 continue

@@ -131,8 +131,11 @@ def obstacle_outcome(
     tolerance: Tolerance = DEFAULT_TOLERANCE,
     *,
     max_travel: float = 0.01,
+    limits: tuple | None = None,
 ) -> dict[str, torch.Tensor]:
     """Judge ``N`` joint paths against their problems by the success rule (see the module docstring).
+    ``limits``: ``(lower, upper)`` joint limits a path must keep within instead of the robot's (a set made
+    within its body's limits, ``ProblemConfig(within="body")``, is judged within them).
 
     ``body``: :func:`~kinlearn.collision.body_spheres` of the robot (the 12-sphere body with the base).
     ``joints``: a tensor ``(N, T+1, dof)`` or a sequence of ``N`` paths ``(K_i, dof)`` (tensors or
@@ -182,7 +185,11 @@ def obstacle_outcome(
     s0, sT = start[idx], goal[idx]
 
     starts = (padded[:, 0] - s0).abs().amax(-1) <= START_TOLERANCE
-    within = robot.within_limits(padded, LIMIT_TOLERANCE).all(-1)
+    if limits is None:
+        within = robot.within_limits(padded, LIMIT_TOLERANCE).all(-1)
+    else:
+        lo, hi = (torch.as_tensor(np.asarray(x, dtype=np.float64)) for x in limits)
+        within = ((padded >= lo - LIMIT_TOLERANCE) & (padded <= hi + LIMIT_TOLERANCE)).all(-1).all(-1)
     sc = scene[idx] if len(scene.batch_shape) else scene
     check = check_path(body, padded, sc, max_travel=max_travel)
     free = check.collision_free.cpu()
@@ -203,7 +210,7 @@ def obstacle_outcome(
     out["clearance"][idx] = check.clearance.cpu().to(_F64)
     out["goal_error"][idx] = goal_error
     out["joint_error"][idx] = joint_error
-    out["success"][idx] = plan.success
+    out["success"][idx] = plan.success & within  # judge's verdict, within the limits given too
     out["joint_length"][idx] = torch.stack(
         [torch.linalg.vector_norm(p[1:] - p[:-1], dim=-1).sum() for p in live]
     )
