@@ -8,6 +8,8 @@
         --sphere-set spherized --out benchmarks/data/scene_problems_ur5_arm.npz  # the ur5 without its tool
     python benchmarks/make_obstacle_problems.py --robot R --families bookcase cubby cage bin \\
         --hand grasp --per-family 20 [--out benchmarks/data/grasp_problems_R.npz]  # hands held as grasps
+    python benchmarks/make_obstacle_problems.py --robot ur5 --families scenes --per-family 20 --within body \
+        [--out benchmarks/data/scene_problems_ur5_within.npz]  # within the benchmarks' UR5 limits (±π)
 
 Families: tabletop, shelf, barrier (the default set), or the seven of ``kinlearn/data/scenes.py``
 (``--families scenes``), or any names (see ``kinlearn/data/problems.py``), each from a fixed
@@ -47,6 +49,8 @@ HELDOUT_SEEDS = {name: 1001 + k for k, name in enumerate(FAMILIES)}
 #: Held-out seeds of the sets with the hand held as a grasp (``--hand grasp``): 1104, … (other scenes
 #: than the free sets').
 GRASP_SEEDS = {name: 1101 + k for k, name in enumerate(FAMILIES)}
+#: Held-out seeds of the sets made within the body's limits (``--within body``): 1204, … (other scenes again).
+WITHIN_SEEDS = {name: 1201 + k for k, name in enumerate(FAMILIES)}
 
 
 def main() -> None:
@@ -71,6 +75,13 @@ def main() -> None:
         default="free",
         help="'grasp': in the families with cells the hand points into the cell (ProblemConfig.hand)",
     )
+    ap.add_argument(
+        "--within",
+        choices=("robot", "body"),
+        default="robot",
+        help="'body': starts, goals and the verifying search within the body's joint limits (the ur5's tool "
+        "model: ±π, the benchmarks' UR5) (ProblemConfig.within)",
+    )
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
@@ -81,11 +92,13 @@ def main() -> None:
         name = "obstacle_problems_heldout.npz" if legacy else f"scene_problems_{args.robot}.npz"
         if args.hand == "grasp":
             name = f"grasp_problems_{args.robot}.npz"
+        if args.within == "body":
+            name = name.replace(".npz", "_within.npz")
         args.out = Path(__file__).parent / "data" / name
     robot = load_robot(args.robot)
     print(header(f"obstacle benchmark problems ({args.robot})", args.threads))
-    cfg = ProblemConfig(sphere_set=args.sphere_set, hand=args.hand)
-    seeds = GRASP_SEEDS if args.hand == "grasp" else HELDOUT_SEEDS
+    cfg = ProblemConfig(sphere_set=args.sphere_set, hand=args.hand, within=args.within)
+    seeds = GRASP_SEEDS if args.hand == "grasp" else WITHIN_SEEDS if args.within == "body" else HELDOUT_SEEDS
     parts: dict[str, list[ProblemSet]] = {f: [] for f in families}
     spent = {f: 0.0 for f in families}
     t_start = time.perf_counter()

@@ -5,7 +5,8 @@ and success against a time budget, for kinlearn and the baselines on the same pr
         [--planner DIR] [--kinlearn-only] [--n 140] [--threads 1] [--out benchmarks/results/families_panda]
 
 Problems: a held-out set of ``benchmarks/make_obstacle_problems.py --families scenes`` (seeds 1004–1010,
-verified solvable by OMPL RRT-Connect within 5 s). Every method runs at batch 1 on one thread, one
+verified solvable by OMPL RRT-Connect within 5 s); a set made with ``--within body`` (the ur5's within the
+benchmarks' UR5 limits, ±π) is judged within those limits. Every method runs at batch 1 on one thread, one
 untimed warm-up call first, and every path is judged by one rule
 (:func:`kinlearn.evaluation.obstacles.obstacle_outcome`: starts at the start, reaches the goal, within
 the limits, and the dense check finds no collision with the scene, the floor or itself).
@@ -135,6 +136,9 @@ def main() -> None:
         problems = problems[: args.n]
     robot = load_robot(args.robot)
     body = problems.body(robot).double()  # the body the problems were made for
+    # a set made within its body's limits (the ur5's tool model: ±π) is judged within them
+    within = (problems.config.get("problem_config") or {}).get("within", "robot")
+    limits = body.limits if within == "body" else None
     fams = [f for f in FAMILIES if len(problems.of(f))]
     print(f"{len(problems)} problems from {path} ({', '.join(f'{f} {len(problems.of(f))}' for f in fams)})")
     print(f"hard (straight joint line collides): {int(problems.hard.sum())}")
@@ -176,7 +180,7 @@ def main() -> None:
                 t0 = time.perf_counter()
                 paper_tm(tm_state, tm_state)
                 tm_seconds.append(time.perf_counter() - t0)
-        outcome = obstacle_outcome(body, paths, problems)
+        outcome = obstacle_outcome(body, paths, problems, limits=limits)
         ok = outcome["success"].numpy()
         t = np.array(seconds)
         fam_rate = {f: float(ok[(problems.family == FAMILIES.index(f)).numpy()].mean()) for f in fams}
