@@ -129,3 +129,22 @@ def test_compiled_rrt_connect_plans_around_what_the_line_hits():
     line = baselines.make("joint-line", "iiwa14")
     with pytest.warns(UserWarning):
         assert not bool(line.plan(problem).collision_free)
+
+
+def test_sampling_baselines_search_the_planners_box():
+    """The ur5's problems made within its tool model's ±π (the committed set): the compiled and OMPL
+    RRT-Connect search within ±π there, as the planner does, and their paths stay within it."""
+    import numpy as np
+
+    from kinlearn.collision import planning_body
+    from kinlearn.data.problems import ProblemSet
+    from kinlearn.planning.obstacle_baselines import compiled_rrt_connect
+
+    data = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "scene_problems_ur5_within.npz"
+    problems = ProblemSet.load(data, robot="ur5")
+    tool = planning_body(load_robot("ur5")).double()
+    start, goal, scene = problems[problems.hard].problem(0)
+    for method in (compiled_rrt_connect, scene_rrt_connect):
+        path, _ = method(start, goal, scene, time_limit=30.0, body=tool)  # returns when found
+        assert path is not None and float(path.abs().max()) <= np.pi + 1e-9
+        assert bool(check_path(tool, path, scene).collision_free)

@@ -212,6 +212,16 @@ def cartesian_line_path(
     return _pin(path, start, goal), time.perf_counter() - t0
 
 
+def _box(body: BodySpheres, start: torch.Tensor, goal: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    """The joint box a sampling baseline searches: the body's limits (``BodySpheres.limits``: the ur5's
+    tool model's ±π) where start and goal both lie within them, else the robot's (the planner's rule)."""
+    lo, hi = body.limits
+    ends = torch.stack((start, goal)).double().numpy()
+    if ((ends >= lo) & (ends <= hi)).all():
+        return lo, hi
+    return body.robot.lower.astype(np.float64), body.robot.upper.astype(np.float64)
+
+
 def scene_rrt_connect(
     start,
     goal,
@@ -223,7 +233,8 @@ def scene_rrt_connect(
     max_travel: float = 0.01,
     body: BodySpheres | None = None,
 ) -> tuple[torch.Tensor | None, float]:
-    """OMPL RRT-Connect around ``scene`` on the dense checker (:class:`~kinlearn.collision.ompl.OmplRrtConnect`).
+    """OMPL RRT-Connect around ``scene`` on the dense checker (:class:`~kinlearn.collision.ompl.OmplRrtConnect`),
+    in the planner's joint box (the body's limits where start and goal lie within them).
 
     With ``simplify`` OMPL's path simplifier shortens the path in whatever the search left of
     ``time_limit`` seconds; it checks that limit only between its steps and does at least one round,
@@ -234,7 +245,7 @@ def scene_rrt_connect(
     t0 = time.perf_counter()
     start, goal, body = _inputs(start, goal, body)
     scene = _one_scene(scene)
-    rrt = OmplRrtConnect(body.robot, body, scene, max_travel=max_travel)
+    rrt = OmplRrtConnect(body.robot, body, scene, max_travel=max_travel, bounds=_box(body, start, goal))
     path, _ = rrt.solve(start, goal, time_limit=time_limit, seed=seed, simplify=simplify)
     if path is None:
         return None, time.perf_counter() - t0
@@ -261,14 +272,14 @@ def compiled_rrt_connect(
     t0 = time.perf_counter()
     start, goal, body = _inputs(start, goal, body)
     scene = _one_scene(scene)
-    robot = body.robot
+    lo, hi = _box(body, start, goal)
     path, _, _ = rrt_connect(
         kernel.KernelBody.of(body),
         kernel.KernelScene.of(scene.to(_F64)),
         start.numpy(),
         goal.numpy(),
-        robot.lower,
-        robot.upper,
+        lo,
+        hi,
         time_limit=time_limit,
         seed=seed,
         max_travel=max_travel,
