@@ -196,3 +196,24 @@ def test_a_body_read_from_a_urdf_carries_its_models_joint_limits_within_the_robo
         robot = load_robot(name)
         lo, hi = body_spheres(robot).limits
         assert np.array_equal(lo, robot.lower) and np.array_equal(hi, robot.upper)
+
+
+def test_body_limits_that_leave_no_range_and_unreadable_urdf_limits_are_refused():
+    """A body's limits must leave every joint a range within the robot's; a sphere URDF's limit must be
+    numbers. ``joint_box``: the body's limits where both ends lie within them, else the robot's."""
+    from kinlearn.collision.body import BodySpheres, urdf_limits
+
+    ur5 = load_robot("ur5")
+    body = body_spheres(ur5)
+    spheres = np.column_stack([body.link.numpy(), body.local.numpy(), body.radii.numpy()])
+    lo = ur5.lower.copy()
+    with pytest.raises(RobotDescriptionError, match="range within its own"):
+        BodySpheres(ur5, spheres, body.pairs.numpy(), limits=(lo, lo))
+    urdf = b"""<robot name="r"><link name="a"/><link name="b"/>
+      <joint name="shoulder_pan_joint" type="revolute"><parent link="a"/><child link="b"/>
+      <axis xyz="0 0 1"/><limit lower="low" upper="1.0" effort="1" velocity="1"/></joint></robot>"""
+    with pytest.raises(RobotDescriptionError, match="unreadable limit"):
+        urdf_limits(ur5, urdf)
+    inside, beyond = np.zeros((1, 6)), np.full((1, 6), 4.0)
+    assert np.allclose(body.joint_box(inside, inside)[1], np.pi)
+    assert np.array_equal(body.joint_box(inside, beyond)[1][0], ur5.upper)

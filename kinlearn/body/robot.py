@@ -328,13 +328,15 @@ class Robot:
         dtype: torch.dtype = torch.float32,
         device=None,
         margin: float = 0.0,
+        limits: tuple[torch.Tensor, torch.Tensor] | None = None,
     ) -> torch.Tensor:
-        """Joint configurations drawn uniformly within the limits (shrunk by ``margin`` rad on each side).
+        """Joint configurations drawn uniformly within the limits (shrunk by ``margin`` rad on each side),
+        or within ``limits`` ``(lower, upper)`` given instead (a body's narrower ones).
 
         Pass a seeded ``torch.Generator`` for reproducible samples.
         """
         shape = (shape,) if isinstance(shape, int) else tuple(shape)
-        lo, hi = self.limits(dtype, device)
+        lo, hi = self.limits(dtype, device) if limits is None else limits
         lo, hi = lo + margin, hi - margin
         u = torch.rand((*shape, self.dof), generator=generator, dtype=dtype, device=device)
         return lo + (hi - lo) * u

@@ -527,9 +527,8 @@ def _pick_valid(
     kin = kinematics(robot, "fast")
     targets = sampler(cfg.ik_batch, gen)
     lo, hi = _limits(body, cfg)
-    # uniform within the limits less the margin, drawn as Robot.sample draws (the robot's: the same numbers)
+    q0 = robot.sample(cfg.ik_batch, gen, dtype=_F64, margin=cfg.joint_margin, limits=(lo, hi))
     q_lo, q_hi = lo + cfg.joint_margin, hi - cfg.joint_margin
-    q0 = q_lo + (q_hi - q_lo) * torch.rand((cfg.ik_batch, robot.dof), generator=gen, dtype=_F64)
     q = dls_step(kin, q0, targets, iterations=cfg.ik_iterations, damping=0.02, clamp=True)
     if approach is not None:  # then the hand turned into the cell, the position held
         d = torch.as_tensor(approach, dtype=_F64).expand(cfg.ik_batch, 3)

@@ -89,18 +89,9 @@ class ObstacleStages:
         return self._np_obstacle_tm.fractions
 
     def _boxes(self, theta0: np.ndarray, thetaT: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Each problem's joint box, ``(lower, upper)`` each ``(N, dof)``: the planning body's limits
-        (:attr:`~kinlearn.collision.BodySpheres.limits`: those of the model its spheres describe, within
-        the robot's; the ur5's tool model turns ±π where kinlearn's ur5 turns ±2π) where the problem's
-        start and goal both lie within them, else the robot's. Every stage keeps its paths inside: a plan
-        for the benchmarks' UR5 between configurations within its limits stays within them. (Widening the
-        body's box only on the joints whose ends leave it instead cost the ur5's tuning problems, made
-        within ±2π, 11 points in fixed time and 6 under a deadline of 0.05 s.)"""
-        lo, hi = self.body.limits
-        inside = ((theta0 >= lo) & (theta0 <= hi) & (thetaT >= lo) & (thetaT <= hi)).all(
-            axis=1, keepdims=True
-        )
-        return np.where(inside, lo, self._lo_np), np.where(inside, hi, self._hi_np)
+        """Each problem's joint box (:meth:`~kinlearn.collision.BodySpheres.joint_box` of the planning body):
+        every stage keeps its paths inside."""
+        return self.body.joint_box(theta0, thetaT)
 
     def _line(self, theta0, thetaT, steps: int) -> np.ndarray:
         """The straight joint line ``(N, 1, K, dof)`` with the knots the proposals give it (the first

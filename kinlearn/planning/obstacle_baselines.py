@@ -213,13 +213,9 @@ def cartesian_line_path(
 
 
 def _box(body: BodySpheres, start: torch.Tensor, goal: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
-    """The joint box a sampling baseline searches: the body's limits (``BodySpheres.limits``: the ur5's
-    tool model's ±π) where start and goal both lie within them, else the robot's (the planner's rule)."""
-    lo, hi = body.limits
-    ends = torch.stack((start, goal)).double().numpy()
-    if ((ends >= lo) & (ends <= hi)).all():
-        return lo, hi
-    return body.robot.lower.astype(np.float64), body.robot.upper.astype(np.float64)
+    """The joint box a sampling baseline searches: the planner's (:meth:`BodySpheres.joint_box`)."""
+    lo, hi = body.joint_box(start.double().numpy()[None], goal.double().numpy()[None])
+    return lo[0], hi[0]
 
 
 def scene_rrt_connect(
