@@ -109,3 +109,12 @@ def test_within_limits_per_configuration():
     assert robot.within_limits(q).tolist() == [True, True, True, False, False]
     assert robot.within_limits(q, tol=1e-2).tolist() == [True, True, True, True, False]
     assert robot.within_limits(q.reshape(1, 5, -1)).shape == (1, 5)
+
+
+def test_within_limits_given_narrower_limits():
+    robot = load_robot("iiwa14")
+    lo, hi = robot.limits(torch.float64)
+    narrow = (lo.numpy() / 2, hi.numpy() / 2)
+    q = torch.stack((lo / 4, hi / 2, hi * 0.75))
+    assert robot.within_limits(q).tolist() == [True, True, True]
+    assert robot.within_limits(q, limits=narrow).tolist() == [True, True, False]

@@ -341,10 +341,14 @@ class Robot:
         u = torch.rand((*shape, self.dof), generator=generator, dtype=dtype, device=device)
         return lo + (hi - lo) * u
 
-    def within_limits(self, q: torch.Tensor, tol: float = 1e-6) -> torch.Tensor:
+    def within_limits(self, q: torch.Tensor, tol: float = 1e-6, limits=None) -> torch.Tensor:
         """``(...)`` bool: where configurations ``q (..., dof)`` stay within the position limits to ``tol``
-        rad (NaN counts as outside). A joint path is within them where ``within_limits(path).all(-1)``."""
-        lo, hi = self.limits(q.dtype, q.device)
+        rad (NaN counts as outside), or within ``limits`` ``(lower, upper)`` given instead. A joint path is
+        within them where ``within_limits(path).all(-1)``."""
+        if limits is None:
+            lo, hi = self.limits(q.dtype, q.device)
+        else:
+            lo, hi = (torch.as_tensor(np.asarray(x), dtype=q.dtype, device=q.device) for x in limits)
         return ((q >= lo - tol) & (q <= hi + tol)).all(-1)
 
     def check_joints(self, q: torch.Tensor, tol: float = 1e-6, what: str = "joint angles") -> None:

@@ -185,11 +185,7 @@ def obstacle_outcome(
     s0, sT = start[idx], goal[idx]
 
     starts = (padded[:, 0] - s0).abs().amax(-1) <= START_TOLERANCE
-    if limits is None:
-        within = robot.within_limits(padded, LIMIT_TOLERANCE).all(-1)
-    else:
-        lo, hi = (torch.as_tensor(np.asarray(x, dtype=np.float64)) for x in limits)
-        within = ((padded >= lo - LIMIT_TOLERANCE) & (padded <= hi + LIMIT_TOLERANCE)).all(-1).all(-1)
+    within = robot.within_limits(padded, LIMIT_TOLERANCE, limits=limits).all(-1)
     sc = scene[idx] if len(scene.batch_shape) else scene
     check = check_path(body, padded, sc, max_travel=max_travel)
     free = check.collision_free.cpu()
