@@ -223,6 +223,45 @@ def test_training_problems_and_the_trained_body_follow_the_sphere_set(tmp_path):
         make_training_problems(tmp_path / "tool", 1, robot=ur5, families=("wall",), sphere_set="spherized")
 
 
+def test_training_problems_within_the_bodys_limits_train_and_search_in_that_box(tmp_path):
+    """--within body: the ur5's training problems start and end within its tool model's ±π, the set
+    says so, a folder made within other limits is refused, the offline sampler's paths stay in that
+    box and the loss clamps knots to it and charges a knot beyond it."""
+    import numpy as np
+
+    from kinlearn.body.kinematics import kinematics
+    from kinlearn.data.problems import ProblemSet
+    from kinlearn.training.obstacle_path import _batch, build_body, expert_paths, make_training_problems
+
+    ur5 = load_robot("ur5")
+    paths = make_training_problems(tmp_path / "w", 2, robot=ur5, families=("wall",), within="body")
+    pool = ProblemSet.load(paths[0], robot="ur5")
+    lo, hi = pool.body(ur5).limits
+    assert pool.within == "body" and np.isclose(hi[0], np.pi) and hi[0] < ur5.upper[0]
+    assert bool(ur5.within_limits(torch.cat((pool.start, pool.goal)), limits=(lo, hi)).all())
+    assert (
+        ProblemSet.load(make_training_problems(tmp_path / "r", 1, robot=ur5, families=("wall",))[0]).within
+        == "robot"
+    )
+    with pytest.raises(ConfigError, match="within the body's limits, not the robot's"):
+        make_training_problems(tmp_path / "w", 2, robot=ur5, families=("wall",))
+    experts, found = expert_paths(paths[0], ur5, 4)
+    assert bool(found.any()) and bool(ur5.within_limits(experts[found], 1e-9, limits=(lo, hi)).all())
+    # the loss's box: a network whose knots leave ±π is charged for it there, not within ±2π
+    cfg = ObstacleTrainConfig(robot="ur5", problems=tuple(map(str, paths)))
+    body = build_body(cfg, ur5, pool)
+    tm = ObstaclePathModel(ObstaclePathConfig.for_robot(ur5, hidden=[16], encoder=[8], candidates=2, modes=2))
+    kin = kinematics(ur5)
+    ef = (kin.position(pool.start), kin.position(pool.goal))
+    s0, sT, scene = _batch(pool, ef, torch.arange(len(pool)), torch.zeros(len(pool), dtype=torch.bool))
+    fr = torch.tensor([0.5])
+    wide = torch.full((len(pool), ur5.dof), 1.5 * np.pi)
+    narrow = torch.full((len(pool), ur5.dof), 0.1)
+    _, t_wide = candidate_losses(tm, body, s0, sT, scene, ObstacleLossConfig(), fr, box=(-wide, wide))
+    _, t_narrow = candidate_losses(tm, body, s0, sT, scene, ObstacleLossConfig(), fr, box=(-narrow, narrow))
+    assert float(t_narrow["limits"].detach().sum()) > float(t_wide["limits"].detach().sum())
+
+
 def test_leave_one_family_out_bookkeeping():
     """select_families expands groups, keeps order, drops the left-out family, and refuses what it
     cannot do; the groups are the families the benchmark sets and the generator know."""

@@ -237,6 +237,13 @@ def _add_train_obstacle_planner(sub) -> None:
         "(default: the body the robot's planner checks with, the ur5's carrying its gripper)",
     )
     p.add_argument(
+        "--within",
+        choices=("robot", "body"),
+        default="robot",
+        help="whose joint limits training starts and goals keep within: the robot's (default) or the body's "
+        "(the ur5's tool model's ±π, as the standard benchmarks' UR5 turns); paths are kept in the same box",
+    )
+    p.add_argument(
         "--init-checkpoint",
         type=EXISTING_FILE,
         default=None,
@@ -294,6 +301,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
             **({"solvable_only": True} if args.solvable_only else {}),
             # absent: the robot's default sphere body, as before sets could be chosen
             **({"sphere_set": body_name} if body_name != body_spheres(robot).name else {}),
+            **({"within": args.within} if args.within != "robot" else {}),  # absent: the robot's, as before
             "body": file_identity(args.body_checkpoint) if args.body_checkpoint else "analytic",
             "init": file_identity(args.init_checkpoint) if args.init_checkpoint else None,
         },
@@ -305,7 +313,12 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         f"{', '.join(families)}; generated once)"
     )
     paths = make_training_problems(
-        problems_dir, args.problems_per_family, robot=robot, families=families, sphere_set=args.sphere_set
+        problems_dir,
+        args.problems_per_family,
+        robot=robot,
+        families=families,
+        sphere_set=args.sphere_set,
+        within=args.within,
     )
     cfg = ObstacleTrainConfig(
         robot=robot.name,

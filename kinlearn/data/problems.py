@@ -400,6 +400,16 @@ class ProblemSet:
             raise DatasetError(f"the set's parts were made for different bodies: {sorted(map(str, names))}")
         return names.pop() if names else None
 
+    @property
+    def within(self) -> str:
+        """Whose joint limits the problems were made within (:attr:`ProblemConfig.within`): ``"robot"``
+        (also for sets written before it was recorded) or ``"body"``."""
+        parts = self.config.get("parts", [self.config])
+        kinds = {p.get("within", "robot") for p in parts}
+        if len(kinds) > 1:
+            raise DatasetError(f"the set's parts were made within different limits: {sorted(kinds)}")
+        return kinds.pop()
+
     def body(self, robot: Robot) -> BodySpheres:
         """The body the problems were made for: the one to judge plans on them with."""
         name, default = self.body_name, body_spheres(robot)

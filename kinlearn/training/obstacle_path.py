@@ -164,19 +164,22 @@ def make_training_problems(
     progress=None,
     families: tuple[str, ...] = LEGACY_FAMILIES,
     sphere_set: str | None = None,
+    within: str = "robot",
 ) -> list[Path]:
     """Generate (or reuse) unverified training problems: ``per_family`` of each of ``families`` (default
     the three the shipped iiwa14 network was trained on) with :data:`TRAINING_SEEDS`, in files of
     ``chunk`` problems under ``out_dir``, for the body ``sphere_set`` names (default the robot's planning
-    body, :class:`~kinlearn.data.problems.ProblemConfig`). Deterministic: chunk c of a family is problems
-    ``c·chunk …`` of its seed's sequence, whoever generates it. A file already there made for another
-    body is a :class:`~kinlearn.errors.ConfigError` (choose another ``out_dir``)."""
+    body, :class:`~kinlearn.data.problems.ProblemConfig`), starts and goals within the joint limits
+    ``within`` names (``"robot"`` or ``"body"``: the body's, the ur5's tool model's ±π). Deterministic:
+    chunk c of a family is problems ``c·chunk …`` of its seed's sequence, whoever generates it. A file
+    already there made for another body or within other limits is a :class:`~kinlearn.errors.ConfigError`
+    (choose another ``out_dir``)."""
     unknown = [f for f in families if f not in FAMILIES]
     if not families or unknown:
         raise ConfigError(f"training families must be some of {', '.join(FAMILIES)}, got {list(families)}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    cfg = ProblemConfig(verify=False, sphere_set=sphere_set)
+    cfg = ProblemConfig(verify=False, sphere_set=sphere_set, within=within)
     robot = robot or load_robot("iiwa14")
     want = cfg.body(robot).name
     paths = []
@@ -189,9 +192,15 @@ def make_training_problems(
                     path
                 )
             else:
-                held = ProblemSet.load(path, robot=robot.name).body(robot).name
-                if held != want:
-                    raise ConfigError(f"{path} holds problems made for the {held!r} body, not {want!r}")
+                held = ProblemSet.load(path, robot=robot.name)
+                if held.body(robot).name != want:
+                    raise ConfigError(
+                        f"{path} holds problems made for the {held.body(robot).name!r} body, not {want!r}"
+                    )
+                if held.within != within:
+                    raise ConfigError(
+                        f"{path} holds problems made within the {held.within}'s limits, not the {within}'s"
+                    )
             paths.append(path)
             if progress is not None:
                 progress(len(paths))
@@ -220,7 +229,8 @@ def expert_paths(
     """The compiled RRT-Connect's path of every problem of the set in ``problems`` (``.npz``), shortcut
     and resampled to ``knots + 1`` points by arc length: ``(paths (N, knots + 1, dof) float64, found (N,)
     bool)``. Each problem gets :data:`EXPERT_ITERATIONS` iterations with its index as the seed (no time
-    limit: the same paths everywhere). Made once and cached beside the set (``NAME.experts{knots}.npz``,
+    limit: the same paths everywhere), searching the problem's joint box as the planner does
+    (:meth:`~kinlearn.collision.BodySpheres.joint_box`). Made once and cached beside the set (``NAME.experts{knots}.npz``,
     written atomically); a cache of another set, robot or size is made again."""
     from ..collision import kernel
     from ..collision.rrt import rrt_connect
@@ -236,6 +246,7 @@ def expert_paths(
         "iterations": EXPERT_ITERATIONS,
         "n": len(pset),
         "body": body.name,
+        "box": "joint_box",
     }
     if cache.is_file():
         try:
@@ -244,15 +255,15 @@ def expert_paths(
                 return torch.from_numpy(arrays["paths"]), torch.from_numpy(arrays["found"])
         except DatasetError:
             pass  # unreadable: made again below
+    lo, hi = body.joint_box(pset.start.numpy(), pset.goal.numpy())
     body = kernel.KernelBody.of(body)
-    lo, hi = np.asarray(robot.lower, np.float64), np.asarray(robot.upper, np.float64)
     paths = np.zeros((len(pset), knots + 1, robot.dof))
     found = np.zeros(len(pset), dtype=bool)
     for i in range(len(pset)):
         start, goal, scene = pset.problem(i)
         path, _, _ = rrt_connect(
             body, kernel.KernelScene.of(scene.to(torch.float64)), start.double().numpy(), goal.double().numpy(),
-            lo, hi, time_limit=math.inf, seed=i, max_iterations=EXPERT_ITERATIONS,
+            lo[i], hi[i], time_limit=math.inf, seed=i, max_iterations=EXPERT_ITERATIONS,
         )  # fmt: skip
         if path is not None:
             paths[i], found[i] = _resample(path, knots), True
@@ -373,12 +384,16 @@ def candidate_losses(
     config: ObstacleLossConfig,
     fractions: torch.Tensor,
     expert: torch.Tensor | None = None,
+    box: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Each candidate's loss ``(N, C)`` for problems ``(s0, sT)`` in ``scene`` (batch ``(N,)``), and the
     terms (per candidate, not reduced). The body is looked at in every segment at ``fractions`` (in
     [0, 1)) of the way, and at the goal. ``expert`` ``(N, T − 1, dof)``: target inner knots; its term
     ``imitation`` (each candidate's mean squared knot difference, in half joint ranges) is returned
-    with the terms and not added to the loss (the caller takes its minimum over the candidates)."""
+    with the terms and not added to the loss (the caller takes its minimum over the candidates).
+    ``box``: each problem's joint box ``(lower, upper)``, each ``(N, dof)``, that its knots are clamped
+    to and its ``limits`` term measures against, as the planner keeps a problem's paths in it
+    (:meth:`~kinlearn.collision.BodySpheres.joint_box`); default the model's joint limits."""
     J = tm.layout.joints
     n = s0.shape[0]
     rows, mask, floor = scene_primitives(scene, n, s0.dtype)
@@ -386,7 +401,13 @@ def candidate_losses(
     C = mid.shape[1]
     theta0 = s0[:, None, None, J].expand(n, C, 1, -1)
     thetaT = sT[:, None, None, J].expand(n, C, 1, -1)
-    knots = torch.cat((theta0, mid.clamp(tm.lower, tm.upper), thetaT), dim=2)  # (N, C, T + 1, dof)
+    if box is None:
+        lo, hi = tm.lower, tm.upper
+    else:
+        lo, hi = (b.to(mid)[:, None, None, :] for b in box)
+    knots = torch.cat(
+        (theta0, torch.minimum(torch.maximum(mid, lo), hi), thetaT), dim=2
+    )  # (N, C, T + 1, dof)
     dense = _dense(knots, fractions)  # (N, C, Q, dof)
     Q = dense.shape[2]
     centres = body(dense, validate=False)  # (N, C, Q, M, 3)
@@ -413,7 +434,7 @@ def candidate_losses(
     length = _travel(centres, moving) / (ref + 0.05)
     jacc = knots[:, :, 2:] - 2 * knots[:, :, 1:-1] + knots[:, :, :-2]
     joint_smooth = jacc.square().sum((-1, -2))
-    limits = (torch.relu(mid - tm.upper) + torch.relu(tm.lower - mid)).square().sum((-1, -2))
+    limits = (torch.relu(mid - hi) + torch.relu(lo - mid)).square().sum((-1, -2))
     c = config
     loss = (
         c.collision * collision
@@ -476,6 +497,10 @@ def train_obstacle_model(
                 raise ConfigError("solvable_only: the sampler solved none of the training problems")
             pool, experts, found = pool[found], experts[found], found[found]
     ef_all = (kin.position(pool.start), kin.position(pool.goal))
+    # Each problem's joint box, as the planner searches it (the same either way round).
+    box_all = tuple(
+        torch.from_numpy(b) for b in pool.body(robot).joint_box(pool.start.numpy(), pool.goal.numpy())
+    )
     n_pool = len(pool)
     seen = {f for i, f in enumerate(FAMILIES) if bool((pool.family == i).any())}
     if config.init_checkpoint:
@@ -527,7 +552,8 @@ def train_obstacle_model(
         target = None
         if experts is not None:  # walked the other way where the problem is
             target = torch.where(swap[:, None, None], experts[idx].flip(1), experts[idx])
-        per, terms = candidate_losses(tm, body, s0, sT, scene, config.loss, fractions, expert=target)
+        box = (box_all[0][idx], box_all[1][idx])
+        per, terms = candidate_losses(tm, body, s0, sT, scene, config.loss, fractions, expert=target, box=box)
         best = per.min(dim=1)
         total = best.values.mean() + config.loss.spread * per.mean()
         imitated = {}
