@@ -13,7 +13,9 @@ retreat stage (``retreat=False``: the network alone) and plans with ``deadline=0
 problems of ``--problems`` (seeds apart from every training seed; verified solvable).
 Every plan is judged by :func:`kinlearn.evaluation.obstacles.obstacle_outcome` with the body the held-out
 problems were made for, and the networks are trained for that body (``--sphere-set``; the ur5's committed
-set: its arm with the gripper; ``--problems benchmarks/data/scene_problems_ur5_arm.npz``: the arm alone).
+set: its arm with the gripper; ``--problems benchmarks/data/scene_problems_ur5_arm.npz``: the arm alone),
+and within the limits they were made within (``--problems benchmarks/data/scene_problems_ur5_within.npz``:
+the networks train with ``--within body`` and plans are judged within the benchmarks' UR5 limits, ±π).
 
 The table gives per left-out family its fixed-time success (the network never saw it), the network alone's
 on it, the same network's fixed-time success on the families it saw, the straight line's on the left-out
@@ -61,7 +63,7 @@ def train(robot: str, family: str, args, run: Path) -> Path:
         "--families", *args.base, "--leave-out", family,
         "--problems-per-family", str(args.problems_per_family), "--iterations", str(args.iterations),
         "--candidates", str(args.candidates), "--problems-dir", str(args.problems_dir),
-        "--run-dir", str(run), "--no-progress", "--sphere-set", args.sphere_set,
+        "--run-dir", str(run), "--no-progress", "--sphere-set", args.sphere_set, "--within", args.within,
     ]  # fmt: skip
     if args.solvable_only:
         cmd.append("--solvable-only")
@@ -83,14 +85,14 @@ def planner_with(network: Path, robot: str, folder: Path, body) -> kinlearn.Plan
     return kinlearn.Planner.load(folder, body=body)
 
 
-def success(planner, problems, body, **kw) -> np.ndarray:
+def success(planner, problems, body, limits=None, **kw) -> np.ndarray:
     paths = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NoObstacleModelWarning)
         for i in range(len(problems)):
             start, goal, scene = problems.problem(i)
             paths.append(torch.as_tensor(planner.plan(start, goal, obstacles=scene, **kw).joints))
-    return obstacle_outcome(body, paths, problems)["success"].numpy()
+    return obstacle_outcome(body, paths, problems, limits=limits)["success"].numpy()
 
 
 def main() -> None:
@@ -133,6 +135,9 @@ def main() -> None:
     robot = kinlearn.load_robot(args.robot)
     body = problems.body(robot).double()  # the body the problems were made for
     args.sphere_set = body.name  # and the networks are trained for it
+    # a set made within the body's limits (the ur5's tool model: ±π) is trained for and judged within them
+    args.within = problems.within
+    limits = body.limits if args.within == "body" else None
     fam = problems.family.numpy()
     ref_folder = args.reference or Path(kinlearn.__file__).parent / "checkpoints" / args.robot
     reference = kinlearn.Planner.load(ref_folder, body=body)  # every plan checked as it is judged
@@ -140,10 +145,13 @@ def main() -> None:
     ref_alone = kinlearn.Planner.load(ref_folder, retreat=False, body=body) if has_retreat else reference
     if args.candidates is None:  # trained as the network it is compared with
         args.candidates = reference.obstacle_tm.config.candidates
-    ref_ok = success(reference, problems, body, refine_steps=0)
-    ref_alone_ok = success(ref_alone, problems, body, refine_steps=0)
+    ref_ok = success(reference, problems, body, limits, refine_steps=0)
+    ref_alone_ok = success(ref_alone, problems, body, limits, refine_steps=0)
     line_ok = obstacle_outcome(
-        body, [joint_line_path(*problems.problem(i), body=body)[0] for i in range(len(problems))], problems
+        body,
+        [joint_line_path(*problems.problem(i), body=body)[0] for i in range(len(problems))],
+        problems,
+        limits=limits,
     )["success"].numpy()
     rows, summary = [], {}
     for f in args.families:
@@ -153,13 +161,13 @@ def main() -> None:
         net = train(args.robot, f, args, args.run_root / f"without-{f}")
         planner = planner_with(net, args.robot, args.run_root / f"planner-without-{f}", body)
         assert f not in planner.obstacle_tm.families, planner.obstacle_tm.families
-        fixed = success(planner, problems, body, refine_steps=0)
+        fixed = success(planner, problems, body, limits, refine_steps=0)
         if has_retreat:  # the same folder again, without the retreat stage
             alone = kinlearn.Planner.load(args.run_root / f"planner-without-{f}", retreat=False, body=body)
-            alone_ok = success(alone, problems, body, refine_steps=0)
+            alone_ok = success(alone, problems, body, limits, refine_steps=0)
         else:
             alone_ok = fixed
-        timed = success(planner, problems, body, deadline=args.deadline)
+        timed = success(planner, problems, body, limits, deadline=args.deadline)
         summary[f] = {
             "left_out_fixed": float(fixed[mine].mean()),
             "left_out_network_alone": float(alone_ok[mine].mean()),

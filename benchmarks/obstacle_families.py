@@ -137,8 +137,7 @@ def main() -> None:
     robot = load_robot(args.robot)
     body = problems.body(robot).double()  # the body the problems were made for
     # a set made within its body's limits (the ur5's tool model: ±π) is judged within them
-    within = (problems.config.get("problem_config") or {}).get("within", "robot")
-    limits = body.limits if within == "body" else None
+    limits = body.limits if problems.within == "body" else None
     fams = [f for f in FAMILIES if len(problems.of(f))]
     print(f"{len(problems)} problems from {path} ({', '.join(f'{f} {len(problems.of(f))}' for f in fams)})")
     print(f"hard (straight joint line collides): {int(problems.hard.sum())}")

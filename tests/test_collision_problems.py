@@ -98,6 +98,10 @@ def test_committed_ur5_set_within_the_benchmarks_limits():
     ur5 = load_robot("ur5")
     problems = ProblemSet.load(HELDOUT.parent / "scene_problems_ur5_within.npz", robot="ur5")
     assert problems.config["problem_config"]["within"] == "body" and problems.body_name == "gripper"
+    assert problems.within == "body" and ProblemSet.load(HELDOUT, robot="iiwa14").within == "robot"
+    mixed = ProblemSet.concat([problems[:1], ProblemSet.load(HELDOUT.parent / "scene_problems_ur5.npz")[:1]])
+    with pytest.raises(DatasetError, match="within different limits"):
+        mixed.within
     assert {f: len(problems.of(f)) for f in FAMILIES[3:]} == dict.fromkeys(FAMILIES[3:], 20)
     ends = torch.cat([problems.start, problems.goal]).abs()
     assert float(ends.max()) <= np.pi - 0.05 + 1e-12

@@ -405,7 +405,8 @@ class ProblemSet:
         """Whose joint limits the problems were made within (:attr:`ProblemConfig.within`): ``"robot"``
         (also for sets written before it was recorded) or ``"body"``."""
         parts = self.config.get("parts", [self.config])
-        kinds = {p.get("within", "robot") for p in parts}
+        # a part records its ProblemConfig's fields, or (the benchmark's sets) holds them as "problem_config"
+        kinds = {p.get("within", (p.get("problem_config") or {}).get("within", "robot")) for p in parts}
         if len(kinds) > 1:
             raise DatasetError(f"the set's parts were made within different limits: {sorted(kinds)}")
         return kinds.pop()
