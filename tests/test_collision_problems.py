@@ -101,7 +101,7 @@ def test_committed_ur5_set_within_the_benchmarks_limits():
     assert problems.within == "body" and ProblemSet.load(HELDOUT, robot="iiwa14").within == "robot"
     mixed = ProblemSet.concat([problems[:1], ProblemSet.load(HELDOUT.parent / "scene_problems_ur5.npz")[:1]])
     with pytest.raises(DatasetError, match="within different limits"):
-        mixed.within
+        _ = mixed.within
     assert {f: len(problems.of(f)) for f in FAMILIES[3:]} == dict.fromkeys(FAMILIES[3:], 20)
     ends = torch.cat([problems.start, problems.goal]).abs()
     assert float(ends.max()) <= np.pi - 0.05 + 1e-12
