@@ -85,14 +85,14 @@ def planner_with(network: Path, robot: str, folder: Path, body) -> kinlearn.Plan
     return kinlearn.Planner.load(folder, body=body)
 
 
-def success(planner, problems, body, limits=None, **kw) -> np.ndarray:
+def success(planner, problems, body, **kw) -> np.ndarray:
     paths = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NoObstacleModelWarning)
         for i in range(len(problems)):
             start, goal, scene = problems.problem(i)
             paths.append(torch.as_tensor(planner.plan(start, goal, obstacles=scene, **kw).joints))
-    return obstacle_outcome(body, paths, problems, limits=limits)["success"].numpy()
+    return obstacle_outcome(body, paths, problems)["success"].numpy()
 
 
 def main() -> None:
@@ -135,9 +135,8 @@ def main() -> None:
     robot = kinlearn.load_robot(args.robot)
     body = problems.body(robot).double()  # the body the problems were made for
     args.sphere_set = body.name  # and the networks are trained for it
-    # a set made within the body's limits (the ur5's tool model: ±π) is trained for and judged within them
+    # a set made within the body's limits (the ur5's tool model: ±π) is trained for (and judged within) them
     args.within = problems.within
-    limits = body.limits if args.within == "body" else None
     fam = problems.family.numpy()
     ref_folder = args.reference or Path(kinlearn.__file__).parent / "checkpoints" / args.robot
     reference = kinlearn.Planner.load(ref_folder, body=body)  # every plan checked as it is judged
@@ -145,13 +144,12 @@ def main() -> None:
     ref_alone = kinlearn.Planner.load(ref_folder, retreat=False, body=body) if has_retreat else reference
     if args.candidates is None:  # trained as the network it is compared with
         args.candidates = reference.obstacle_tm.config.candidates
-    ref_ok = success(reference, problems, body, limits, refine_steps=0)
-    ref_alone_ok = success(ref_alone, problems, body, limits, refine_steps=0)
+    ref_ok = success(reference, problems, body, refine_steps=0)
+    ref_alone_ok = success(ref_alone, problems, body, refine_steps=0)
     line_ok = obstacle_outcome(
         body,
         [joint_line_path(*problems.problem(i), body=body)[0] for i in range(len(problems))],
         problems,
-        limits=limits,
     )["success"].numpy()
     rows, summary = [], {}
     for f in args.families:
@@ -161,13 +159,13 @@ def main() -> None:
         net = train(args.robot, f, args, args.run_root / f"without-{f}")
         planner = planner_with(net, args.robot, args.run_root / f"planner-without-{f}", body)
         assert f not in planner.obstacle_tm.families, planner.obstacle_tm.families
-        fixed = success(planner, problems, body, limits, refine_steps=0)
+        fixed = success(planner, problems, body, refine_steps=0)
         if has_retreat:  # the same folder again, without the retreat stage
             alone = kinlearn.Planner.load(args.run_root / f"planner-without-{f}", retreat=False, body=body)
-            alone_ok = success(alone, problems, body, limits, refine_steps=0)
+            alone_ok = success(alone, problems, body, refine_steps=0)
         else:
             alone_ok = fixed
-        timed = success(planner, problems, body, limits, deadline=args.deadline)
+        timed = success(planner, problems, body, deadline=args.deadline)
         summary[f] = {
             "left_out_fixed": float(fixed[mine].mean()),
             "left_out_network_alone": float(alone_ok[mine].mean()),

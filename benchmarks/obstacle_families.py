@@ -136,8 +136,6 @@ def main() -> None:
         problems = problems[: args.n]
     robot = load_robot(args.robot)
     body = problems.body(robot).double()  # the body the problems were made for
-    # a set made within its body's limits (the ur5's tool model: ±π) is judged within them
-    limits = body.limits if problems.within == "body" else None
     fams = [f for f in FAMILIES if len(problems.of(f))]
     print(f"{len(problems)} problems from {path} ({', '.join(f'{f} {len(problems.of(f))}' for f in fams)})")
     print(f"hard (straight joint line collides): {int(problems.hard.sum())}")
@@ -179,7 +177,7 @@ def main() -> None:
                 t0 = time.perf_counter()
                 paper_tm(tm_state, tm_state)
                 tm_seconds.append(time.perf_counter() - t0)
-        outcome = obstacle_outcome(body, paths, problems, limits=limits)
+        outcome = obstacle_outcome(body, paths, problems)
         ok = outcome["success"].numpy()
         t = np.array(seconds)
         fam_rate = {f: float(ok[(problems.family == FAMILIES.index(f)).numpy()].mean()) for f in fams}

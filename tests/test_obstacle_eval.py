@@ -2,6 +2,7 @@
 outside the limits, self-colliding, from the wrong start) and pass, and the table and figure writers."""
 
 import math
+from pathlib import Path
 
 import pytest
 import torch
@@ -121,6 +122,27 @@ def test_a_path_is_judged_within_the_limits_given(robot, body, case):
     assert out["within_limits"].tolist() == [False] and out["success"].tolist() == [False]
     lo[0] = -0.9
     assert obstacle_outcome(body, [path], one, limits=(lo, hi))["success"].tolist() == [True]
+
+
+def test_a_set_made_within_its_bodys_limits_is_judged_within_them():
+    """A ProblemSet made within the body's limits (the ur5's ±π) is judged within them by default: a
+    path through ±2π's room is not within them, and is within the robot's when those are given."""
+    import numpy as np
+
+    from kinlearn import load_robot
+    from kinlearn.data.problems import ProblemSet
+
+    ur5 = load_robot("ur5")
+    data = Path(__file__).resolve().parents[1] / "benchmarks" / "data"
+    one = ProblemSet.load(data / "scene_problems_ur5_within.npz", robot="ur5")[:1]
+    body = one.body(ur5).double()
+    start, goal = one.start[0], one.goal[0]
+    via = start.clone()
+    via[0] = np.pi + 0.3  # within the robot's ±2π, beyond the tool model's ±π
+    path = torch.stack((start, via, goal))
+    assert obstacle_outcome(body, [path], one)["within_limits"].tolist() == [False]
+    wide = (ur5.lower.astype(np.float64), ur5.upper.astype(np.float64))
+    assert obstacle_outcome(body, [path], one, limits=wide)["within_limits"].tolist() == [True]
 
 
 def test_paths_of_different_lengths_are_judged_as_one_at_a_time(body, case):

@@ -341,7 +341,7 @@ class Robot:
         u = torch.rand((*shape, self.dof), generator=generator, dtype=dtype, device=device)
         return lo + (hi - lo) * u
 
-    def within_limits(self, q: torch.Tensor, tol: float = 1e-6, limits=None) -> torch.Tensor:
+    def within_limits(self, q: torch.Tensor, tol: float = 1e-6, limits: tuple | None = None) -> torch.Tensor:
         """``(...)`` bool: where configurations ``q (..., dof)`` stay within the position limits to ``tol``
         rad (NaN counts as outside), or within ``limits`` ``(lower, upper)`` given instead. A joint path is
         within them where ``within_limits(path).all(-1)``."""

@@ -134,8 +134,9 @@ def obstacle_outcome(
     limits: tuple | None = None,
 ) -> dict[str, torch.Tensor]:
     """Judge ``N`` joint paths against their problems by the success rule (see the module docstring).
-    ``limits``: ``(lower, upper)`` joint limits a path must keep within instead of the robot's (a set made
-    within its body's limits, ``ProblemConfig(within="body")``, is judged within them).
+    ``limits``: ``(lower, upper)`` joint limits a path must keep within instead of the robot's; by default
+    the robot's, or the body's for a :class:`~kinlearn.data.problems.ProblemSet` made within them
+    (``ProblemSet.within == "body"``, ``ProblemConfig(within="body")``).
 
     ``body``: :func:`~kinlearn.collision.body_spheres` of the robot (the 12-sphere body with the base).
     ``joints``: a tensor ``(N, T+1, dof)`` or a sequence of ``N`` paths ``(K_i, dof)`` (tensors or
@@ -154,6 +155,8 @@ def obstacle_outcome(
     robot = body.robot
     dof = robot.dof
     start, goal, scene = _problem_tensors(problems, dof)
+    if limits is None and isinstance(problems, ProblemSet) and problems.within == "body":
+        limits = body.limits
     n = start.shape[0]
     if len(scene.batch_shape) not in (0, 1) or (len(scene.batch_shape) == 1 and scene.batch_shape[0] != n):
         raise ShapeError(

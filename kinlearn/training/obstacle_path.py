@@ -193,10 +193,9 @@ def make_training_problems(
                 )
             else:
                 held = ProblemSet.load(path, robot=robot.name)
-                if held.body(robot).name != want:
-                    raise ConfigError(
-                        f"{path} holds problems made for the {held.body(robot).name!r} body, not {want!r}"
-                    )
+                held_body = held.body(robot).name
+                if held_body != want:
+                    raise ConfigError(f"{path} holds problems made for the {held_body!r} body, not {want!r}")
                 if held.within != within:
                     raise ConfigError(
                         f"{path} holds problems made within the {held.within}'s limits, not the {within}'s"
@@ -405,9 +404,7 @@ def candidate_losses(
         lo, hi = tm.lower, tm.upper
     else:
         lo, hi = (b.to(mid)[:, None, None, :] for b in box)
-    knots = torch.cat(
-        (theta0, torch.minimum(torch.maximum(mid, lo), hi), thetaT), dim=2
-    )  # (N, C, T + 1, dof)
+    knots = torch.cat((theta0, mid.clamp(lo, hi), thetaT), dim=2)  # (N, C, T + 1, dof)
     dense = _dense(knots, fractions)  # (N, C, Q, dof)
     Q = dense.shape[2]
     centres = body(dense, validate=False)  # (N, C, Q, M, 3)
