@@ -268,6 +268,31 @@ def test_near_pairs_finds_exactly_the_pairs_within_the_cut():
         K.near_pairs(c.numpy()[0], body.radii.numpy(), body.pairs.numpy(), 0.03)
 
 
+@pytest.mark.parametrize("margin", [0.0, 0.03])
+def test_the_probes_proof_of_a_clear_scene_answers_as_every_sub_step(arm, margin):
+    """The probe proves a path clear of the scene from the windows its configurations' clearances cover
+    (link balls, then spheres) and fills the gaps; the walk then looks at the body against itself alone.
+    On many paths through cluttered scenes, near misses among them (a share free, a share not), the
+    verdict of each path alone and of first_free over them is that of checking every sub-step."""
+    robot, body, kb = arm
+    rng = np.random.default_rng(5)
+    counts = [0, 0]
+    for s in range(6):
+        scene = random_scene(rng, n=int(rng.integers(2, 6)), floor=bool(s % 2))
+        ks = K.KernelScene(scene)
+        knots = int(rng.integers(2, 8))
+        paths = np.concatenate([_random_paths(robot, 24, knots, seed=40 + s, spread=w) for w in (0.1, 0.4)])
+        ref = check_path(body, torch.from_numpy(paths), scene, margin=margin).collision_free.numpy()
+        alone = [bool(K._free_packed(p, 0.01, margin, *kb.packed, ks.packed)) for p in paths]
+        assert alone == ref.tolist(), s
+        order = rng.permutation(len(paths))
+        expect = next((int(i) for i in order if ref[i]), -1)
+        assert K.first_free(kb, paths, ks, order, margin=margin) == expect
+        counts[0] += int(ref.sum())
+        counts[1] += len(ref)
+    assert 0.05 * counts[1] < counts[0] < 0.95 * counts[1]
+
+
 def test_verdicts_where_self_collision_decides(arm):
     """Long motions across the whole joint range with no obstacle (then with one): the verdict, which
     spends each self-collision pair's distance by its own bound, answers as check_path does, for paths

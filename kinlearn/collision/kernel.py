@@ -56,6 +56,15 @@ Four refinements keep the verdict that of every sub-step and cut the work (``ben
   and each was then walked to its hit. With the segments' sub-steps counted only where the probe needs
   them, the candidate checks of fixed-time plans take 0.51 / 0.96 / 0.96 of stop 37's time (ur5 with
   its gripper, panda, iiwa14; tuning problems, by turns; the same answers).
+- **The probe proves the scene clear as it goes.** Each configuration it looks at and finds clear also
+  says how far along its segment, either way, the body stays clear: a link's ball clear of the scene
+  by d keeps the link's spheres clear while their fastest travel is below d, a sphere looked at alone
+  while its own travel is below its clearance (the walk's bounds). Grid configurations inside such a
+  window cannot hit and are not looked at; after the last level the gaps left are filled, each from its
+  middle, until every configuration of the grid is proven clear of the scene or one is found that is
+  not (a hit, as any other). The walk then looks only at the body against itself. On a free path, the
+  part of every check a plan cannot skip, the probe's levels looked at every configuration they reach
+  and the walk then did the scene again.
 """
 
 from __future__ import annotations
@@ -512,7 +521,7 @@ def _expiry_lever(b, k, i, absd, left, lever, row, steps, offset):
 
 
 @_jit
-def _verdict(path, max_travel, margin, body, scene):
+def _verdict(path, max_travel, margin, body, scene, scene_clear=False):
     """One path ``(W, dof)``: (first colliding segment or −1, configurations evaluated, the colliding
     configuration's fraction of that segment (a sub-step of the grid), whether that hit is the body against
     itself rather than the scene or the floor), the verdict of checking every sub-step. Each sphere's
@@ -524,7 +533,9 @@ def _verdict(path, max_travel, margin, body, scene):
     ``b_radius`` around ``b_folded`` in link ``b_link``'s frame) holds them: far from that ball (farther
     than its radius) the group's budget is its distance to the ball, spent at its members' fastest rate;
     nearer, each member's own distance, spent at its own rate. ``pairs`` are the pairs not grouped.
-    ``body``: the arrays of :func:`_unpack_body`; ``scene``: those of :func:`_unpack_scene`."""
+    ``body``: the arrays of :func:`_unpack_body`; ``scene``: those of :func:`_unpack_scene`.
+    ``scene_clear``: every configuration of the grid is already proven clear of the scene (the probe's
+    :func:`_prove_clear`): only the body against itself is walked."""
     F, prismatic, link, folded, radii, on_floor, pairs, lever = body[:8]
     g_sphere, g_ball, g_start, g_members, b_link, b_folded, b_radius, p_lever, g_lever, m_lever = body[8:18]
     spheres, boxes, cylinders, floor = scene
@@ -548,7 +559,7 @@ def _verdict(path, max_travel, margin, body, scene):
     for k in range(T - 1, -1, -1):
         for j in range(dof):
             left[k, j] = left[k + 1, j] + absd[k, j]
-    due_m = np.zeros(M)  # global sub-step index at which each item must be recomputed
+    due_m = np.full(M, np.inf) if scene_clear else np.zeros(M)  # where each item must be recomputed
     due_p = np.zeros(P)
     due_g = np.zeros(G)
     from_g = np.zeros(G)
@@ -658,6 +669,68 @@ def _scene_hit(q, margin, body, scene, frames):
 
 
 @_jit_inline
+def _scene_clear(q, margin, body, scene, frames, link_lever, path, k, n):
+    """:func:`_scene_hit` at a configuration ``q`` of segment ``k`` (``n`` sub-steps) that also says how far
+    along the segment, either way, its clearances prove the body clear of the scene: −1 where some sphere is
+    within ``margin``, else w > 0 such that every grid configuration of the segment fewer than w sub-steps
+    from ``q`` is clear. A link whose ball is clear proves its spheres clear while the ball's clearance
+    outlasts their fastest travel (``link_lever``: per link and joint the largest lever of its spheres);
+    a sphere looked at alone, while its own clearance outlasts its own travel (the walk's bound)."""
+    F, prismatic, _, folded, radii, on_floor = body[:6]
+    lever = body[7]
+    l_start, l_folded, l_radius = body[18:21]
+    spheres, boxes, cylinders, floor = scene
+    dof = q.shape[0]
+    _chain(q, F, prismatic, frames)
+    w = np.inf
+    for lk in range(l_start.shape[0] - 1):
+        a, b = l_start[lk], l_start[lk + 1]
+        if a == b:
+            continue
+        x, y, z = _point(frames, lk, l_folded[lk])
+        d = _sphere_scene(x, y, z, l_radius[lk], lk > 0, spheres, boxes, cylinders, floor)
+        if d > margin:
+            rate = 0.0
+            for j in range(dof):
+                rate += abs(path[k + 1, j] - path[k, j]) * link_lever[lk, j]
+            if rate > 0.0:
+                w = min(w, (d - margin - _SLACK) * n / rate)
+            continue
+        for m in range(a, b):
+            x, y, z = _point(frames, lk, folded[m])
+            d = _sphere_scene(x, y, z, radii[m], on_floor[m], spheres, boxes, cylinders, floor)
+            if d <= margin:
+                return -1.0
+            rate = 0.0
+            for j in range(dof):
+                rate += abs(path[k + 1, j] - path[k, j]) * lever[m, j]
+            if rate > 0.0:
+                w = min(w, (d - margin - _SLACK) * n / rate)
+    return w
+
+
+@_jit_inline
+def _link_levers(body):
+    """Per link (as ``l_start`` groups the spheres) and joint, the largest lever of the link's spheres."""
+    lever, l_start = body[7], body[18]
+    out = np.zeros((l_start.shape[0] - 1, lever.shape[1]))
+    for lk in range(l_start.shape[0] - 1):
+        for m in range(l_start[lk], l_start[lk + 1]):
+            for j in range(lever.shape[1]):
+                out[lk, j] = max(out[lk, j], lever[m, j])
+    return out
+
+
+@_jit_inline
+def _proven(cen, wid, cnt, k, i):
+    """Whether grid sub-step ``i`` of segment ``k`` lies within a window a probed configuration proved clear."""
+    for t in range(cnt[k]):
+        if abs(i - cen[k, t]) < wid[k, t]:
+            return True
+    return False
+
+
+@_jit_inline
 def _self_hit(body, frames, c, cb):
     """Whether the body, its links placed at ``frames`` (:func:`_chain`'s, already computed), touches itself:
     every self-collision pair of the packing, a group's members only where the sphere reaches into
@@ -693,6 +766,62 @@ def _point(frames, k, v):
     )
 
 
+@_jit_inline
+def _prove_clear(path, margin, body, scene, steps, cen, wid, cnt, link_lever, frames, q):
+    """After the probe's levels: the rest of the grid (every segment's sub-steps ``steps``, counted, and the
+    last knot) proven clear of the scene, or a configuration that is not. What the levels' windows
+    (``cen``, ``wid``, ``cnt``) leave is filled gap by gap: the configuration in a gap's middle is looked
+    at (:func:`_scene_clear`) and its window closes what it proves. Returns (hit, its segment, its
+    fraction of the segment)."""
+    W, dof = path.shape
+    T = W - 1
+    off = np.zeros(T + 1, dtype=np.int64)
+    for k in range(T):
+        off[k + 1] = off[k] + int(steps[k])
+    covered = np.zeros(off[T] + 1, dtype=np.bool_)  # every segment's sub-steps, then the last knot
+    for k in range(T):
+        n = int(steps[k])
+        for t in range(cnt[k]):
+            _cover(covered, off[k], n, cen[k, t], wid[k, t])
+    for k in range(T):
+        n = int(steps[k])
+        end = n + 1 if k == T - 1 else n  # the last segment's last sub-step is the last knot
+        i = 0
+        while i < end:
+            if covered[off[k] + i]:
+                i += 1
+                continue
+            e = i
+            while e + 1 < end and not covered[off[k] + e + 1]:
+                e += 1
+            mid = (i + e) // 2
+            if mid == n:  # the last knot, as the walk takes it
+                for j in range(dof):
+                    q[j] = path[T, j]
+            else:
+                for j in range(dof):
+                    q[j] = path[k, j] + (mid / n) * (path[k + 1, j] - path[k, j])
+            w = _scene_clear(q, margin, body, scene, frames, link_lever, path, k, n)
+            if w < 0.0:
+                return True, k, mid / n
+            covered[off[k] + mid] = True
+            _cover(covered, off[k], n, mid, w)
+    return False, 0, 0.0
+
+
+@_jit_inline
+def _cover(covered, start, n, centre, width):
+    """Mark the sub-steps 0…n of a segment (from ``start`` in ``covered``) fewer than ``width`` from ``centre``
+    (n is the next segment's first: the same knot, to rounding far below the slack)."""
+    if width > n + 1.0:  # the whole segment (also an unbounded window: a still segment, an empty scene)
+        a, b = 0, n
+    else:
+        a = max(0, math.floor(centre - width) + 1)
+        b = min(n, math.ceil(centre + width) - 1)
+    for i in range(a, b + 1):
+        covered[start + i] = True
+
+
 @_jit
 def _probe(path, max_travel, margin, body, scene, hints, nh, fold=False):
     """Where a few configurations of the dense check's grid, spread along ``path (W, dof)``, already hit the
@@ -712,7 +841,7 @@ def _probe(path, max_travel, margin, body, scene, hints, nh, fold=False):
     lever = body[7]
     W, dof = path.shape
     if W < 2:
-        return False, 0, 0.0, -1
+        return False, 0, 0.0, -1, False
     frames, q = np.empty((dof + 1, 3, 4)), np.empty(dof)
     c, cb = np.empty((body[2].shape[0], 3)), np.empty((body[12].shape[0], 3))
     steps = np.zeros(W - 1)  # each segment's sub-steps, counted where first needed (a hint, a level)
@@ -724,10 +853,15 @@ def _probe(path, max_travel, margin, body, scene, hints, nh, fold=False):
             q[j] = path[k, j] + frac * (path[k + 1, j] - path[k, j])
         # where another candidate hit, the body against itself too: a walk's hit may be one
         if _scene_hit(q, margin, body, scene, frames) or _self_hit(body, frames, c, cb):
-            return True, k, frac, h
+            return True, k, frac, h, False
     for k in range(1, W - 1):  # the knots (against the body itself too where candidates fold)
         if _scene_hit(path[k], margin, body, scene, frames) or (fold and _self_hit(body, frames, c, cb)):
-            return True, k, 0.0, -1
+            return True, k, 0.0, -1, False
+    # Where a probed configuration's clearances prove its neighbours clear (:func:`_scene_clear`), they
+    # cannot hit and are not looked at: per segment, the windows (centre, half-width in sub-steps).
+    link_lever = _link_levers(body)
+    n_win = 2**_PROBE_LEVELS
+    cen, wid, cnt = np.empty((W - 1, n_win)), np.empty((W - 1, n_win)), np.zeros(W - 1, dtype=np.int64)
     parts = 2
     for _ in range(_PROBE_LEVELS):
         for k in range(W - 1):
@@ -742,15 +876,21 @@ def _probe(path, max_travel, margin, body, scene, hints, nh, fold=False):
                     or i >= n
                     or i == math.floor(n * (h - 1) / parts)
                     or i == math.floor(n * (h + 1) / parts)
+                    or _proven(cen, wid, cnt, k, i)
                 ):
                     continue
                 frac = i / n
                 for j in range(dof):
                     q[j] = path[k, j] + frac * (path[k + 1, j] - path[k, j])
-                if _scene_hit(q, margin, body, scene, frames):
-                    return True, k, frac, -1
+                w = _scene_clear(q, margin, body, scene, frames, link_lever, path, k, n)
+                if w < 0.0:
+                    return True, k, frac, -1, False
+                if w > 1.0 and cnt[k] < n_win:
+                    cen[k, cnt[k]], wid[k, cnt[k]] = i, w
+                    cnt[k] += 1
         parts *= 2
-    return False, 0, 0.0, -1
+    hit, k, frac = _prove_clear(path, margin, body, scene, steps, cen, wid, cnt, link_lever, frames, q)
+    return hit, k, frac, -1, not hit
 
 
 #: No hints, for a probe of one path.
@@ -783,11 +923,11 @@ def _first_free(paths, order, max_travel, margin, body, scene, n_hints):
     fold = False  # whether a walk's hit was the body against itself: the next probes look at the knots for it
     for i in range(order.shape[0]):
         path = paths[order[i]]
-        hit, k, frac, h = _probe(path, max_travel, margin, body, scene, hints, nh, fold)
+        hit, k, frac, h, clear = _probe(path, max_travel, margin, body, scene, hints, nh, fold)
         if hit:
             nh = _remember(hints, nh, h, k, frac)
             continue
-        first, _, frac, itself = _verdict(path, max_travel, margin, body, scene)
+        first, _, frac, itself = _verdict(path, max_travel, margin, body, scene, clear)
         if first < 0:
             return order[i]
         # the walk found a hit the probe missed: the next candidates are probed there first
@@ -881,9 +1021,10 @@ def _free_packed(path, max_travel, margin, f, n, s):
     body, scene = _unpack_body(f, n), _unpack_scene(s)
     if _scene_hit(path[path.shape[0] - 1], margin, body, scene, np.empty((path.shape[1] + 1, 3, 4))):
         return False
-    if _probe(path, max_travel, margin, body, scene, _NO_HINTS, 0)[0]:
+    hit, _, _, _, clear = _probe(path, max_travel, margin, body, scene, _NO_HINTS, 0)
+    if hit:
         return False
-    return _verdict(path, max_travel, margin, body, scene)[0] < 0
+    return _verdict(path, max_travel, margin, body, scene, clear)[0] < 0
 
 
 @_jit
