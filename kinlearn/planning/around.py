@@ -59,8 +59,8 @@ class ObstacleStages:
     """The obstacle stages of a :class:`~kinlearn.planning.planner.Planner` (see the module docstring).
 
     It reads what the planner holds: ``robot``, the limits ``_lo_np``/``_hi_np``, the obstacle network
-    (``obstacle_tm`` and its NumPy twin ``_np_obstacle_tm``), the identified ``chain``, the given body
-    (``_body``), ``retreat``, and the caches ``_body64``, ``_np_body_cache`` and ``_vias`` its
+    (``obstacle_tm``, packed for the compiled proposals on first use), the identified ``chain``, the given body
+    (``_body``), ``retreat``, and the caches ``_body64``, ``_np_body_cache``, ``_compiled_cache`` and ``_vias`` its
     ``__init__`` sets to None.
     """
 
@@ -86,7 +86,18 @@ class ObstacleStages:
         without one the straight line's :data:`NO_MODEL_KNOTS` segments."""
         if self.obstacle_tm is None:
             return np.linspace(0.0, 1.0, NO_MODEL_KNOTS + 1)[1:-1, None]
-        return self._np_obstacle_tm.fractions
+        return self._compiled_tm.fractions[:, None]
+
+    @property
+    def _compiled_tm(self):
+        """The obstacle network packed for the compiled proposals
+        (:class:`~kinlearn.planning.proposals.CompiledObstacleModel`, made on first use: numba is
+        imported with it)."""
+        if self._compiled_cache is None:
+            from .proposals import CompiledObstacleModel
+
+            self._compiled_cache = CompiledObstacleModel(self.obstacle_tm)
+        return self._compiled_cache
 
     def _boxes(self, theta0: np.ndarray, thetaT: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each problem's joint box (:meth:`~kinlearn.collision.BodySpheres.joint_box` of the planning body):
@@ -117,38 +128,23 @@ class ObstacleStages:
         f = self._fractions()
         line = theta0[:, None] + f * (thetaT - theta0)[:, None]  # the straight joint line's knots
         if self.obstacle_tm is None:  # the straight joint line alone
-            mid = np.zeros((n, 0, f.shape[0], dof))
-        else:
-            tm = self._np_obstacle_tm
-            parts = []
-            C = 2 * self.obstacle_tm.config.candidates
-            for i in range(n):
-                if skip is not None and skip[i]:
-                    parts.append(np.broadcast_to(line[i], (1, C, *line[i].shape)))
-                    continue
-                rows, floor = scenes[i]
-                # The problem and the problem the other way round (the network learned both
-                # directions), as one batch of two: the second's paths, walked backwards, are as many
-                # more candidates.
-                a, b = (theta0[i], thetaT[i]), (ef0[i], efT[i])
-                both = tm(
-                    np.stack(a),
-                    np.stack(b),
-                    np.stack(a[::-1]),
-                    np.stack(b[::-1]),
-                    np.broadcast_to(rows, (2, *rows.shape)),
-                    np.ones((2, rows.shape[0]), dtype=bool),
-                    np.broadcast_to(floor, (2, 2)),
-                )
-                parts.append(np.concatenate((both[:1], both[1:, :, ::-1]), axis=1))
-            mid = np.concatenate(parts) if parts else np.zeros((0, C, f.shape[0], dof))
+            paths = _knotted(theta0, line[:, None], thetaT, steps)
+            return paths, np.zeros((n, 1), dtype=np.int64)
+        net = self._compiled_tm
         lo, hi = self._boxes(theta0, thetaT)
-        np.clip(mid, lo[:, None, None], hi[:, None, None], out=mid)
-        # (N, C + 1, K, dof): each segment halved when refining (the same paths: the knots a refined path
-        # is optimised on)
-        paths = _knotted(theta0, np.concatenate((line[:, None], mid), axis=1), thetaT, steps)
-        length = np.linalg.norm(np.diff(paths, axis=2), axis=-1).sum(-1)  # (N, C + 1)
-        return paths, np.argsort(length, axis=1, kind="stable")
+        size = 2 * net.C + 1
+        paths = np.empty((n, size, 2 * f.shape[0] + 3 if steps else f.shape[0] + 2, dof))
+        order = np.empty((n, size), dtype=np.int64)
+        for i in range(n):
+            if skip is not None and skip[i]:  # its plan is the line: every candidate a copy of it
+                paths[i] = _knotted(theta0[i : i + 1], line[i : i + 1, None], thetaT[i : i + 1], steps)[0]
+                order[i] = np.arange(size)
+                continue
+            rows, floor = scenes[i]
+            paths[i], order[i] = net.proposals(
+                theta0[i], ef0[i], thetaT[i], efT[i], rows, floor, lo[i], hi[i], bool(steps)
+            )
+        return paths, order
 
     def _plan_around(
         self,
@@ -414,7 +410,7 @@ def _first_free(
     pick = np.where(done, 0, order[:, 0])
     check = _kernel().first_free
     for i in np.flatnonzero(~done):
-        k = check(planner._np_body, paths[i], packed[i], order[i], max_travel=CHECK_TRAVEL)
+        k = check(planner._np_body, paths[i], packed[i], order[i][order[i] != 0], max_travel=CHECK_TRAVEL)
         if k >= 0:
             pick[i], free[i] = k, True
     return pick, free

@@ -14,9 +14,8 @@ import numpy as np
 import torch
 
 from ..models.joint_path import JointPathModel
-from ..models.obstacle_path import ObstaclePathModel
 
-__all__ = ["NumpyFK", "NumpyObstacleModel", "NumpyPathModel"]
+__all__ = ["NumpyFK", "NumpyPathModel"]
 
 
 def _arr(t: torch.Tensor) -> np.ndarray:
@@ -120,43 +119,3 @@ class NumpyPathModel:
         joints = theta0[:, None] + f * (thetaT - theta0)[:, None] + self.half_range * r
         ef = ef0[:, None] + f * (efT - ef0)[:, None] + self.ef_scale * h[:, nj:].reshape(n, self.W, 3)
         return joints, ef
-
-
-class NumpyObstacleModel:
-    """The obstacle-aware TM's forward pass in NumPy (:meth:`ObstaclePathModel.forward`): problems and
-    their scenes' primitive rows → every candidate's intermediate knots ``(N, C, T − 1, dof)``."""
-
-    def __init__(self, tm: ObstaclePathModel, dtype=np.float32):
-        self.dtype = np.dtype(dtype)
-        self.silu = tm.config.activation == "silu"
-        self.enc_w, self.enc_b = _folded_mlp(tm.encoder, tm.prim_mean, tm.prim_std, self.dtype)
-        # Only the problem features are standardised; the pooled scene embedding follows them.
-        self.trunk_w, self.trunk_b = _folded_mlp(
-            tm.trunk, tm.in_mean, tm.in_std, self.dtype, rows=tm.n_problem_features
-        )
-        c = tm.config
-        self.C, self.modes, self.dof = c.candidates, c.modes, c.dof
-        self.half_range = _arr(tm.half_range)
-        self.fractions = _arr(tm.fractions)[:, None]
-        self.basis = _arr(tm.basis)
-        self.emb = c.encoder[-1]
-        self.columns = tm.row_columns
-
-    def __call__(self, theta0, ef0, thetaT, efT, rows, mask, floor) -> np.ndarray:
-        """``theta0, thetaT (N, dof)``, ``ef0, efT (N, 3)``, ``rows (N, P, 14)``, ``mask (N, P)``,
-        ``floor (N, 2)`` (as :func:`~kinlearn.models.obstacle_path.scene_primitives`) → ``(N, C, T − 1, dof)``."""
-        n = theta0.shape[0]
-        if rows.shape[1]:
-            c = rows[..., :3]
-            cols = rows[..., : self.columns]
-            p = np.concatenate((cols, c - ef0[:, None], c - efT[:, None]), axis=-1).astype(self.dtype)
-            h = _run_mlp(p, self.enc_w, self.enc_b, self.silu, last_active=True)
-            h = np.where(mask[..., None], h, -np.inf).max(axis=1)
-            emb = np.where(np.isfinite(h), h, 0.0)
-        else:
-            emb = np.zeros((n, self.emb))
-        x = np.concatenate((theta0, ef0, thetaT, efT, thetaT - theta0, floor, emb), axis=1).astype(self.dtype)
-        y = _run_mlp(x, self.trunk_w, self.trunk_b, self.silu).astype(np.float64)
-        coef = y.reshape(n, self.C, self.modes, self.dof)
-        line = theta0[:, None, None] + self.fractions * (thetaT - theta0)[:, None, None]
-        return line + self.half_range * (self.basis @ coef)

@@ -57,7 +57,7 @@ from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model
 from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
 from .around import ObstacleStages, _load_kernels
-from .inference import NumpyObstacleModel, NumpyPathModel
+from .inference import NumpyPathModel
 from .plan import DEFAULT_TOLERANCE, Plan, Tolerance, judge
 from .retreat import RetreatVias
 from .stages import Deadline
@@ -204,7 +204,7 @@ class Planner(ObstacleStages):
                 q = robot.sample(4096, torch.Generator().manual_seed(0), dtype=torch.float64)
                 self._chain_reach = float(chain.position(q).norm(dim=-1).max())
         self.chain = chain
-        self._np_obstacle_tm = NumpyObstacleModel(obstacle_tm) if obstacle_tm is not None else None
+        self._compiled_cache = None  # the obstacle network packed for the compiled proposals (first use)
         self._body, self._body64 = body, None
         self.refine_steps = _check_steps(refine_steps)
         if not isinstance(retreat, bool):
@@ -411,7 +411,7 @@ class Planner(ObstacleStages):
         """Load now what the first plan among obstacles would load (once per planner): the compiled
         check and sampler (:func:`_load_kernels`), the retreat stage's solver, this planner's sphere
         body and its self-collision pairs proven apart (:func:`~kinlearn.collision.kernel.proven_apart`,
-        0.1–0.4 s), and one small plan's code paths.
+        0.1–0.4 s), the obstacle network's compiled proposals, and one small plan's code paths.
         :meth:`plan` calls it before its deadline's clock starts; call it ahead to keep the first plan's
         call short too."""
         if self._warm:
@@ -421,6 +421,12 @@ class Planner(ObstacleStages):
         if self.retreat and self._retreat_vias() is not None:  # the chain's compiled solver
             self._retreat_vias().vias((self._lo_np + self._hi_np) / 2)
         _ = self._np_body.packed_within  # the proof of the pairs apart: here, not in a plan
+        if self.obstacle_tm is not None:  # the compiled proposals (the plan below runs no network)
+            q = (self._lo_np + self._hi_np) / 2
+            ef = positions(self.robot, q[None])[0]
+            self._compiled_tm.proposals(
+                q, ef, q, ef, np.zeros((0, 14)), np.zeros(2), self._lo_np, self._hi_np, False
+            )
         mid = torch.as_tensor((self._lo_np + self._hi_np) / 2)
         far = Scene.from_spheres([[10.0, 10.0, 10.0, 0.1]], floor=None)
         with warnings.catch_warnings():

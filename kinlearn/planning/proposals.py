@@ -1,0 +1,241 @@
+"""The obstacle network's proposals for one problem, compiled (numba): the batch-1 twin of
+:meth:`~kinlearn.models.obstacle_path.ObstaclePathModel.forward` and of the candidates the planner
+builds from it.
+
+torch (:class:`~kinlearn.models.obstacle_path.ObstaclePathModel`) is the implementation for training and
+large batches; a plan among obstacles runs the network on one problem at a time (a plan must not depend
+on its batch-mates), where each of the few dozen array operations of an eager forward pass costs
+microseconds of dispatch. This module is the one compiled twin, held to torch by a contract test
+(``tests/test_proposals.py``): one call runs the scene encoder on every primitive, pools it, runs the
+trunk for the problem and for the problem the other way round, turns both into knots and assembles
+every candidate path the planner checks — the straight joint line first, the network's paths, the
+reversed problem's paths walked backwards, each clipped to the problem's joint box, segments halved when
+refining — with each path's joint-space length and the order of the candidates, shortest first.
+The network's arithmetic is float32 as torch's (its products through BLAS, ``np.dot``), the knots
+float64. Where the same arithmetic ran as NumPy operations (before stop 41), the proposals for one
+problem took 323 / 384 µs on the panda's / iiwa14's held-out problems, compiled 124 / 167 µs (one
+process, by turns; most of what is left is reading the trunk's weights, about 1.4 MB).
+
+numba is imported with this module, which the planner imports on its first plan among obstacles
+(:mod:`kinlearn.collision.kernel` is imported there too); ``cache=True`` keeps the machine code on disk.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import torch
+
+from ..models.obstacle_path import ObstaclePathModel
+from .inference import _arr, _folded_mlp
+
+__all__ = ["CompiledObstacleModel"]
+
+_jit = numba.njit(cache=True, nogil=True, fastmath=False)
+
+
+def _packed_mlp(seq: torch.nn.Sequential, mean, std, rows: int | None = None):
+    """The Linear layers of ``seq`` (the standardisation folded in: :func:`~kinlearn.planning.inference._folded_mlp`)
+    as float32 tuples for the kernels: weights ``(in, out)`` and biases ``(1, out)``, contiguous."""
+    weights, biases = _folded_mlp(seq, mean, std, np.float32, rows=rows)
+    return tuple(np.ascontiguousarray(w) for w in weights), tuple(
+        np.ascontiguousarray(b[None]) for b in biases
+    )
+
+
+@_jit
+def _mlp(h, weights, biases, silu, last_active):
+    """The MLP on ``h (N, in)`` float32: every layer but the last followed by the activation (SiLU, else
+    tanh), the last too if ``last_active``."""
+    last = len(weights) - 1
+    for k in range(len(weights)):
+        h = np.dot(h, weights[k]) + biases[k]
+        if k < last or last_active:
+            for i in range(h.shape[0]):
+                for j in range(h.shape[1]):
+                    v = h[i, j]
+                    h[i, j] = v / (np.float32(1.0) + np.exp(-v)) if silu else np.tanh(v)
+    return h
+
+
+@_jit
+def _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_b, silu, emb_size):
+    """The network's coefficients ``(2, C · modes · dof)`` float64 for the problem (row 0) and the problem
+    the other way round (row 1): ``a0, aT (dof,)`` joints, ``e0, eT (3,)`` their end-effector positions,
+    ``rows (P, ≥ columns)`` the scene's primitive rows, ``floor (2,)``."""
+    P, dof = rows.shape[0], a0.shape[0]
+    emb = np.zeros((2, emb_size), dtype=np.float32)
+    if P:
+        p = np.empty((2 * P, columns + 6), dtype=np.float32)
+        for r in range(2):
+            f, t = (e0, eT) if r == 0 else (eT, e0)
+            for i in range(P):
+                o = r * P + i
+                for j in range(columns):
+                    p[o, j] = rows[i, j]
+                for j in range(3):
+                    p[o, columns + j] = rows[i, j] - f[j]
+                    p[o, columns + 3 + j] = rows[i, j] - t[j]
+        h = _mlp(p, enc_w, enc_b, silu, True)
+        for r in range(2):
+            for j in range(emb_size):
+                m = h[r * P, j]
+                for i in range(1, P):
+                    m = max(m, h[r * P + i, j])
+                emb[r, j] = m
+    x = np.empty((2, trunk_w[0].shape[0]), dtype=np.float32)  # θ0, ef0, θT, efT, θT − θ0, floor, scene
+    for r in range(2):
+        s, t = (a0, aT) if r == 0 else (aT, a0)
+        es, et = (e0, eT) if r == 0 else (eT, e0)
+        o = 0
+        for j in range(dof):
+            x[r, o + j] = s[j]
+        o += dof
+        for j in range(3):
+            x[r, o + j] = es[j]
+        o += 3
+        for j in range(dof):
+            x[r, o + j] = t[j]
+        o += dof
+        for j in range(3):
+            x[r, o + j] = et[j]
+        o += 3
+        for j in range(dof):
+            x[r, o + j] = t[j] - s[j]
+        o += dof
+        x[r, o], x[r, o + 1] = floor[0], floor[1]
+        o += 2
+        for j in range(emb_size):
+            x[r, o + j] = emb[r, j]
+    return _mlp(x, trunk_w, trunk_b, silu, False).astype(np.float64)
+
+
+@_jit
+def _knots(s, t, coef, fractions, basis, half_range, out):
+    """One direction's candidates' inner knots into ``out (C, T − 1, dof)``: the straight joint line from
+    ``s`` to ``t`` at ``fractions (T − 1,)`` plus ``half_range`` times the basis ``(T − 1, modes)`` times
+    each candidate's coefficients (``coef`` flat, ``(C, modes, dof)`` in order)."""
+    C, inner, dof = out.shape
+    modes = basis.shape[1]
+    for c in range(C):
+        for k in range(inner):
+            for j in range(dof):
+                v = 0.0
+                for m in range(modes):
+                    v += basis[k, m] * coef[(c * modes + m) * dof + j]
+                out[c, k, j] = s[j] + fractions[k] * (t[j] - s[j]) + half_range[j] * v
+
+
+@_jit
+def _assemble(a0, aT, ahead, back, fractions, lo, hi, halve, paths, length):
+    """Every candidate path into ``paths (2C + 1, K, dof)``: the straight line, ``ahead (C, T − 1, dof)``,
+    then ``back`` walked backwards, the network's knots clipped to ``[lo, hi]``, each segment halved when
+    ``halve``; each path's joint-space length into ``length``."""
+    n_paths, K, dof = paths.shape
+    C, inner = ahead.shape[0], ahead.shape[1]
+    T = inner + 1
+    step = 2 if halve else 1
+    for c in range(n_paths):
+        for j in range(dof):
+            paths[c, 0, j] = a0[j]
+            paths[c, K - 1, j] = aT[j]
+        for k in range(inner):
+            for j in range(dof):
+                if c == 0:
+                    v = a0[j] + fractions[k] * (aT[j] - a0[j])
+                else:
+                    v = ahead[c - 1, k, j] if c <= C else back[c - 1 - C, inner - 1 - k, j]
+                    v = min(max(v, lo[j]), hi[j])
+                paths[c, step * (k + 1), j] = v
+        if halve:
+            for k in range(T):
+                for j in range(dof):
+                    paths[c, 2 * k + 1, j] = 0.5 * (paths[c, 2 * k, j] + paths[c, 2 * k + 2, j])
+        total = 0.0
+        for k in range(K - 1):
+            ss = 0.0
+            for j in range(dof):
+                d = paths[c, k + 1, j] - paths[c, k, j]
+                ss += d * d
+            total += math.sqrt(ss)
+        length[c] = total
+
+
+@_jit
+def _proposals(
+    a0, e0, aT, eT, rows, floor, lo, hi, halve, columns, enc_w, enc_b, trunk_w, trunk_b, silu,
+    emb_size, fractions, basis, half_range, paths,
+):  # fmt: skip
+    """The whole of :meth:`CompiledObstacleModel.proposals` but the argument checks: the candidates into
+    ``paths`` and their order, shortest first (a stable sort: the line leads among equals)."""
+    C, inner, dof = (paths.shape[0] - 1) // 2, fractions.shape[0], a0.shape[0]
+    coef = _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_b, silu, emb_size)
+    ahead, back = np.empty((C, inner, dof)), np.empty((C, inner, dof))
+    _knots(a0, aT, coef[0], fractions, basis, half_range, ahead)
+    _knots(aT, a0, coef[1], fractions, basis, half_range, back)
+    length = np.empty(paths.shape[0])
+    _assemble(a0, aT, ahead, back, fractions, lo, hi, halve, paths, length)
+    return np.argsort(length, kind="mergesort")
+
+
+@_jit
+def _forward(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_b, silu, emb_size, fractions,
+             basis, half_range, out):  # fmt: skip
+    """One problem's candidates' knots into ``out (C, T − 1, dof)`` (:meth:`CompiledObstacleModel.__call__`)."""
+    coef = _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_b, silu, emb_size)
+    _knots(a0, aT, coef[0], fractions, basis, half_range, out)
+
+
+class CompiledObstacleModel:
+    """An obstacle-aware TM packed for the compiled proposals (float32 weights with the input
+    standardisation folded in, float64 knot constants), made once per planner."""
+
+    def __init__(self, tm: ObstaclePathModel):
+        self.silu = tm.config.activation == "silu"
+        self.enc_w, self.enc_b = _packed_mlp(tm.encoder, tm.prim_mean, tm.prim_std)
+        # Only the problem features are standardised; the pooled scene embedding follows them.
+        self.trunk_w, self.trunk_b = _packed_mlp(tm.trunk, tm.in_mean, tm.in_std, rows=tm.n_problem_features)
+        c = tm.config
+        self.C, self.modes, self.dof = c.candidates, c.modes, c.dof
+        self.half_range = np.ascontiguousarray(_arr(tm.half_range).reshape(-1))
+        self.fractions = _arr(tm.fractions).reshape(-1)
+        self.basis = np.ascontiguousarray(_arr(tm.basis))
+        self.emb = c.encoder[-1]
+        self.columns = tm.row_columns
+
+    def proposals(
+        self, theta0, ef0, thetaT, efT, rows, floor, lo, hi, halve: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One problem's candidate paths ``(2C + 1, K, dof)`` and their order, shortest first: the straight
+        joint line, the network's C paths, and its C paths for the problem the other way round walked
+        backwards (the network learned both directions), the network's knots clipped to the joint box
+        ``[lo, hi]``; K = T + 1 knots, 2T + 1 when ``halve`` (each segment split in two: the knots a
+        refined path is optimised on). ``theta0, thetaT, lo, hi (dof,)``, ``ef0, efT (3,)`` float64;
+        ``rows (P, ≥ 14)`` the scene's primitive rows and ``floor (2,)``
+        (:meth:`~kinlearn.collision.kernel.KernelScene.model_rows`)."""
+        T = self.fractions.shape[0] + 1
+        paths = np.empty((2 * self.C + 1, 2 * T + 1 if halve else T + 1, self.dof))
+        order = _proposals(
+            theta0, ef0, thetaT, efT, rows, floor, lo, hi, bool(halve), self.columns, self.enc_w, self.enc_b,
+            self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions, self.basis, self.half_range, paths,
+        )  # fmt: skip
+        return paths, order
+
+    def __call__(self, theta0, ef0, thetaT, efT, rows, mask, floor) -> np.ndarray:
+        """The network's forward pass on a batch (:meth:`ObstaclePathModel.forward`, unclipped):
+        ``theta0, thetaT (N, dof)``, ``ef0, efT (N, 3)``, ``rows (N, P, 14)``, ``mask (N, P)``,
+        ``floor (N, 2)`` (as :func:`~kinlearn.models.obstacle_path.scene_primitives`)
+        → every candidate's inner knots ``(N, C, T − 1, dof)``."""
+        f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+        theta0, ef0, thetaT, efT, rows, floor = map(f64, (theta0, ef0, thetaT, efT, rows, floor))
+        mask = np.asarray(mask, dtype=bool)
+        out = np.empty((theta0.shape[0], self.C, self.fractions.shape[0], self.dof))
+        for i in range(theta0.shape[0]):
+            _forward(
+                theta0[i], ef0[i], thetaT[i], efT[i], np.ascontiguousarray(rows[i][mask[i]]), floor[i],
+                self.columns, self.enc_w, self.enc_b, self.trunk_w, self.trunk_b, self.silu, self.emb,
+                self.fractions, self.basis, self.half_range, out[i],
+            )  # fmt: skip
+        return out

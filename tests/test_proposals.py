@@ -1,0 +1,106 @@
+"""The compiled proposals held to the obstacle-aware TM in torch: the knots of every candidate, and the
+candidate paths the planner checks (the line, the network's paths, the reversed problem's walked
+backwards, clipped, halved, ordered by length)."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from kinlearn.body.kinematics import kinematics
+from kinlearn.collision import Scene
+from kinlearn.collision.geometry import Box, Cylinder, Sphere
+from kinlearn.collision.kernel import KernelScene
+from kinlearn.models.obstacle_path import ObstaclePathConfig, ObstaclePathModel, scene_primitives
+from kinlearn.planning.proposals import CompiledObstacleModel
+
+
+def _model(robot, activation="silu") -> ObstaclePathModel:
+    torch.manual_seed(0)
+    config = ObstaclePathConfig.for_robot(
+        robot, hidden=(32, 32), encoder=(16, 24), candidates=4, activation=activation
+    )
+    tm = ObstaclePathModel(config)
+    with torch.no_grad():  # weights of a trained size, so the candidates differ visibly
+        for p in tm.trunk[-1].parameters():
+            p.normal_(0.0, 0.1)
+        tm.in_mean.normal_(0.0, 0.3)  # a standardisation to fold in
+        tm.in_std.uniform_(0.5, 2.0)
+    return tm.eval()
+
+
+def _states(robot, n, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    q = robot.sample(2 * n, g, dtype=torch.float64)
+    s = torch.cat((q, kinematics(robot).position(q)), -1).float()
+    return s[:n], s[n:]
+
+
+def _scene() -> Scene:
+    turn = np.array([[0.8, -0.6, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]])
+    return Scene.from_primitives(
+        [
+            Sphere([0.5, 0.0, 0.4], 0.1),
+            Box([0.6, 0.1, 0.2], [0.2, 0.1, 0.05], turn),
+            Cylinder([0.3, -0.3, 0.5], 0.05, 0.2, turn),
+        ],
+        floor=0.0,
+    )
+
+
+def test_compiled_knots_match_torch(robot):
+    """Both activations, scenes with padding inside the rows (a masked sphere before the boxes) and
+    without primitives: the knots agree with torch's float32 forward pass within 1e-4 rad."""
+    for activation in ("silu", "tanh"):
+        tm = _model(robot, activation)
+        net = CompiledObstacleModel(tm)
+        s0, sT = _states(robot, 3, seed=1)
+        mask = torch.ones(3, 2, dtype=torch.bool)
+        mask[0, 1] = False
+        padded = Scene(
+            torch.tensor([[[0.5, 0.0, 0.4, 0.1], [0.3, 0.3, 0.2, 0.05]]]).repeat(3, 1, 1),
+            torch.tensor([[[0.6, 0.0, 0.1, 0.2, 0.3, 0.1]]]).repeat(3, 1, 1),
+            floor=torch.zeros(3),
+            sphere_mask=mask,
+        )
+        for scene in (padded, _scene().expand(3), Scene().expand(3)):
+            rows, m, floor = scene_primitives(scene, 3)
+            with torch.no_grad():
+                ref = tm(s0, sT, rows, m, floor).double().numpy()
+            a = [x.double().numpy() for x in (s0[:, :7], s0[:, 7:], sT[:, :7], sT[:, 7:])]
+            out = net(*a, rows.double().numpy(), m.numpy(), floor.double().numpy())
+            assert out.shape == ref.shape
+            assert np.abs(out - ref).max() < 1e-4, activation
+
+
+def test_proposals_are_the_line_the_paths_and_the_reversed_paths(robot):
+    """The candidates the planner checks, from one call: the straight joint line first (to the bit), then
+    the network's paths for the problem, then its paths for the problem the other way round walked
+    backwards, knots clipped to the box; halving puts a knot midway along every segment; the order is by
+    joint-space length, shortest first."""
+    tm = _model(robot)
+    net = CompiledObstacleModel(tm)
+    s0, sT = _states(robot, 1, seed=3)
+    ks = KernelScene(_scene())
+    rows, floor = ks.model_rows(), ks.floor
+    a0, e0, aT, eT = (x[0].double().numpy() for x in (s0[:, :7], s0[:, 7:], sT[:, :7], sT[:, 7:]))
+    lo, hi = np.minimum(a0, aT) - 0.05, np.maximum(a0, aT) + 0.05  # a narrow box: some knots clipped
+    paths, order = net.proposals(a0, e0, aT, eT, rows, floor, lo, hi, False)
+    C = tm.config.candidates
+    assert paths.shape == (2 * C + 1, tm.config.steps + 1, 7)
+    f = net.fractions[:, None]
+    assert np.array_equal(paths[0, 1:-1], a0 + f * (aT - a0))
+    assert (paths[:, 0] == a0).all() and (paths[:, -1] == aT).all()
+    prims = (torch.from_numpy(rows)[None].float(), torch.ones(1, len(rows), dtype=torch.bool))
+    with torch.no_grad():
+        ahead = tm(s0, sT, *prims, torch.from_numpy(floor)[None].float()).double().numpy()[0]
+        back = tm(sT, s0, *prims, torch.from_numpy(floor)[None].float()).double().numpy()[0]
+    assert np.abs(paths[1 : C + 1, 1:-1] - np.clip(ahead, lo, hi)).max() < 1e-4
+    assert np.abs(paths[C + 1 :, 1:-1] - np.clip(back[:, ::-1], lo, hi)).max() < 1e-4
+    assert ((ahead < lo) | (ahead > hi)).any()  # the box did clip
+    length = np.linalg.norm(np.diff(paths, axis=1), axis=-1).sum(-1)
+    assert np.array_equal(order, np.argsort(length, kind="stable"))
+    halved, order2 = net.proposals(a0, e0, aT, eT, rows, floor, lo, hi, True)
+    assert np.array_equal(halved[:, ::2], paths)
+    assert np.allclose(halved[:, 1::2], 0.5 * (paths[:, :-1] + paths[:, 1:]), atol=1e-15)
+    assert np.array_equal(order2, order)
