@@ -10,6 +10,16 @@ torch.set_num_threads(min(2, os.cpu_count() or 1))
 ALL_ROBOTS = ("iiwa14", "panda", "ur5", "xarm7", "z1")
 
 
+def state_pairs(robot, n: int, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+    """``n`` start and ``n`` goal states [θ, ef] (float32) of joints drawn within ``robot``'s limits."""
+    from kinlearn.body.kinematics import kinematics
+
+    g = torch.Generator().manual_seed(seed)
+    q = robot.sample(2 * n, g, dtype=torch.float64)
+    s = torch.cat((q, kinematics(robot).position(q)), -1).float()
+    return s[:n], s[n:]
+
+
 @pytest.fixture
 def gen() -> torch.Generator:
     return torch.Generator().manual_seed(1234)

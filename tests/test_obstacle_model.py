@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from conftest import state_pairs
 
-from kinlearn.body.kinematics import kinematics
 from kinlearn.collision import Scene
 from kinlearn.errors import CheckpointError, ConfigError
 from kinlearn.models.obstacle_path import (
@@ -27,13 +27,6 @@ def _model(robot, **fields) -> ObstaclePathModel:
     return tm.eval()
 
 
-def _states(robot, n, seed=0):
-    g = torch.Generator().manual_seed(seed)
-    q = robot.sample(2 * n, g, dtype=torch.float64)
-    s = torch.cat((q, kinematics(robot).position(q)), -1).float()
-    return s[:n], s[n:]
-
-
 def _scene(n):
     spheres = torch.tensor([[[0.5, 0.0, 0.4, 0.1], [0.3, 0.3, 0.2, 0.05]]]).repeat(n, 1, 1)
     boxes = torch.tensor([[[0.6, 0.0, 0.1, 0.2, 0.3, 0.1]]]).repeat(n, 1, 1)
@@ -44,7 +37,7 @@ def _scene(n):
 
 def test_candidates_start_and_end_at_the_problem(robot):
     tm = _model(robot, candidates=5, modes=4)
-    s0, sT = _states(robot, 3)
+    s0, sT = state_pairs(robot, 3)
     mid = tm(s0, sT, *scene_primitives(_scene(3), 3))
     assert mid.shape == (3, 5, 10, 7)
     # The sine modes vanish at t = 0 and t = T: extending the basis to the ends gives the endpoints.
@@ -57,7 +50,7 @@ def test_candidates_start_and_end_at_the_problem(robot):
 
 def test_padding_and_order_of_primitives_do_not_matter(robot):
     tm = _model(robot)
-    s0, sT = _states(robot, 1)
+    s0, sT = state_pairs(robot, 1)
     a = Scene(torch.tensor([[0.5, 0.0, 0.4, 0.1], [0.3, 0.3, 0.2, 0.05]]))
     b = Scene(torch.tensor([[0.3, 0.3, 0.2, 0.05], [0.5, 0.0, 0.4, 0.1]]))
     padded = Scene(
@@ -74,7 +67,7 @@ def test_padding_and_order_of_primitives_do_not_matter(robot):
 
 def test_empty_scene_gives_a_finite_plan(robot):
     tm = _model(robot)
-    s0, sT = _states(robot, 2)
+    s0, sT = state_pairs(robot, 2)
     out = tm(s0, sT, *scene_primitives(Scene(), 2))
     assert torch.isfinite(out).all()
 
@@ -83,7 +76,7 @@ def test_checkpoint_round_trip_and_wrong_robot(robot, tmp_path):
     tm = _model(robot)
     save_obstacle_model(tm, tmp_path / "tm_obstacles.pt")
     back = load_obstacle_model(tmp_path / "tm_obstacles.pt", robot="iiwa14")
-    s0, sT = _states(robot, 2)
+    s0, sT = state_pairs(robot, 2)
     prims = scene_primitives(_scene(2), 2)
     assert torch.equal(back(s0, sT, *prims), tm(s0, sT, *prims))
     with pytest.raises(CheckpointError):
@@ -166,7 +159,7 @@ def test_shape_model_sees_turns_and_old_files_read_boxes(robot, tmp_path):
     ``primitives`` in its config) reads bounding boxes, as it was trained to."""
     tm = _model(robot)
     assert tm.config.primitives == "shape" and tm.row_columns == 14
-    s0, sT = _states(robot, 3, seed=2)
+    s0, sT = state_pairs(robot, 3, seed=2)
     rows, mask, floor = scene_primitives(_mixed_scene().expand(3), 3)
     with torch.no_grad():
         ref = tm(s0, sT, rows, mask, floor).double().numpy()

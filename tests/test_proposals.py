@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from conftest import state_pairs
 
-from kinlearn.body.kinematics import kinematics
 from kinlearn.collision import Scene
 from kinlearn.collision.geometry import Box, Cylinder, Sphere
 from kinlearn.collision.kernel import KernelScene
@@ -29,13 +29,6 @@ def _model(robot, activation="silu") -> ObstaclePathModel:
     return tm.eval()
 
 
-def _states(robot, n, seed=0):
-    g = torch.Generator().manual_seed(seed)
-    q = robot.sample(2 * n, g, dtype=torch.float64)
-    s = torch.cat((q, kinematics(robot).position(q)), -1).float()
-    return s[:n], s[n:]
-
-
 def _scene() -> Scene:
     turn = np.array([[0.8, -0.6, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]])
     return Scene.from_primitives(
@@ -54,7 +47,7 @@ def test_compiled_knots_match_torch(robot):
     for activation in ("silu", "tanh"):
         tm = _model(robot, activation)
         net = CompiledObstacleModel(tm)
-        s0, sT = _states(robot, 3, seed=1)
+        s0, sT = state_pairs(robot, 3, seed=1)
         mask = torch.ones(3, 2, dtype=torch.bool)
         mask[0, 1] = False
         padded = Scene(
@@ -80,7 +73,7 @@ def test_proposals_are_the_line_the_paths_and_the_reversed_paths(robot):
     joint-space length, shortest first."""
     tm = _model(robot)
     net = CompiledObstacleModel(tm)
-    s0, sT = _states(robot, 1, seed=3)
+    s0, sT = state_pairs(robot, 1, seed=3)
     ks = KernelScene(_scene())
     rows, floor = ks.model_rows(), ks.floor
     a0, e0, aT, eT = (x[0].double().numpy() for x in (s0[:, :7], s0[:, 7:], sT[:, :7], sT[:, 7:]))

@@ -61,6 +61,14 @@ def _mlp(h, weights, biases, silu, last_active):
 
 
 @_jit
+def _put(row, o, v):
+    """``v`` into ``row`` from column ``o``; the column after it."""
+    for j in range(v.shape[0]):
+        row[o + j] = v[j]
+    return o + v.shape[0]
+
+
+@_jit
 def _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_b, silu, emb_size):
     """The network's coefficients ``(2, C · modes · dof)`` float64 for the problem (row 0) and the problem
     the other way round (row 1): ``a0, aT (dof,)`` joints, ``e0, eT (3,)`` their end-effector positions,
@@ -89,19 +97,10 @@ def _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, t
     for r in range(2):
         s, t = (a0, aT) if r == 0 else (aT, a0)
         es, et = (e0, eT) if r == 0 else (eT, e0)
-        o = 0
-        for j in range(dof):
-            x[r, o + j] = s[j]
-        o += dof
-        for j in range(3):
-            x[r, o + j] = es[j]
-        o += 3
-        for j in range(dof):
-            x[r, o + j] = t[j]
-        o += dof
-        for j in range(3):
-            x[r, o + j] = et[j]
-        o += 3
+        o = _put(x[r], 0, s)
+        o = _put(x[r], o, es)
+        o = _put(x[r], o, t)
+        o = _put(x[r], o, et)
         for j in range(dof):
             x[r, o + j] = t[j] - s[j]
         o += dof
