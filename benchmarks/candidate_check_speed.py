@@ -10,8 +10,9 @@ network's paths both ways, shortest first) on the committed held-out problems of
 
 - ``first_free``: each candidate probed first where the last candidates hit the scene (where a probe
   or a walk found their collision), then at spread
-  grid configurations, scene only, link by link behind a ball per link (a hit is a collision), then
-  walked with budgets, without the self-collision pairs proven apart (the planner's check); also with
+  grid configurations, scene only, link by link behind a ball per link (a hit is a collision; a clear
+  one proves a window around it clear), then walked with budgets for self-collision and the rest of the
+  grid proven clear of the scene, without the self-collision pairs proven apart (the planner's check); also with
   every pair, and without the places of the last hits;
 - the walk alone: the budgeted verdict of each candidate in order until one is free;
 - exact: every sub-step of every candidate evaluated (``check_paths``), the first free one taken.
