@@ -423,9 +423,9 @@ class Planner(ObstacleStages):
         _ = self._np_body.packed_within  # the proof of the pairs apart: here, not in a plan
         if self.obstacle_tm is not None:  # the compiled proposals (the plan below runs no network)
             q = (self._lo_np + self._hi_np) / 2
-            ef = positions(self.robot, q[None])[0]
-            self._compiled_tm.proposals(
-                q, ef, q, ef, np.zeros((0, 14)), np.zeros(2), self._lo_np, self._hi_np, False
+            ef, net = positions(self.robot, q[None])[0], self._compiled_tm
+            net.proposals(
+                q, ef, q, ef, np.zeros((0, net.columns)), np.zeros(2), self._lo_np, self._hi_np, False
             )
         mid = torch.as_tensor((self._lo_np + self._hi_np) / 2)
         far = Scene.from_spheres([[10.0, 10.0, 10.0, 0.1]], floor=None)
