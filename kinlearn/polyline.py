@@ -1,18 +1,29 @@
-"""The paper's trajectory metrics (its Table 2) of a polyline of end-effector points.
+"""Polylines: the paper's trajectory metrics (its Table 2) of a polyline of end-effector points, and
+the resampling of any polyline by arc length.
 
 Pure geometry of points, shared by training (held-out metrics after each epoch) and evaluation
 (:mod:`kinlearn.evaluation.metrics`, which adds what executing a plan gives). The polyline of T + 1
 points is P = [ef(s(0)), ŝ(1), …, ŝ(T−1), ef(s(T))]; see :func:`trajectory_metrics` for the metrics.
+:func:`resample` turns a joint path of any number of vertices into a fixed number of points (a
+sampler's path as a network's knots).
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from .checks import check_finite, check_last_dim
 from .errors import ShapeError
 
-__all__ = ["ZERO_LENGTH", "interior_angles", "polyline_metrics", "trajectory_metrics", "trajectory_points"]
+__all__ = [
+    "ZERO_LENGTH",
+    "interior_angles",
+    "polyline_metrics",
+    "resample",
+    "trajectory_metrics",
+    "trajectory_points",
+]
 
 #: Segments shorter than this (metres) count as zero-length when measuring angles.
 ZERO_LENGTH = 1e-9
@@ -105,3 +116,15 @@ def trajectory_metrics(
     out["waypoint_path_length"] = out.pop("path_length")
     out["endpoint_distance"] = torch.linalg.vector_norm(ef_goal.double() - ef_start.double(), dim=-1)
     return {k: v.to(ef_start.dtype) for k, v in out.items()}
+
+
+def resample(vertices: np.ndarray, count: int) -> np.ndarray:
+    """``count`` points equally spaced by arc length along the polyline ``vertices (M, n)`` (its first
+    and last vertex among them); a polyline of zero length gives its first vertex ``count`` times."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    seg = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
+    cum = np.concatenate(([0.0], np.cumsum(seg)))
+    if cum[-1] <= 0.0:
+        return np.repeat(vertices[:1], count, axis=0)
+    u = np.linspace(0.0, cum[-1], count)
+    return np.stack([np.interp(u, cum, vertices[:, j]) for j in range(vertices.shape[1])], axis=1)

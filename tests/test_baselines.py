@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import sys
 
-import numpy as np
 import pytest
 import torch
 
@@ -19,7 +18,6 @@ from kinlearn.errors import (
 )
 from kinlearn.evaluation.metrics import plan_metrics
 from kinlearn.planning.baselines import (
-    _resample,
     cartesian_line,
     joint_line,
     rrt_connect,
@@ -124,15 +122,6 @@ def test_rrt_connect(robot):
     assert torch.equal(plan.joints[:, -1], StateLayout(robot.dof).split(goal)[0])
     assert times.shape == (16,) and bool((times > 0).all()) and bool((times < 1.0).all())
     assert float(plan_metrics(plan, robot)["limit_violation"].sum()) == 0
-
-
-def test_resampling_is_even_in_arc_length():
-    vertices = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
-    expected = np.array([[0, 0], [0.5, 0], [1, 0], [1, 0.5], [1, 1.0]])
-    np.testing.assert_allclose(_resample(vertices, 5), expected, atol=1e-15)
-    # 4 points on a path of length 2: spacing 2/3 along the path, the corner is cut.
-    np.testing.assert_allclose(_resample(vertices, 4)[1:3], [[2 / 3, 0], [1, 1 / 3]], atol=1e-15)
-    np.testing.assert_array_equal(_resample(np.ones((3, 2)), 4), np.ones((4, 2)))  # zero length
 
 
 def test_rrt_connect_is_reproducible_with_a_seed(robot):

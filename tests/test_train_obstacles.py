@@ -178,6 +178,27 @@ def test_train_obstacle_planner_command(tmp_path):
     assert not (tmp_path / "other").exists()
 
 
+def test_train_obstacle_planner_taught_by_the_shipped_planner(tmp_path):
+    """--teacher planner: the shipped planner plans the training problems first (its plans written beside
+    them), the network is distilled from them and says so, and the run records its teacher; naming a
+    teacher planner without --teacher planner is refused before anything is written."""
+    from kinlearn.cli.main import main
+    from kinlearn.models.obstacle_path import load_obstacle_model
+
+    run = tmp_path / "run"
+    args = ["train-obstacle-planner", "--families", "cubby", "--problems-per-family", "2", "--iterations", "2"]
+    args += ["--batch-size", "2", "--candidates", "2", "--no-progress"]
+    taught = ["--teacher", "planner", "--imitation", "300", "--solvable-only"]
+    assert main([*args, *taught, "--run-dir", str(run)]) == 0
+    assert [p.name for p in (run / "problems").glob("*.planner11.npz")] == ["cubby_00_2.planner11.npz"]
+    assert load_obstacle_model(run / "tm_obstacles.pt").distilled == "planner"
+    record = json.loads((run / "config.json").read_text())["obstacle_planner"]
+    assert record["teacher"]["planner"].endswith("iiwa14") and record["imitation"] == 300
+    other = tmp_path / "other"
+    assert main([*args, "--teacher-planner", str(run), "--run-dir", str(other)]) == 2
+    assert not other.exists()
+
+
 def test_train_obstacle_planner_refuses_a_planner_folder_without_a_planner(tmp_path, capsys):
     from kinlearn.cli.main import main
 
@@ -341,9 +362,7 @@ def test_expert_paths_solve_start_to_goal_and_are_cached(problems, tmp_path):
     the cache beside the set), made again for another number of knots; resampled by arc length."""
     import shutil
 
-    import numpy as np
-
-    from kinlearn.training.obstacle_path import _resample, expert_paths
+    from kinlearn.training.obstacle_path import expert_paths
 
     path = tmp_path / "train.npz"
     shutil.copy(problems[0], path)
@@ -358,10 +377,6 @@ def test_expert_paths_solve_start_to_goal_and_are_cached(problems, tmp_path):
     again, found2 = expert_paths(path, robot, 6)
     assert torch.equal(again, paths) and torch.equal(found2, found)
     assert expert_paths(path, robot, 4)[0].shape[1] == 5 and (tmp_path / "train.experts4.npz").is_file()
-    # resampling by arc length keeps the ends and spaces the points equally along the polyline
-    poly = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 3.0]])
-    r = _resample(poly, 4)
-    assert np.allclose(r, [[0, 0], [1, 0], [1, 1], [1, 2], [1, 3]])
 
 
 def test_distillation_pulls_the_nearest_candidate_and_is_recorded(problems, tmp_path):
@@ -375,11 +390,11 @@ def test_distillation_pulls_the_nearest_candidate_and_is_recorded(problems, tmp_
     logs = [json.loads(x) for x in (tmp_path / "d" / "metrics.jsonl").read_text().splitlines()]
     imit = [x["train/imitation"] for x in logs if "train/imitation" in x]
     assert len(imit) >= 2 and imit[-1] < imit[0]
-    assert tm.distilled and load_obstacle_model(tmp_path / "d" / "tm_obstacles.pt").distilled
+    assert tm.distilled == "sampler" == load_obstacle_model(tmp_path / "d" / "tm_obstacles.pt").distilled
     export_obstacle_model(tmp_path / "d" / "tm_obstacles.pt", tmp_path / "exported.pt")
-    assert load_obstacle_model(tmp_path / "exported.pt").distilled
+    assert load_obstacle_model(tmp_path / "exported.pt").distilled == "sampler"
     plain = train_obstacle_model(_tiny(problems, iterations=2), tmp_path / "p", progress=False)
-    assert not plain.distilled and not load_obstacle_model(tmp_path / "p" / "tm_obstacles.pt").distilled
+    assert plain.distilled is None and load_obstacle_model(tmp_path / "p" / "tm_obstacles.pt").distilled is None
     # A self-supervised run's record is what it was before distillation existed (runs made then resume).
     assert "imitation" not in _tiny(problems).to_dict()["loss"]
     assert cfg.to_dict()["loss"]["imitation"] == 50.0
@@ -400,7 +415,7 @@ def test_solvable_only_trains_on_what_the_sampler_solves(problems, tmp_path):
     assert cfg.to_dict()["solvable_only"] is True and "solvable_only" not in _tiny(problems).to_dict()
     tm = train_obstacle_model(cfg, tmp_path / "run", progress=False)
     _, found = expert_paths(path, load_robot("iiwa14"), tm.config.steps)
-    assert not tm.distilled and int(found.sum()) >= 4  # a filter, not a teacher
+    assert tm.distilled is None and int(found.sum()) >= 4  # a filter, not a teacher
     kept = {f for f, ok in zip(problems[1].family.tolist(), found.tolist(), strict=True) if ok}
     assert len(tm.families) == len(kept)
 

@@ -15,6 +15,7 @@ from ..io import atomic_copy
 from ..models.forward_inverse import load_fm, load_im
 from ..planning.planner import Planner
 from .common import (
+    EXISTING_DIR,
     EXISTING_FILE,
     NONNEGATIVE_FLOAT,
     NONNEGATIVE_INT,
@@ -219,15 +220,31 @@ def _add_train_obstacle_planner(sub) -> None:
         type=NONNEGATIVE_FLOAT,
         default=0.0,
         metavar="WEIGHT",
-        help="distil: the compiled RRT-Connect solves each training problem once (cached beside the problems) "
-        "and the nearest candidate is pulled towards its path with this weight, besides the self-supervised "
-        "loss (default: 0, self-supervised alone; 10 is a good start)",
+        help="distil: each training problem's teacher path (--teacher; made once, cached beside the problems) "
+        "pulls the nearest candidate towards it with this weight, besides the self-supervised loss "
+        "(default: 0, self-supervised alone; 10 for the sampler's paths, 300 for a planner's own plans)",
+    )
+    p.add_argument(
+        "--teacher",
+        choices=("sampler", "planner"),
+        default="sampler",
+        help="whose paths --imitation and --solvable-only read: the compiled RRT-Connect's (20,000 iterations "
+        "per problem; default) or a kinlearn planner's own plans (plan(..., obstacles=...) by default: its "
+        "fixed-time stages, then 2,000 sampler iterations; --teacher-planner), self-distillation",
+    )
+    p.add_argument(
+        "--teacher-planner",
+        type=EXISTING_DIR,
+        default=None,
+        metavar="FOLDER",
+        help="the planner folder whose plans teach with --teacher planner (default: the robot's shipped planner)",
     )
     p.add_argument(
         "--solvable-only",
         action="store_true",
-        help="train only on the problems the compiled RRT-Connect solves within 20,000 iterations (solved once, "
-        "cached beside the problems): unverified problems include infeasible ones; a filter, no path is shown",
+        help="train only on the problems the teacher solves (--teacher; the sampler within 20,000 iterations; "
+        "solved once, cached beside the problems): unverified problems include infeasible ones; a filter, "
+        "no path is shown without --imitation",
     )
     p.add_argument(
         "--sphere-set",
@@ -286,6 +303,20 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
     from ..data.problems import ProblemConfig
 
     body_name = ProblemConfig(sphere_set=args.sphere_set).body(robot).name  # an unknown set is refused here
+    teacher_record = None
+    if args.teacher == "planner":
+        from ..planning.planner import DEFAULT_CHECKPOINTS, OBSTACLE_TM
+
+        teacher_dir = args.teacher_planner or DEFAULT_CHECKPOINTS / robot.name
+        if not (teacher_dir / "tm.pt").is_file():
+            raise ConfigError(f"--teacher-planner {teacher_dir} is not a planner folder (it holds no tm.pt)")
+        network = teacher_dir / OBSTACLE_TM
+        teacher_record = {
+            "planner": str(teacher_dir),
+            **({"network": file_identity(network)} if network.is_file() else {}),
+        }
+    elif args.teacher_planner is not None:
+        raise ConfigError("--teacher-planner names the planner of --teacher planner; add --teacher planner")
     run = open_command_run(
         args,
         ("tm_obstacles.pt", "metrics.jsonl", "tensorboard", "problems"),
@@ -299,6 +330,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
             "candidates": args.candidates,
             **({"imitation": args.imitation} if args.imitation else {}),  # absent: self-supervised, as before
             **({"solvable_only": True} if args.solvable_only else {}),
+            **({"teacher": teacher_record} if args.teacher != "sampler" else {}),  # absent: the sampler
             # absent: the robot's default sphere body, as before sets could be chosen
             **({"sphere_set": body_name} if body_name != body_spheres(robot).name else {}),
             **({"within": args.within} if args.within != "robot" else {}),  # absent: the robot's, as before
@@ -320,6 +352,17 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         sphere_set=args.sphere_set,
         within=args.within,
     )
+    if args.teacher == "planner":
+        import time
+
+        from ..models.obstacle_path import ObstaclePathConfig
+        from ..planning.teacher import planner_paths
+
+        knots = ObstaclePathConfig.for_robot(robot, candidates=args.candidates).steps
+        for p in paths:
+            t0 = time.perf_counter()
+            planner_paths(teacher_dir, p, knots)
+            print(f"the teacher planner's plans of {p.name}: {time.perf_counter() - t0:.0f} s", flush=True)
     cfg = ObstacleTrainConfig(
         robot=robot.name,
         problems=tuple(sorted(str(p) for p in paths)),
@@ -331,6 +374,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         model={"candidates": args.candidates},
         loss=ObstacleLossConfig(imitation=args.imitation),
         solvable_only=args.solvable_only,
+        teacher=args.teacher,
         init_checkpoint=str(args.init_checkpoint) if args.init_checkpoint else None,
         seed=args.seed,
     )

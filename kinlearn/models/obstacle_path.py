@@ -194,9 +194,10 @@ class ObstaclePathModel(nn.Module):
         #: The scene families it was trained on (names of :data:`kinlearn.data.problems.FAMILIES`),
         #: recorded by its trainer and kept in its checkpoint; None where none was recorded.
         self.families: tuple[str, ...] | None = None
-        #: Whether its training also pulled a candidate towards the offline sampler's paths
-        #: (:mod:`kinlearn.training.obstacle_path`, distillation); kept in its checkpoint.
-        self.distilled: bool = False
+        #: Whose paths its training also pulled a candidate towards (:mod:`kinlearn.training.obstacle_path`,
+        #: distillation): ``"sampler"`` (the offline RRT-Connect's), ``"planner"`` (a planner's own plans),
+        #: None (self-supervised alone); kept in its checkpoint.
+        self.distilled: str | None = None
         #: The sphere set its training went through (``BodySpheres.name``: the ur5's ``"gripper"``), kept in
         #: its checkpoint; None where none was recorded (a learned body, or an older checkpoint).
         self.body: str | None = None
@@ -280,8 +281,8 @@ def save_obstacle_model(
 def _record(tm: ObstaclePathModel) -> dict:
     """What a checkpoint keeps of how the model was trained."""
     extra: dict = {} if tm.families is None else {"families": list(tm.families)}
-    if tm.distilled:
-        extra["distilled"] = True
+    if tm.distilled:  # the sampler's as True, as before a planner could teach
+        extra["distilled"] = True if tm.distilled == "sampler" else tm.distilled
     if tm.body is not None:
         extra["body"] = tm.body
     return extra
@@ -307,7 +308,10 @@ def load_obstacle_model(path: str | Path, robot: str | None = None) -> ObstacleP
             f"{path}: the obstacle TM checkpoint does not match this kinlearn ({exc})"
         ) from exc
     tm.families = _families(payload, path)
-    tm.distilled = payload["extra"].get("distilled", False) is True
+    distilled = payload["extra"].get("distilled", False)
+    if distilled not in (False, True, "planner"):
+        raise CheckpointError(f"{path}: its record of distillation is not one kinlearn knows: {distilled!r}")
+    tm.distilled = "sampler" if distilled is True else (distilled or None)
     body = payload["extra"].get("body")
     if body is not None and not isinstance(body, str):
         raise CheckpointError(f"{path}: its record of the training body is not a name: {body!r}")

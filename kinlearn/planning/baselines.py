@@ -45,6 +45,7 @@ from ..collision.body import BodySpheres
 from ..collision.ompl import OmplRrtConnect
 from ..data.problem import LIMIT_TOLERANCE, Problem
 from ..errors import ConfigError, ObstaclesIgnoredWarning, PlanningError, ShapeError
+from ..polyline import resample
 from .plan import Plan, judge
 
 __all__ = [
@@ -241,16 +242,6 @@ def _dls_path(robot: Robot, theta, ef0, efT, steps: int, iterations: int, dampin
 # --------------------------------------------------------------------------------------------------
 
 
-def _resample(vertices: np.ndarray, count: int) -> np.ndarray:
-    """``count`` points evenly spaced by arc length along the polyline ``vertices (M, n)``."""
-    seg = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
-    cum = np.concatenate(([0.0], np.cumsum(seg)))
-    if cum[-1] <= 0.0:
-        return np.repeat(vertices[:1], count, axis=0)
-    targets = np.linspace(0.0, cum[-1], count)
-    return np.stack([np.interp(targets, cum, vertices[:, j]) for j in range(vertices.shape[1])], axis=1)
-
-
 def rrt_connect_timed(
     robot: Robot,
     start: torch.Tensor,
@@ -294,7 +285,7 @@ def rrt_connect_timed(
                 "raise time_limit"
             )
         vertices[0], vertices[-1] = q0[i], qT[i]
-        paths[i] = _resample(vertices, steps + 1)
+        paths[i] = resample(vertices, steps + 1)
         times[i] = time.perf_counter() - t0
 
     joints = torch.as_tensor(paths, dtype=start.dtype, device=start.device).reshape(

@@ -27,6 +27,9 @@ resampled to the model's knots by arc length, is a target: the candidate nearest
 ranges) is pulled towards it by ``imitation`` times the mean squared knot difference, on top of the
 self-supervised loss every candidate keeps. The sampler shows the way out of a cell; the body's
 hinges still decide what is free. A network trained so is marked as distilled in its checkpoint.
+Self-distillation (``ObstacleTrainConfig.teacher="planner"``) takes a kinlearn planner's own plans as
+the targets instead (its retreat stage's paths and, where its fixed-time stages clear nothing, its
+sampler's), written beforehand by :func:`kinlearn.planning.teacher.planner_paths`.
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ from ..collision.body import BodySpheres, body_spheres
 from ..collision.distance import body_obstacle_distance, self_collision_distance
 from ..collision.geometry import safe_sqrt
 from ..data.problems import FAMILIES, LEGACY_FAMILIES, ProblemConfig, ProblemSet, make_problems
+from ..data.target_paths import TEACHERS, load_target_paths, read_target_paths, save_target_paths
 from ..errors import ConfigError, DatasetError
 from ..models.obstacle_path import (
     ObstaclePathConfig,
@@ -54,6 +58,7 @@ from ..models.obstacle_path import (
     save_obstacle_model,
     scene_primitives,
 )
+from ..polyline import resample
 from .loop import iteration_loop, seed_everything
 
 __all__ = [
@@ -64,6 +69,7 @@ __all__ = [
     "candidate_losses",
     "expert_paths",
     "make_training_problems",
+    "planner_paths",
     "train_obstacle_model",
 ]
 
@@ -104,7 +110,10 @@ class ObstacleTrainConfig:
     :data:`EXPERT_ITERATIONS` (:func:`expert_paths`, made once and cached) and drop the rest: unverified
     problems include infeasible ones (start and goal in parts of the free space that do not connect),
     whose loss can only pull paths through obstacles. A filter, not a teacher: no path is shown unless
-    ``loss.imitation`` > 0. Adam with cosine decay to zero.
+    ``loss.imitation`` > 0. ``teacher``: whose paths the filter and the imitation read (see
+    :mod:`kinlearn.data.target_paths`): ``"sampler"`` (the compiled RRT-Connect, made here when
+    missing) or ``"planner"`` (a kinlearn planner's own plans, self-distillation: made beforehand by
+    :func:`kinlearn.planning.teacher.planner_paths`). Adam with cosine decay to zero.
     """
 
     robot: str = "iiwa14"
@@ -118,6 +127,7 @@ class ObstacleTrainConfig:
     checkpoint_every: int = 100
     init_checkpoint: str | None = None
     solvable_only: bool = False
+    teacher: Literal["sampler", "planner"] = "sampler"
     loss: ObstacleLossConfig = field(default_factory=ObstacleLossConfig)
     model: dict = field(default_factory=dict)
     seed: int = 0
@@ -125,6 +135,8 @@ class ObstacleTrainConfig:
     def __post_init__(self) -> None:
         if not self.problems:
             raise ConfigError("ObstacleTrainConfig.problems must name at least one problem set (.npz)")
+        if self.teacher not in TEACHERS:
+            raise ConfigError(f"teacher must be one of {', '.join(TEACHERS)}, got {self.teacher!r}")
         if self.body not in ("analytic", "learned"):
             raise ConfigError(f"body must be 'analytic' or 'learned', got {self.body!r}")
         if self.body == "learned" and not self.body_checkpoint:
@@ -143,6 +155,8 @@ class ObstacleTrainConfig:
             del d["loss"]["imitation"]
         if not self.solvable_only:  # and as before the filter existed
             del d["solvable_only"]
+        if self.teacher == "sampler":  # and as before a planner could teach
+            del d["teacher"]
         return d
 
     @classmethod
@@ -209,17 +223,6 @@ def make_training_problems(
 #: The offline sampler's iteration budget per training problem (a budget of work: the same paths on
 #: every machine); a problem it leaves unsolved has no target.
 EXPERT_ITERATIONS = 20000
-#: Kind of the cached expert-path files (:func:`expert_paths`).
-EXPERT_KIND = "expert_paths"
-
-
-def _resample(path: np.ndarray, knots: int) -> np.ndarray:
-    """``path (V, dof)`` → ``(knots + 1, dof)``: points equally spaced by joint-space arc length."""
-    s = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))))
-    if s[-1] <= 0.0:
-        return np.repeat(path[:1], knots + 1, axis=0)
-    u = np.linspace(0.0, s[-1], knots + 1)
-    return np.stack([np.interp(u, s, path[:, j]) for j in range(path.shape[1])], axis=1)
 
 
 def expert_paths(
@@ -229,31 +232,25 @@ def expert_paths(
     and resampled to ``knots + 1`` points by arc length: ``(paths (N, knots + 1, dof) float64, found (N,)
     bool)``. Each problem gets :data:`EXPERT_ITERATIONS` iterations with its index as the seed (no time
     limit: the same paths everywhere), searching the problem's joint box as the planner does
-    (:meth:`~kinlearn.collision.BodySpheres.joint_box`). Made once and cached beside the set (``NAME.experts{knots}.npz``,
-    written atomically); a cache of another set, robot or size is made again."""
+    (:meth:`~kinlearn.collision.BodySpheres.joint_box`). Made once and cached beside the set (the
+    ``sampler`` teacher's file of :mod:`kinlearn.data.target_paths`, written atomically); a cache of
+    another set, robot or size is made again."""
     from ..collision import kernel
     from ..collision.rrt import rrt_connect
-    from ..io import load_npz, save_npz
 
-    problems = Path(problems)
-    cache = problems.with_name(f"{problems.stem}.experts{knots}.npz")
     pset = ProblemSet.load(problems, robot=robot.name)
     body = pset.body(robot).double()
     want = {
-        "problems": problems.name,
+        "problems": Path(problems).name,
         "knots": knots,
         "iterations": EXPERT_ITERATIONS,
         "n": len(pset),
         "body": body.name,
         "box": "joint_box",
     }
-    if cache.is_file():
-        try:
-            meta, arrays = load_npz(cache, kind=EXPERT_KIND, robot=robot.name)
-            if meta.get("config") == want:
-                return torch.from_numpy(arrays["paths"]), torch.from_numpy(arrays["found"])
-        except DatasetError:
-            pass  # unreadable: made again below
+    held = load_target_paths(problems, robot.name, "sampler", knots, want)
+    if held is not None:
+        return torch.from_numpy(held[0]), torch.from_numpy(held[1])
     lo, hi = body.joint_box(pset.start.numpy(), pset.goal.numpy())
     body = kernel.KernelBody.of(body)
     paths = np.zeros((len(pset), knots + 1, robot.dof))
@@ -265,10 +262,27 @@ def expert_paths(
             lo[i], hi[i], time_limit=math.inf, seed=i, max_iterations=EXPERT_ITERATIONS,
         )  # fmt: skip
         if path is not None:
-            paths[i], found[i] = _resample(path, knots), True
+            paths[i], found[i] = resample(path, knots + 1), True
         if progress is not None:
             progress(i + 1)
-    save_npz(cache, kind=EXPERT_KIND, robot=robot.name, config=want, arrays={"paths": paths, "found": found})
+    save_target_paths(problems, robot.name, "sampler", knots, want, paths, found)
+    return torch.from_numpy(paths), torch.from_numpy(found)
+
+
+def planner_paths(problems: str | Path, robot: Robot, knots: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """A planner's own plans of the set in ``problems`` as ``(paths (N, knots + 1, dof) float64, found
+    (N,) bool)``: the ``planner`` teacher's file beside the set (:mod:`kinlearn.data.target_paths`), made
+    beforehand by :func:`kinlearn.planning.teacher.planner_paths` (``kinlearn train-obstacle-planner
+    --teacher planner`` makes it). A :class:`~kinlearn.errors.ConfigError` where there is none for
+    this set, robot and number of knots."""
+    n = len(ProblemSet.load(problems, robot=robot.name))
+    try:
+        _, paths, found = read_target_paths(problems, robot.name, "planner", knots, n)
+    except DatasetError as exc:
+        raise ConfigError(
+            f"teacher 'planner' needs a planner's paths of {problems} at {knots} knots "
+            f"(make them with kinlearn.planning.teacher.planner_paths): {exc}"
+        ) from exc
     return torch.from_numpy(paths), torch.from_numpy(found)
 
 
@@ -486,7 +500,8 @@ def train_obstacle_model(
     kin = kinematics(robot)
     experts = found = None
     if config.loss.imitation > 0 or config.solvable_only:  # the offline sampler's paths, in the pool's order
-        parts = [expert_paths(p, robot, tm.config.steps) for p in config.problems]
+        targets = expert_paths if config.teacher == "sampler" else planner_paths
+        parts = [targets(p, robot, tm.config.steps) for p in config.problems]
         experts = torch.cat([e for e, _ in parts])[:, 1:-1].float()
         found = torch.cat([f for _, f in parts])
         if config.solvable_only:
@@ -520,7 +535,7 @@ def train_obstacle_model(
             floor_all.repeat(2, 1),
         )
     tm.families = tuple(f for f in FAMILIES if f in seen)  # recorded in its checkpoints
-    tm.distilled = config.loss.imitation > 0
+    tm.distilled = config.teacher if config.loss.imitation > 0 else None
     tm.body = body.name if config.body == "analytic" else None  # the sphere set it learned through
     if not tm.distilled:  # the sampler's paths filtered the pool; they are no target
         experts = None
