@@ -66,7 +66,9 @@ def test_a_training_taught_by_a_planner_reads_its_plans_and_says_so(problems, tm
         ObstacleTrainConfig(**{**base, "teacher": "oracle"})
     cfg = ObstacleTrainConfig(**base, loss=ObstacleLossConfig(imitation=500.0))
     with pytest.raises(ConfigError, match="planner's paths"):  # at 11 knots: none were made
-        train_obstacle_model(ObstacleTrainConfig(**{**base, "model": {**base["model"], "steps": 11}}), tmp_path / "x")
+        train_obstacle_model(
+            ObstacleTrainConfig(**{**base, "model": {**base["model"], "steps": 11}}), tmp_path / "x"
+        )
     planner_paths(DEFAULT_CHECKPOINTS / "iiwa14", path, cfg.model_config(load_robot("iiwa14")).steps)
     tm = train_obstacle_model(cfg, tmp_path / "run", progress=False)
     assert tm.distilled == "planner" == load_obstacle_model(tmp_path / "run" / "tm_obstacles.pt").distilled

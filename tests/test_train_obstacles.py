@@ -186,7 +186,15 @@ def test_train_obstacle_planner_taught_by_the_shipped_planner(tmp_path):
     from kinlearn.models.obstacle_path import load_obstacle_model
 
     run = tmp_path / "run"
-    args = ["train-obstacle-planner", "--families", "cubby", "--problems-per-family", "2", "--iterations", "2"]
+    args = [
+        "train-obstacle-planner",
+        "--families",
+        "cubby",
+        "--problems-per-family",
+        "2",
+        "--iterations",
+        "2",
+    ]
     args += ["--batch-size", "2", "--candidates", "2", "--no-progress"]
     taught = ["--teacher", "planner", "--imitation", "300", "--solvable-only"]
     assert main([*args, *taught, "--run-dir", str(run)]) == 0
@@ -394,7 +402,9 @@ def test_distillation_pulls_the_nearest_candidate_and_is_recorded(problems, tmp_
     export_obstacle_model(tmp_path / "d" / "tm_obstacles.pt", tmp_path / "exported.pt")
     assert load_obstacle_model(tmp_path / "exported.pt").distilled == "sampler"
     plain = train_obstacle_model(_tiny(problems, iterations=2), tmp_path / "p", progress=False)
-    assert plain.distilled is None and load_obstacle_model(tmp_path / "p" / "tm_obstacles.pt").distilled is None
+    assert (
+        plain.distilled is None and load_obstacle_model(tmp_path / "p" / "tm_obstacles.pt").distilled is None
+    )
     # A self-supervised run's record is what it was before distillation existed (runs made then resume).
     assert "imitation" not in _tiny(problems).to_dict()["loss"]
     assert cfg.to_dict()["loss"]["imitation"] == 50.0
