@@ -36,7 +36,7 @@ from kinlearn.collision import kernel
 from kinlearn.collision.ompl import OmplRrtConnect
 from kinlearn.data.problems import ProblemSet
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
-from kinlearn.planning.around import _first_free, _lines_free, _packed_scenes
+from kinlearn.planning.around import _packed_scenes
 from kinlearn.planning.plan import judge
 from kinlearn.planning.planner import Planner
 
@@ -117,12 +117,11 @@ def main() -> None:
         name: []
         for name in (
             "the Problem (checks, FK)",
-            "the straight line's check",
-            "proposals (obstacle TM; skipped where the line is free)",
-            "check (first_free)",
+            "the scene packed for the kernels",
+            "stage 1 (the line's check; where it collides the network and its candidates' check: one compiled call)",
+            "judge (verdict, the Plan)",
         )
     }
-    stages["judge (verdict, the Plan)"] = []
     for s, g, sc in problems:
         t0 = time.perf_counter()
         problem = Problem.make(robot, s, g, obstacles=sc)
@@ -130,23 +129,12 @@ def main() -> None:
         st, gl = problem.start.numpy()[None], problem.goal.numpy()[None]
         d = robot.dof
         packed = _packed_scenes(problem.obstacles, 1)
-        line_free = _lines_free(planner, planner._line(st[:, :d], gl[:, :d], 0), packed)
-        t1b = time.perf_counter()
-        paths, order = planner._proposals(
-            st[:, :d],
-            st[:, d:],
-            gl[:, :d],
-            gl[:, d:],
-            [(ks.model_rows(), ks.floor) for ks in packed],
-            0,
-            line_free,
-        )
         t2 = time.perf_counter()
-        pick, free_ = _first_free(planner, paths, order, packed, line_free)
+        paths, pick, free_ = planner._learned(st[:, :d], st[:, d:], gl[:, :d], gl[:, d:], packed, 0)
         t3 = time.perf_counter()
         judge(problem, paths[0, pick[0]], tolerance=planner.tolerance, collision_free=free_[0])
         t4 = time.perf_counter()
-        for name, dt in zip(stages, (t1 - t0, t1b - t1, t2 - t1b, t3 - t2, t4 - t3), strict=True):
+        for name, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3), strict=True):
             stages[name].append(dt)
     print("\nan obstacle plan's stages, each timed alone (median µs):")
     for name, ts in stages.items():

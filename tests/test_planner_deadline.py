@@ -221,7 +221,7 @@ seen = []
 class Spy(stages.Deadline):
     def __init__(self, *a, **k):
         pl = PL[0]
-        seen.append((bool(kernel._first_free_packed.signatures), bool(rrt._grow.signatures),
+        seen.append((bool(kernel.first_free_boxed.signatures), bool(rrt._grow.signatures),
                      pl._np_body_cache is not None))
         super().__init__(*a, **k)
 P.Deadline = Spy

@@ -301,39 +301,39 @@ def test_the_problem_the_other_way_round_adds_its_candidates_walked_backwards(pl
     assert not np.allclose(ahead[0, 1 : C + 1], ahead[0, C + 1 :])  # more paths, not the same ones twice
 
 
-def test_a_free_straight_line_is_the_plan_without_running_the_network(planner, problems, monkeypatch):
+def test_a_free_straight_line_is_the_plan_without_running_the_network(planner, problems):
     """The straight joint line is checked first: it is the shortest candidate, so where it is free it is
-    the plan, and the network is not run for that problem (a batch runs it for the others only); where it
-    collides, the network's candidates are checked as before."""
+    the plan, and the network is not run for that problem (its candidates are copies of the line; a batch
+    runs it for the others only); where it collides, the network's candidates are checked as before."""
     import numpy as np
 
-    calls = []
-    net = planner._compiled_tm
-
-    class Counted:
-        C, fractions = net.C, net.fractions
-
-        def proposals(self, *args):
-            calls.append(args[0].shape)
-            return net.proposals(*args)
+    from kinlearn.data.problem import positions
+    from kinlearn.planning.around import _packed_scenes
 
     free_line = ~problems.hard
     assert bool(free_line.any()) and bool(problems.hard.any())
     i, j = int(free_line.nonzero()[0, 0]), int(problems.hard.nonzero()[0, 0])
     easy = _plan_one(planner, problems, i)
-    monkeypatch.setattr(planner, "_compiled_cache", Counted())
-    again = _plan_one(planner, problems, i)
-    assert calls == [] and bool(again.collision_free) and again.stage == "learned"
-    assert np.array_equal(np.asarray(again.joints), np.asarray(easy.joints))
-    line = np.linspace(0.0, 1.0, np.asarray(again.joints).shape[0])[:, None]
+    assert bool(easy.collision_free) and easy.stage == "learned"
+    line = np.linspace(0.0, 1.0, np.asarray(easy.joints).shape[0])[:, None]
     s, g, _ = problems.problem(i)
-    assert np.allclose(np.asarray(again.joints), s.numpy() + line * (g - s).numpy(), atol=1e-12)
-    _plan_one(planner, problems, j)
-    assert len(calls) == 1  # the problem and the problem the other way round, in one call
+    assert np.allclose(np.asarray(easy.joints), s.numpy() + line * (g - s).numpy(), atol=1e-12)
     both = problems[torch.tensor([i, j])]
-    calls.clear()
-    planner.plan(both.start, both.goal, obstacles=both.scene, refine_steps=0)
-    assert len(calls) == 1  # only the hard one's
+    dof = planner.robot.dof
+    q0, qT = both.start.double().numpy()[:, :dof], both.goal.double().numpy()[:, :dof]
+    e0, eT = positions(planner.robot, q0), positions(planner.robot, qT)
+    packed = _packed_scenes(both.scene, 2)
+    paths, pick, free = planner._learned(q0, e0, qT, eT, packed, 0)
+    assert free[0] and pick[0] == 0 and (paths[0] == paths[0, :1]).all()  # the line, no network
+    assert np.array_equal(paths[0, 0], np.asarray(easy.joints))
+    rows = [(packed[1].model_rows(), packed[1].floor)]
+    every, order = planner._proposals(q0[1:], e0[1:], qT[1:], eT[1:], rows, 0)
+    assert np.array_equal(paths[1], every[0])  # the hard one's: the network's candidates
+    assert not (paths[1] == paths[1, :1]).all()
+    if free[1]:  # the first free one in their order (the line, candidate 0, collides)
+        from kinlearn.collision import kernel
+
+        assert pick[1] == kernel.first_free(planner._np_body, every[0], packed[1], order[0][order[0] != 0])
 
 
 def _plan_one(planner, problems, i):

@@ -93,6 +93,7 @@ __all__ = [
     "check_paths",
     "clearances",
     "first_free",
+    "first_free_boxed",
     "near_pairs",
     "point_distances",
     "proven_apart",
@@ -1071,6 +1072,18 @@ def _first_free_packed(paths, order, max_travel, margin, f, n, s, n_hints=_HINTS
 
 
 @_jit
+def first_free_boxed(paths, order, max_travel, margin, box_lo, box_hi, f_in, n_in, f_all, n_all, s):
+    """:func:`first_free`'s compiled core, for other compiled code to call (the planner's proposals):
+    the body packed without the pairs proven apart (``f_in, n_in``) when every knot of ``paths`` lies in
+    its box ``[box_lo, box_hi]``, else whole (``f_all, n_all``), as :meth:`KernelBody.packing_of` picks
+    (:meth:`KernelBody.boxed` gives the six); the index of the first free path in ``order``, −1 if none
+    is, −2 if ``paths`` hold NaN or infinity."""
+    if _within(paths, box_lo, box_hi):
+        return _first_free_packed(paths, order, max_travel, margin, f_in, n_in, s)
+    return _first_free_packed(paths, order, max_travel, margin, f_all, n_all, s)
+
+
+@_jit
 def _within(paths, lo, hi):
     """Whether every value of ``paths (..., dof)`` lies in ``[lo, hi]`` (NaN does not)."""
     dof = lo.shape[0]
@@ -1194,6 +1207,7 @@ class KernelBody:
         )
         self._apart = None
         self._packed_within = None
+        self._boxed = None
 
     def _items(self, pairs: np.ndarray) -> dict:
         """The verdict's self-collision items of ``pairs``, by name: a sphere's pairs with the
@@ -1286,6 +1300,14 @@ class KernelBody:
         if _within(paths, *self.box):
             return self.packed_within
         return self.packed
+
+    @property
+    def boxed(self) -> tuple[np.ndarray, ...]:
+        """What :func:`first_free_boxed` takes of the body: :attr:`box`, :attr:`packed_within`,
+        :attr:`packed` (made once)."""
+        if self._boxed is None:
+            self._boxed = (*self.box, *self.packed_within, *self.packed)
+        return self._boxed
 
     def _pack(self, it: dict) -> tuple[np.ndarray, np.ndarray]:
         """The body and self-collision items ``it`` (:meth:`_items`) in two buffers (:func:`_unpack_body`)."""
@@ -1679,8 +1701,7 @@ def first_free(
         if not _all_finite(arr):
             raise NonFiniteError(f"joint paths hold {int((~np.isfinite(arr)).sum())} NaN/inf value(s)")
         return -1
-    f, n = body.packing_of(arr)
-    k = int(_first_free_packed(arr, idx, float(max_travel), float(margin), f, n, scene.packed))
+    k = int(first_free_boxed(arr, idx, float(max_travel), float(margin), *body.boxed, scene.packed))
     if k == -2:
         raise NonFiniteError(f"joint paths hold {int((~np.isfinite(arr)).sum())} NaN/inf value(s)")
     return k

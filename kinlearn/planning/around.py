@@ -110,9 +110,7 @@ class ObstacleStages:
         f = self._fractions()
         return _knotted(theta0, (theta0[:, None] + f * (thetaT - theta0)[:, None])[:, None], thetaT, steps)
 
-    def _proposals(
-        self, theta0, ef0, thetaT, efT, scenes, steps: int, skip: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def _proposals(self, theta0, ef0, thetaT, efT, scenes, steps: int) -> tuple[np.ndarray, np.ndarray]:
         """The candidate joint paths ``(N, C + 1, K, dof)`` (the straight joint line first, then the
         obstacle-aware TM's for the problem, then its paths for the problem the other way round, walked
         backwards: C twice the network's candidates; segments halved when refining) and each problem's
@@ -121,9 +119,8 @@ class ObstacleStages:
         ``scenes``: per problem its scene's model rows ``(P, 7)`` and floor ``(2,)``, without padding. The
         TM runs on each problem alone, as a batch-1 plan runs it: float32 products of another batch size
         round differently (up to 3e-5 rad on the held-out set), and a plan must not depend on its
-        batch-mates. ``skip (N,)``: problems whose straight line is already known free (the shortest
-        path, so their plan whatever the network proposes): the network is not run for them, and their
-        other candidates are copies of the line."""
+        batch-mates. Every candidate of every problem (a plan's stage 1, :meth:`_learned`, runs the
+        network only where the line collides)."""
         n, dof = theta0.shape
         f = self._fractions()
         line = theta0[:, None] + f * (thetaT - theta0)[:, None]  # the straight joint line's knots
@@ -136,15 +133,34 @@ class ObstacleStages:
         paths = np.empty((n, size, 2 * f.shape[0] + 3 if steps else f.shape[0] + 2, dof))
         order = np.empty((n, size), dtype=np.int64)
         for i in range(n):
-            if skip is not None and skip[i]:  # its plan is the line: every candidate a copy of it
-                paths[i] = _knotted(theta0[i : i + 1], line[i : i + 1, None], thetaT[i : i + 1], steps)[0]
-                order[i] = np.arange(size)
-                continue
             rows, floor = scenes[i]
             paths[i], order[i] = net.proposals(
                 theta0[i], ef0[i], thetaT[i], efT[i], rows, floor, lo[i], hi[i], bool(steps)
             )
         return paths, order
+
+    def _learned(self, theta0, ef0, thetaT, efT, packed: list, steps: int) -> tuple[np.ndarray, ...]:
+        """Stage 1 for every problem: its candidate paths ``(N, 2C + 1, K, dof)`` (:meth:`_proposals`'),
+        the one picked ``(N,)`` — the first collision-free in their order, else the shortest — and whether
+        it is free ``(N,)``. The straight joint line, the shortest path, is checked first: where it is
+        free it is the plan and the network does not run. One compiled call per problem
+        (:meth:`~kinlearn.planning.proposals.CompiledObstacleModel.first_free`); without a network the
+        line alone."""
+        n = theta0.shape[0]
+        if self.obstacle_tm is None:
+            line = self._line(theta0, thetaT, steps)
+            return line, np.zeros(n, dtype=np.int64), _lines_free(self, line, packed)
+        net, body = self._compiled_tm, self._np_body
+        lo, hi = self._boxes(theta0, thetaT)
+        pick, free, paths = np.empty(n, dtype=np.int64), np.empty(n, dtype=bool), None
+        for i in range(n):
+            p, order, k = net.first_free(
+                theta0[i], ef0[i], thetaT[i], efT[i], lo[i], hi[i], bool(steps), body, packed[i], CHECK_TRAVEL
+            )
+            if paths is None:
+                paths = np.empty((n, *p.shape))
+            paths[i], pick[i], free[i] = p, k if k >= 0 else order[0], k >= 0
+        return paths, pick, free
 
     def _plan_around(
         self,
@@ -173,17 +189,8 @@ class ObstacleStages:
         """
         n = theta0.shape[0]
         packed = _packed_scenes(scene, n)  # the scene converted once, for the TM and the check
-        # The straight joint line first: the shortest path, so the plan wherever it is free, and then
-        # the network need not run.
-        line = self._line(theta0, thetaT, steps)
-        line_free = _lines_free(self, line, packed)
-        if line_free.all():  # every plan is its straight line (a batch-1 plan often): nothing to propose
-            out, free, rows, paths = line[:, 0], line_free.copy(), None, None  # no later stage runs
-        else:
-            rows = [(ks.model_rows(), ks.floor) for ks in packed]
-            paths, order = self._proposals(theta0, ef0, thetaT, efT, rows, steps, skip=line_free)
-            pick, free = _first_free(self, paths, order, packed, line_free)
-            out = paths[np.arange(n), pick]
+        paths, pick, free = self._learned(theta0, ef0, thetaT, efT, packed, steps)
+        out = paths[np.arange(n), pick]
         stage = np.where(free, "learned", "none").astype(object)
         batched = len(scene.batch_shape) > 0
 
@@ -193,9 +200,7 @@ class ObstacleStages:
             for i in np.flatnonzero(~free):
                 if _retreat_over(deadline, self.retreat_share):
                     break
-                path, branches[int(i)] = self._retreat(
-                    theta0[i], thetaT[i], packed[i], rows[i], steps, deadline
-                )
+                path, branches[int(i)] = self._retreat(theta0[i], thetaT[i], packed[i], steps, deadline)
                 if path is not None:
                     found[int(i)] = (path, "retreat")
         open_ = ~free
@@ -272,12 +277,12 @@ class ObstacleStages:
         return self._vias or None
 
     def _retreat(
-        self, theta0: np.ndarray, thetaT: np.ndarray, nscene, rows, steps: int, deadline: Deadline
+        self, theta0: np.ndarray, thetaT: np.ndarray, nscene, steps: int, deadline: Deadline
     ) -> tuple[np.ndarray | None, tuple]:
         """The retreat stage (:mod:`kinlearn.planning.retreat`) for one problem: its path ``(V, dof)`` or
         None, and the free retreats of either end (:func:`~kinlearn.planning.retreat.sampler_branches`: the
-        sampler grows its trees from them). ``rows``: the problem's scene rows and floor for the network
-        (as :meth:`_proposals` takes them)."""
+        sampler grows its trees from them). Its transfers are stage 1's (:meth:`_learned`) between two
+        configurations."""
         k, body = _kernel(), self._np_body
         lo, hi = self._boxes(theta0[None], thetaT[None])
         vias = self._retreat_vias().within(lo[0], hi[0])  # the vias kept in the problem's box
@@ -296,9 +301,8 @@ class ObstacleStages:
 
             def transfer(a, b):
                 ends = positions(self.robot, np.stack((a, b)))
-                paths, order = self._proposals(a[None], ends[:1], b[None], ends[1:], [rows], steps)
-                j = first_free(paths[0], order[0])
-                return paths[0, j] if j >= 0 else None
+                paths, pick, free = self._learned(a[None], ends[:1], b[None], ends[1:], [nscene], steps)
+                return paths[0, pick[0]] if free[0] else None
 
         def distance(points):
             return k.point_distances(nscene, points)
@@ -398,22 +402,6 @@ def _lines_free(planner: ObstacleStages, line: np.ndarray, packed: list) -> np.n
         ],
         dtype=bool,
     )
-
-
-def _first_free(
-    planner: ObstacleStages, paths, order, packed: list, done: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Each problem's first collision-free candidate in its ``order`` and whether there was one (none: its
-    shortest, flagged). ``done (N,)``: problems whose straight line (candidate 0) is known free: picked
-    unchecked."""
-    free = done.copy()
-    pick = np.where(done, 0, order[:, 0])
-    check = _kernel().first_free
-    for i in np.flatnonzero(~done):
-        k = check(planner._np_body, paths[i], packed[i], order[i][order[i] != 0], max_travel=CHECK_TRAVEL)
-        if k >= 0:
-            pick[i], free[i] = k, True
-    return pick, free
 
 
 def _knotted(theta0: np.ndarray, inner: np.ndarray, thetaT: np.ndarray, steps: int) -> np.ndarray:

@@ -411,7 +411,7 @@ class Planner(ObstacleStages):
         """Load now what the first plan among obstacles would load (once per planner): the compiled
         check and sampler (:func:`_load_kernels`), the retreat stage's solver, this planner's sphere
         body and its self-collision pairs proven apart (:func:`~kinlearn.collision.kernel.proven_apart`,
-        0.1–0.4 s), the obstacle network's compiled proposals, and one small plan's code paths.
+        0.1–0.4 s), the obstacle network packed for its compiled call, and one small plan's code paths.
         :meth:`plan` calls it before its deadline's clock starts; call it ahead to keep the first plan's
         call short too."""
         if self._warm:
@@ -420,13 +420,9 @@ class Planner(ObstacleStages):
         _load_kernels()
         if self.retreat and self._retreat_vias() is not None:  # the chain's compiled solver
             self._retreat_vias().vias((self._lo_np + self._hi_np) / 2)
-        _ = self._np_body.packed_within  # the proof of the pairs apart: here, not in a plan
-        if self.obstacle_tm is not None:  # the compiled proposals (the plan below runs no network)
-            q = (self._lo_np + self._hi_np) / 2
-            ef, net = positions(self.robot, q[None])[0], self._compiled_tm
-            net.proposals(
-                q, ef, q, ef, np.zeros((0, net.columns)), np.zeros(2), self._lo_np, self._hi_np, False
-            )
+        _ = self._np_body.boxed  # the proof of the pairs apart: here, not in a plan
+        if self.obstacle_tm is not None:
+            _ = self._compiled_tm  # the network packed (the plan below compiles its one call)
         mid = torch.as_tensor((self._lo_np + self._hi_np) / 2)
         far = Scene.from_spheres([[10.0, 10.0, 10.0, 0.1]], floor=None)
         with warnings.catch_warnings():

@@ -28,6 +28,8 @@ import numba
 import numpy as np
 import torch
 
+from ..collision.kernel import first_free_boxed
+from ..errors import NonFiniteError
 from ..models.obstacle_path import ObstaclePathModel
 from .inference import _arr, _folded_mlp
 
@@ -128,6 +130,24 @@ def _knots(s, t, coef, fractions, basis, half_range, out):
 
 
 @_jit
+def _line_into(a0, aT, fractions, halve, path):
+    """The straight joint line from ``a0`` to ``aT`` into ``path (K, dof)``: its knots at ``fractions``,
+    each segment halved when ``halve`` (candidate 0 of :func:`_assemble`)."""
+    K, dof = path.shape
+    step = 2 if halve else 1
+    for j in range(dof):
+        path[0, j] = a0[j]
+        path[K - 1, j] = aT[j]
+    for k in range(fractions.shape[0]):
+        for j in range(dof):
+            path[step * (k + 1), j] = a0[j] + fractions[k] * (aT[j] - a0[j])
+    if halve:
+        for k in range(fractions.shape[0] + 1):
+            for j in range(dof):
+                path[2 * k + 1, j] = 0.5 * (path[2 * k, j] + path[2 * k + 2, j])
+
+
+@_jit
 def _assemble(a0, aT, ahead, back, fractions, lo, hi, halve, paths, length):
     """Every candidate path into ``paths (2C + 1, K, dof)``: the straight line, ``ahead (C, T − 1, dof)``,
     then ``back`` walked backwards, the network's knots clipped to ``[lo, hi]``, each segment halved when
@@ -136,22 +156,20 @@ def _assemble(a0, aT, ahead, back, fractions, lo, hi, halve, paths, length):
     C, inner = ahead.shape[0], ahead.shape[1]
     T = inner + 1
     step = 2 if halve else 1
-    for c in range(n_paths):
+    _line_into(a0, aT, fractions, halve, paths[0])
+    for c in range(1, n_paths):
         for j in range(dof):
             paths[c, 0, j] = a0[j]
             paths[c, K - 1, j] = aT[j]
         for k in range(inner):
             for j in range(dof):
-                if c == 0:
-                    v = a0[j] + fractions[k] * (aT[j] - a0[j])
-                else:
-                    v = ahead[c - 1, k, j] if c <= C else back[c - 1 - C, inner - 1 - k, j]
-                    v = min(max(v, lo[j]), hi[j])
-                paths[c, step * (k + 1), j] = v
+                v = ahead[c - 1, k, j] if c <= C else back[c - 1 - C, inner - 1 - k, j]
+                paths[c, step * (k + 1), j] = min(max(v, lo[j]), hi[j])
         if halve:
             for k in range(T):
                 for j in range(dof):
                     paths[c, 2 * k + 1, j] = 0.5 * (paths[c, 2 * k, j] + paths[c, 2 * k + 2, j])
+    for c in range(n_paths):
         total = 0.0
         for k in range(K - 1):
             ss = 0.0
@@ -177,6 +195,39 @@ def _proposals(
     length = np.empty(paths.shape[0])
     _assemble(a0, aT, ahead, back, fractions, lo, hi, halve, paths, length)
     return np.argsort(length, kind="mergesort")
+
+
+@_jit
+def _first_free_proposal(
+    a0, e0, aT, eT, rows, floor, lo, hi, halve, columns, enc_w, enc_b, trunk_w, trunk_b, silu,
+    emb_size, fractions, basis, half_range, paths, order, max_travel, margin, box_lo, box_hi, f_in, n_in,
+    f_all, n_all, s,
+):  # fmt: skip
+    """The whole of :meth:`CompiledObstacleModel.first_free` but the argument checks: the straight joint
+    line into ``paths[0]`` and its check; where it collides, every candidate (:func:`_proposals`) and the
+    first free one in their order; where it is free, no network and every candidate a copy of the line.
+    The index picked, −1 if none is free, −2 if a path holds NaN or infinity."""
+    n_paths = paths.shape[0]
+    _line_into(a0, aT, fractions, halve, paths[0])
+    first = np.zeros(1, dtype=np.int64)
+    k = first_free_boxed(paths[0:1], first, max_travel, margin, box_lo, box_hi, f_in, n_in, f_all, n_all, s)
+    if k != -1:  # free (0), or not finite (−2): the line is the answer either way
+        for c in range(n_paths):
+            order[c] = c
+            if c > 0:
+                paths[c] = paths[0]
+        return k
+    order[:] = _proposals(
+        a0, e0, aT, eT, rows, floor, lo, hi, halve, columns, enc_w, enc_b, trunk_w, trunk_b, silu,
+        emb_size, fractions, basis, half_range, paths,
+    )  # fmt: skip
+    rest = np.empty(n_paths - 1, dtype=np.int64)
+    r = 0
+    for c in range(n_paths):
+        if order[c] != 0:
+            rest[r] = order[c]
+            r += 1
+    return first_free_boxed(paths, rest[:r], max_travel, margin, box_lo, box_hi, f_in, n_in, f_all, n_all, s)
 
 
 @_jit
@@ -221,6 +272,31 @@ class CompiledObstacleModel:
             self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions, self.basis, self.half_range, paths,
         )  # fmt: skip
         return paths, order
+
+    def first_free(
+        self, theta0, ef0, thetaT, efT, lo, hi, halve: bool, body, scene, max_travel: float
+    ) -> tuple[np.ndarray, np.ndarray, int]:
+        """One problem's first collision-free candidate, in one compiled call: the straight joint line
+        checked first, and only where it collides the network run (:meth:`proposals`, the same candidates
+        and order) and its candidates checked in their order (:func:`~kinlearn.collision.kernel.first_free`'s
+        verdicts). ``body``: a :class:`~kinlearn.collision.kernel.KernelBody`, ``scene`` a
+        :class:`~kinlearn.collision.kernel.KernelScene` (its rows feed the network); the other arguments as
+        :meth:`proposals`'s. Returns the candidates ``(2C + 1, K, dof)`` (copies of the line where it is
+        free), their order and the index of the first free one (−1: none is). Raises
+        :class:`~kinlearn.errors.NonFiniteError` if a candidate holds NaN or infinity."""
+        T = self.fractions.shape[0] + 1
+        paths = np.empty((2 * self.C + 1, 2 * T + 1 if halve else T + 1, self.dof))
+        order = np.empty(paths.shape[0], dtype=np.int64)
+        k = _first_free_proposal(
+            theta0, ef0, thetaT, efT, scene.model_rows(), scene.floor, lo, hi, bool(halve), self.columns,
+            self.enc_w, self.enc_b, self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions,
+            self.basis, self.half_range, paths, order, float(max_travel), 0.0, *body.boxed, scene.packed,
+        )  # fmt: skip
+        if k == -2:
+            raise NonFiniteError(
+                "a candidate path holds NaN or infinity (the problem's joints or the network's output)"
+            )
+        return paths, order, int(k)
 
     def __call__(self, theta0, ef0, thetaT, efT, rows, mask, floor) -> np.ndarray:
         """The network's forward pass on a batch (:meth:`ObstaclePathModel.forward`, unclipped):
