@@ -191,6 +191,8 @@ class ObstacleStages:
         packed = _packed_scenes(scene, n)  # the scene converted once, for the TM and the check
         paths, pick, free = self._learned(theta0, ef0, thetaT, efT, packed, steps)
         out = paths[np.arange(n), pick]
+        if free.all():  # every plan cleared by stage 1 (a batch-1 plan most often): no later stage runs
+            return out, free, np.full(n, "learned", dtype=object)
         stage = np.where(free, "learned", "none").astype(object)
         batched = len(scene.batch_shape) > 0
 
