@@ -97,3 +97,43 @@ def test_proposals_are_the_line_the_paths_and_the_reversed_paths(robot):
     assert np.array_equal(halved[:, ::2], paths)
     assert np.allclose(halved[:, 1::2], 0.5 * (paths[:, :-1] + paths[:, 1:]), atol=1e-15)
     assert np.array_equal(order2, order)
+
+
+def test_first_free_is_the_proposals_checked_in_their_order(robot):
+    """A plan's stage 1 in one call: where the straight line collides, the same candidates and order as
+    :meth:`proposals` and the first free one by the kernel's own ``first_free`` (−1 when none is); where
+    the line is free, the line (every candidate a copy: the network is not run); NaN joints raise."""
+    import pytest
+
+    from kinlearn.collision.body import body_spheres
+    from kinlearn.collision.kernel import KernelBody, first_free
+    from kinlearn.data.problem import positions
+    from kinlearn.errors import NonFiniteError
+
+    net = CompiledObstacleModel(_model(robot))
+    body = KernelBody(body_spheres(robot).double())
+    lo, hi = np.asarray(robot.lower, dtype=np.float64), np.asarray(robot.upper, dtype=np.float64)
+    rng = np.random.default_rng(0)
+    seen = {"line": 0, "network": 0, "none": 0}
+    far = KernelScene(Scene.from_spheres([[5.0, 5.0, 5.0, 0.1]], floor=None))
+    for _ in range(16):
+        q = lo + (hi - lo) * rng.uniform(0.3, 0.7, size=(2, robot.dof))
+        e = positions(robot, q)
+        mid = positions(robot, q.mean(0, keepdims=True))[0]  # a ball on the line's hand path
+        for ks in (far, KernelScene(Scene.from_spheres([[*mid, 0.04]], floor=None))):
+            for halve in (False, True):
+                paths, order, k = net.first_free(q[0], e[0], q[1], e[1], lo, hi, halve, body, ks, 0.01)
+                if first_free(body, paths[:1], ks) == 0:  # the line is free: it is the plan
+                    seen["line"] += 1
+                    assert k == 0 and (paths == paths[:1]).all()
+                    continue
+                rows, floor = ks.model_rows(), ks.floor
+                ref, ref_order = net.proposals(q[0], e[0], q[1], e[1], rows, floor, lo, hi, halve)
+                assert np.array_equal(paths, ref) and np.array_equal(order, ref_order)
+                assert k == first_free(body, ref, ks, ref_order[ref_order != 0])
+                seen["network" if k > 0 else "none"] += 1
+    assert seen["line"] and seen["network"] and seen["none"]
+    bad = q[0].copy()
+    bad[0] = np.nan
+    with pytest.raises(NonFiniteError):
+        net.first_free(bad, e[0], q[1], e[1], lo, hi, False, body, KernelScene(_scene()), 0.01)
