@@ -152,13 +152,13 @@ class ObstacleStages:
             return line, np.zeros(n, dtype=np.int64), _lines_free(self, line, packed)
         net, body = self._compiled_tm, self._np_body
         lo, hi = self._boxes(theta0, thetaT)
-        pick, free, paths = np.empty(n, dtype=np.int64), np.empty(n, dtype=bool), None
+        T = net.fractions.shape[0] + 1
+        paths = np.empty((n, 2 * net.C + 1, 2 * T + 1 if steps else T + 1, theta0.shape[1]))
+        pick, free = np.empty(n, dtype=np.int64), np.empty(n, dtype=bool)
         for i in range(n):
             p, order, k = net.first_free(
                 theta0[i], ef0[i], thetaT[i], efT[i], lo[i], hi[i], bool(steps), body, packed[i], CHECK_TRAVEL
             )
-            if paths is None:
-                paths = np.empty((n, *p.shape))
             paths[i], pick[i], free[i] = p, k if k >= 0 else order[0], k >= 0
         return paths, pick, free
 
