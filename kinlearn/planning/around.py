@@ -121,17 +121,13 @@ class ObstacleStages:
         round differently (up to 3e-5 rad on the held-out set), and a plan must not depend on its
         batch-mates. Every candidate of every problem (a plan's stage 1, :meth:`_learned`, runs the
         network only where the line collides)."""
-        n, dof = theta0.shape
-        f = self._fractions()
-        line = theta0[:, None] + f * (thetaT - theta0)[:, None]  # the straight joint line's knots
+        n = theta0.shape[0]
         if self.obstacle_tm is None:  # the straight joint line alone
-            paths = _knotted(theta0, line[:, None], thetaT, steps)
-            return paths, np.zeros((n, 1), dtype=np.int64)
+            return self._line(theta0, thetaT, steps), np.zeros((n, 1), dtype=np.int64)
         net = self._compiled_tm
         lo, hi = self._boxes(theta0, thetaT)
-        size = 2 * net.C + 1
-        paths = np.empty((n, size, 2 * f.shape[0] + 3 if steps else f.shape[0] + 2, dof))
-        order = np.empty((n, size), dtype=np.int64)
+        paths = np.empty((n, *net.candidates_shape(bool(steps))))
+        order = np.empty(paths.shape[:2], dtype=np.int64)
         for i in range(n):
             rows, floor = scenes[i]
             paths[i], order[i] = net.proposals(
@@ -152,8 +148,7 @@ class ObstacleStages:
             return line, np.zeros(n, dtype=np.int64), _lines_free(self, line, packed)
         net, body = self._compiled_tm, self._np_body
         lo, hi = self._boxes(theta0, thetaT)
-        T = net.fractions.shape[0] + 1
-        paths = np.empty((n, 2 * net.C + 1, 2 * T + 1 if steps else T + 1, theta0.shape[1]))
+        paths = np.empty((n, *net.candidates_shape(bool(steps))))
         pick, free = np.empty(n, dtype=np.int64), np.empty(n, dtype=bool)
         for i in range(n):
             p, order, k = net.first_free(
@@ -176,8 +171,8 @@ class ObstacleStages:
         """Joint paths ``(N, K, dof)`` around ``scene``, whether each is collision-free ``(N,)`` and the
         stage that made it ``(N,)`` (:data:`~kinlearn.planning.stages.STAGES`).
 
-        Stage 1: the learned proposals (:meth:`_proposals`), each problem's first collision-free one in
-        their order (exact verdicts), else its shortest, flagged. Stage 2 (the planner's ``retreat``),
+        Stage 1 (:meth:`_learned`): the straight joint line, where it collides the learned proposals,
+        each problem's first collision-free one in their order (exact verdicts), else its shortest, flagged. Stage 2 (the planner's ``retreat``),
         for the problems stage 1 left colliding: :meth:`_retreat`. Stage 3 (``steps`` > 0), for those
         still colliding: the optimiser from the least colliding proposal (:meth:`_refine`), kept if the
         dense check finds it free. Stage 4 (a ``deadline``, or an iteration budget ``iterations``), for

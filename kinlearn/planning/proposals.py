@@ -14,8 +14,8 @@ refining — with each path's joint-space length and the order of the candidates
 A plan's stage 1 is one call, :meth:`CompiledObstacleModel.first_free`: the straight line checked
 first (:func:`~kinlearn.collision.kernel.first_free_boxed`), and only where it collides the network and
 its candidates' check, with no Python between them. The network's arithmetic is float32 as torch's (its
-products through BLAS, ``np.dot``), the knots float64. Where the same arithmetic ran as NumPy operations (before stop 41), the proposals for one
-problem took 323 / 384 µs on the panda's / iiwa14's held-out problems, compiled 124 / 167 µs (one
+products through BLAS, ``np.dot``), the knots float64. Where the same arithmetic ran as NumPy operations
+(before stop 41), the proposals for one problem took 323 / 384 µs on the panda's / iiwa14's held-out problems, compiled 124 / 167 µs (one
 process, by turns; most of what is left is reading the trunk's weights, about 1.4 MB).
 
 numba is imported with this module, which the planner imports on its first plan among obstacles
@@ -257,6 +257,12 @@ class CompiledObstacleModel:
         self.emb = c.encoder[-1]
         self.columns = tm.row_columns
 
+    def candidates_shape(self, halve: bool) -> tuple[int, int, int]:
+        """The shape ``(2C + 1, K, dof)`` of one problem's candidates: K = T + 1 knots, 2T + 1 when
+        ``halve``."""
+        T = self.fractions.shape[0] + 1
+        return 2 * self.C + 1, 2 * T + 1 if halve else T + 1, self.dof
+
     def proposals(
         self, theta0, ef0, thetaT, efT, rows, floor, lo, hi, halve: bool
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -267,8 +273,7 @@ class CompiledObstacleModel:
         refined path is optimised on). ``theta0, thetaT, lo, hi (dof,)``, ``ef0, efT (3,)`` float64;
         ``rows (P, ≥ 14)`` the scene's primitive rows and ``floor (2,)``
         (:meth:`~kinlearn.collision.kernel.KernelScene.model_rows`)."""
-        T = self.fractions.shape[0] + 1
-        paths = np.empty((2 * self.C + 1, 2 * T + 1 if halve else T + 1, self.dof))
+        paths = np.empty(self.candidates_shape(halve))
         order = _proposals(
             theta0, ef0, thetaT, efT, rows, floor, lo, hi, bool(halve), self.columns, self.enc_w, self.enc_b,
             self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions, self.basis, self.half_range, paths,
@@ -286,8 +291,7 @@ class CompiledObstacleModel:
         :meth:`proposals`'s. Returns the candidates ``(2C + 1, K, dof)`` (copies of the line where it is
         free), their order and the index of the first free one (−1: none is). Raises
         :class:`~kinlearn.errors.NonFiniteError` if a candidate holds NaN or infinity."""
-        T = self.fractions.shape[0] + 1
-        paths = np.empty((2 * self.C + 1, 2 * T + 1 if halve else T + 1, self.dof))
+        paths = np.empty(self.candidates_shape(halve))
         order = np.empty(paths.shape[0], dtype=np.int64)
         k = _first_free_proposal(
             theta0, ef0, thetaT, efT, scene.model_rows(), scene.floor, lo, hi, bool(halve), self.columns,
