@@ -425,3 +425,25 @@ def test_a_motion_whose_end_state_collides_is_not_free(arm):
     assert not check_path(body, torch.from_numpy(path[None]), scene).collision_free.item()
     assert not K._free_packed(path, 0.01, 0.0, *kb.packed_within, ks.packed)
     assert not K._free_packed(path, 0.01, 0.0, *kb.packed, ks.packed)
+
+
+def test_kernel_scene_is_one_buffer_with_each_primitive_s_bounding_radius():
+    """A packed scene's tables are views of its one buffer ``[K, B, C, has floor, height, rows…]``, each
+    box and cylinder followed by the radius of its bounding ball (the kernels cull by it)."""
+    scene = random_scene(np.random.default_rng(5), n=9)
+    ks = K.KernelScene(scene)
+    tables = {k.table: t.numpy() for k, t, _ in scene.tables(live=True)}
+    k, b, c = (len(tables[t]) for t in ("spheres", "boxes", "cylinders"))
+    assert k and b and c
+    np.testing.assert_array_equal(ks.packed[:5], [k, b, c, 1.0, float(scene.floor)])
+    np.testing.assert_array_equal(ks.spheres, tables["spheres"])
+    np.testing.assert_array_equal(ks.boxes[:, :-1], tables["boxes"])
+    np.testing.assert_array_equal(ks.cylinders[:, :-1], tables["cylinders"])
+    np.testing.assert_allclose(ks.boxes[:, -1], np.linalg.norm(tables["boxes"][:, 3:6], axis=1), rtol=1e-15)
+    np.testing.assert_allclose(
+        ks.cylinders[:, -1], np.hypot(tables["cylinders"][:, 3], tables["cylinders"][:, 4])
+    )
+    for t in (ks.spheres, ks.boxes, ks.cylinders, ks.floor):
+        assert np.shares_memory(t, ks.packed)
+    bare = K.KernelScene(Scene.from_spheres([[0.5, 0.0, 0.5, 0.25]], floor=None))
+    np.testing.assert_array_equal(bare.packed, [1, 0, 0, 0, 0, 0.5, 0.0, 0.5, 0.25])

@@ -85,11 +85,15 @@ def test_bad_problems_raise_typed_errors(robot, joints):
         Problem.make(robot, bad, goal)
     far = start.clone()
     far[0] = 10.0
-    with pytest.raises(JointLimitError):
+    with pytest.raises(JointLimitError, match="goal joints"):  # start and goal are checked in one call
         Problem.make(robot, start, far)
+    with pytest.raises(JointLimitError, match="start joints"):
+        Problem.make(robot, far, start)
     state = torch.cat((start, torch.tensor([9.0, 9.0, 9.0], dtype=torch.float64)))
     with pytest.raises(StateError, match="end-effector part"):
         Problem.make(robot, state, goal)
+    with pytest.raises(StateError, match=r"^goal"):
+        Problem.make(robot, goal, state)
     with pytest.raises(ObstacleError):
         Problem.make(robot, start, goal, obstacles=torch.ones(3, 3))
     with pytest.raises(ShapeError, match="batch shape"):

@@ -313,11 +313,10 @@ class BodySpheres(nn.Module):
         (Widening the body's box only on the joints whose ends leave it instead cost the ur5's tuning
         problems, made within ±2π, 11 points in fixed time and 6 under a deadline of 0.05 s.)"""
         lo, hi = self.limits
-        inside = ((theta0 >= lo) & (theta0 <= hi) & (thetaT >= lo) & (thetaT <= hi)).all(
+        inside = ((np.minimum(theta0, thetaT) >= lo) & (np.maximum(theta0, thetaT) <= hi)).all(
             axis=1, keepdims=True
-        )
-        r_lo, r_hi = self.robot.lower.astype(np.float64), self.robot.upper.astype(np.float64)
-        return np.where(inside, lo, r_lo), np.where(inside, hi, r_hi)
+        )  # NaN is outside: it propagates through minimum and maximum and compares false
+        return np.where(inside, lo, self.robot.lower), np.where(inside, hi, self.robot.upper)
 
     def forward(self, q: torch.Tensor, validate: bool = True) -> torch.Tensor:
         """World sphere centres ``(..., M, 3)`` for joints ``q (..., dof)``.

@@ -353,6 +353,41 @@ def _extent_tensor(out, r, e0, e1, e2, R, o):
         out[r, 7 + m] = (t0 + t1) + t2
 
 
+def _float64(t: torch.Tensor) -> np.ndarray:
+    """A tensor's values as a C-contiguous float64 array (a view where the tensor already is one)."""
+    if t.dtype != torch.float64 or t.device.type != "cpu" or t.requires_grad:
+        t = t.detach().cpu().double()
+    return np.ascontiguousarray(t.numpy())
+
+
+@_jit
+def _pack_scene(spheres, boxes, cylinders, has_floor, height):
+    """A scene's tables in one buffer ``[K, B, C, has floor, height, spheres…, boxes…, cylinders…]``
+    (:attr:`KernelScene.packed`): each box (15 columns) and cylinder followed by the radius of its
+    bounding ball, ‖half extents‖ and hypot(radius, half length)."""
+    K, B, C, cw = spheres.shape[0], boxes.shape[0], cylinders.shape[0], cylinders.shape[1]
+    buf = np.empty(5 + 4 * K + 16 * B + (cw + 1) * C)
+    buf[0], buf[1], buf[2], buf[3], buf[4] = K, B, C, has_floor, height
+    o = 5
+    for i in range(K):
+        for j in range(4):
+            buf[o + j] = spheres[i, j]
+        o += 4
+    for i in range(B):
+        for j in range(15):
+            buf[o + j] = boxes[i, j]
+        buf[o + 15] = math.sqrt(
+            boxes[i, 3] * boxes[i, 3] + boxes[i, 4] * boxes[i, 4] + boxes[i, 5] * boxes[i, 5]
+        )
+        o += 16
+    for i in range(C):
+        for j in range(cw):
+            buf[o + j] = cylinders[i, j]
+        buf[o + cw] = math.hypot(cylinders[i, 3], cylinders[i, 4])
+        o += cw + 1
+    return buf
+
+
 @_jit
 def _model_rows(spheres, boxes, cylinders):
     """The obstacle TM's rows ``(K + B + C, 14)`` of packed tables (see :meth:`KernelScene.model_rows`)."""
@@ -1410,19 +1445,19 @@ class KernelScene:
             raise ObstacleError(
                 f"a KernelScene holds one scene, got batch shape {tuple(scene.batch_shape)}; index it first"
             )
-        tables = {
-            k.table: np.ascontiguousarray(t.detach().cpu().double().numpy())
-            for k, t, _ in scene.tables(live=True)
-        }
-        boxes, cylinders = tables["boxes"], tables["cylinders"]
-        # Each box and cylinder with the radius of its bounding ball last (the kernels cull by it).
-        box_bound = np.linalg.norm(boxes[:, 3:6], axis=1)
-        cyl_bound = np.hypot(cylinders[:, 3], cylinders[:, 4])
-        self.spheres = tables["spheres"]
-        self.boxes = np.ascontiguousarray(np.concatenate((boxes, box_bound[:, None]), axis=1))
-        self.cylinders = np.ascontiguousarray(np.concatenate((cylinders, cyl_bound[:, None]), axis=1))
-        self.floor = np.array([0.0, 0.0] if scene.floor is None else [1.0, float(scene.floor)])
-        self._buf = self._rows = None
+        s, b, c = (_float64(t) for _, t, _ in scene.tables(live=True))
+        floor = (0.0, 0.0) if scene.floor is None else (1.0, float(scene.floor))
+        # One buffer [K, B, C, has floor, height, spheres…, boxes…, cylinders…], each box and cylinder
+        # with the radius of its bounding ball last (the kernels cull by it); the tables are views of it.
+        self._buf = buf = _pack_scene(s, b, c, floor[0], floor[1])
+        K, B, C = s.shape[0], b.shape[0], c.shape[0]
+        o = 5 + 4 * K
+        self.spheres = buf[5:o].reshape(K, 4)
+        self.boxes = buf[o : o + 16 * B].reshape(B, 16)
+        o += 16 * B
+        self.cylinders = buf[o : o + (c.shape[1] + 1) * C].reshape(C, c.shape[1] + 1)
+        self.floor = buf[3:5]
+        self._rows = None
 
     def model_rows(self) -> np.ndarray:
         """The scene as the obstacle-aware TM reads it, float64 ``(P, 14)``: per primitive its centre, the
@@ -1440,11 +1475,6 @@ class KernelScene:
     @property
     def packed(self) -> np.ndarray:
         """The scene in one buffer: [K, B, C, has floor, height, spheres…, boxes…, cylinders…]."""
-        if self._buf is None:
-            head = [len(self.spheres), len(self.boxes), len(self.cylinders), *self.floor]
-            self._buf = np.ascontiguousarray(
-                np.concatenate([head, self.spheres.ravel(), self.boxes.ravel(), self.cylinders.ravel()])
-            )
         return self._buf
 
     def __repr__(self) -> str:

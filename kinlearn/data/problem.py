@@ -143,13 +143,13 @@ class Problem:
                 ) from exc
             x0 = np.broadcast_to(x0, (*batch, x0.shape[-1]))
             xT = np.broadcast_to(xT, (*batch, xT.shape[-1]))
-        start_state = _state(robot, x0, "start")
         if position:
+            (start_state,) = _states(robot, (x0, "start"))
             if not np.isfinite(xT).all():
                 check_finite(torch.from_numpy(np.ascontiguousarray(xT)), "goal_position")
             goal_state = np.array(xT)  # its own copy
         else:
-            goal_state = _state(robot, xT, "goal")
+            start_state, goal_state = _states(robot, (x0, "start"), (xT, "goal"))
         scene = None
         if obstacles is not None:
             scene = as_scene(obstacles, torch.Size(batch)).to(dtype=torch.float64, device="cpu")
@@ -269,27 +269,36 @@ def state_error(what: str, worst: float) -> StateError:
     )
 
 
-def _state(robot: Robot, x: np.ndarray, what: str) -> np.ndarray:
-    """Joints or a state ``(..., dof [+ 3])`` (float64) as a checked state: joints within the limits,
-    ef = FK (computed once, here)."""
+def _states(robot: Robot, *parts: tuple[np.ndarray, str]) -> list[np.ndarray]:
+    """Joints or states ``(..., dof [+ 3])`` (float64), each given with its name, as checked states: joints
+    within the limits, ef = FK (computed once, here; for a few configurations the limits, finiteness and
+    FK of all of them in one compiled call)."""
     dof = robot.dof
-    flat = x.reshape(-1, x.shape[-1])
-    q = np.ascontiguousarray(flat[:, :dof])
+    flats = [x.reshape(-1, x.shape[-1]) for x, _ in parts]
+    q = np.concatenate([f[:, :dof] for f in flats])  # contiguous
     ef = None
-    if q.shape[0] <= SMALL_BATCH:  # limits, finiteness and FK in one compiled call
-        from ..collision.kernel import KernelChain
+    if q.shape[0] <= SMALL_BATCH:
+        from ..collision.kernel import KernelChain  # numba loads on first use, not at import
 
         ef, ok = KernelChain.of(robot).checked(q, LIMIT_TOLERANCE)
         good = bool(ok.all())
     else:  # one pass checks finiteness and the limits (a comparison with NaN is false)
         good = bool(((q >= robot.lower - LIMIT_TOLERANCE) & (q <= robot.upper + LIMIT_TOLERANCE)).all())
-    if not good or (x.shape[-1] > dof and not np.isfinite(flat).all()):  # explain
-        check_finite(torch.from_numpy(np.ascontiguousarray(x)), what)
-        robot.check_joints(torch.from_numpy(q), tol=LIMIT_TOLERANCE, what=f"{what} joints")
+    if not good or any(f.shape[-1] > dof and not np.isfinite(f).all() for f in flats):  # explain
+        for (x, what), f in zip(parts, flats, strict=True):
+            check_finite(torch.from_numpy(np.ascontiguousarray(x)), what)
+            robot.check_joints(
+                torch.from_numpy(np.ascontiguousarray(f[:, :dof])), tol=LIMIT_TOLERANCE, what=f"{what} joints"
+            )
     if ef is None:
         ef = positions(robot, q)
-    if x.shape[-1] > dof:
-        err = np.linalg.norm(flat[:, dof:] - ef, axis=-1)
-        if (err > STATE_EF_TOLERANCE).any():
-            raise state_error(what, float(err.max()))
-    return np.concatenate((q, ef), axis=-1).reshape(*x.shape[:-1], dof + 3)
+    out, o = [], 0
+    for (x, what), f in zip(parts, flats, strict=True):
+        m = f.shape[0]
+        if f.shape[-1] > dof:
+            err = np.linalg.norm(f[:, dof:] - ef[o : o + m], axis=-1)
+            if (err > STATE_EF_TOLERANCE).any():
+                raise state_error(what, float(err.max()))
+        out.append(np.concatenate((q[o : o + m], ef[o : o + m]), axis=-1).reshape(*x.shape[:-1], dof + 3))
+        o += m
+    return out

@@ -502,10 +502,8 @@ def _judge_small(
         wp = waypoints.detach().double().cpu().numpy() if isinstance(waypoints, torch.Tensor) else waypoints
         wp = wp.reshape(n, *wp.shape[len(batch) :])
 
-    def shaped(a):
-        if a is None:
-            return None
-        return np.array(a[0]) if batch == () else a.reshape(*batch, *a.shape[1:])
+    def shaped(a):  # (n, ...) → (*batch, ...): a view (batch () too)
+        return None if a is None else a.reshape((*batch, *a.shape[1:]))
 
     return Plan.from_joints(
         shaped(goal),
