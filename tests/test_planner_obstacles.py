@@ -85,6 +85,70 @@ def test_batch_one_gives_the_batch_verdict(planner, problems):
         assert bool(check_path(planner.body, one.joints, scene).collision_free) == bool(one.collision_free)
 
 
+def test_the_batch_one_entry_plans_as_a_problem_plans(monkeypatch):
+    """A batch-1 plan from joint vectors and a scene (the planner's batch-1 entry: no Problem made where
+    stage 1 clears it) is the plan of the same Problem (the general path) in every field, to the bit:
+    on held-out problems the learned proposals clear and ones they leave to the retreat stage (which
+    take the entry's stage 1 along), with float32 tensors and float64 arrays too; where stage 1 clears
+    it, no Problem is made."""
+    from kinlearn.data.problem import Problem
+    from kinlearn.planning.plan import Plan
+
+    shipped = Planner.default("iiwa14")
+    ps = ProblemSet.load(BENCHMARK.with_name("scene_problems_iiwa14.npz"))  # the seven scene families
+    stages = set()
+    for i in range(0, 140, 7):
+        start, goal, scene = ps.problem(i)
+        for kw in ({"refine_steps": 0}, {}):
+            one = shipped.plan(start, goal, obstacles=scene, **kw)
+            ref = shipped.plan(Problem.make(shipped.robot, start, goal, obstacles=scene), **kw)
+            stages.add(one.stage)
+            assert one.stage == ref.stage
+            for f in Plan._BATCHED:
+                a, b = getattr(one, f), getattr(ref, f)
+                assert a.dtype == b.dtype and torch.equal(a, b), (i, f)
+        low = shipped.plan(start.float(), goal.float(), obstacles=scene, refine_steps=0)
+        assert low.joints.dtype == torch.float32
+        assert torch.equal(
+            low.joints,
+            shipped.plan(
+                start.float().double(), goal.float().double(), obstacles=scene, refine_steps=0
+            ).joints.float(),
+        )
+        arrays = shipped.plan(start.numpy(), goal.numpy(), obstacles=scene, refine_steps=0)
+        assert arrays.joints.dtype == torch.float64 and torch.equal(
+            arrays.joints, one.joints if one.stage == "learned" else arrays.joints
+        )
+    assert {"learned", "retreat"} <= stages
+
+    def no_problem(*args, **kwargs):
+        raise AssertionError("a Problem was made")
+
+    start, goal, scene = ps.problem(0)
+    assert shipped.plan(start, goal, obstacles=scene).stage == "learned"
+    monkeypatch.setattr(Problem, "make", no_problem)
+    assert shipped.plan(start, goal, obstacles=scene).stage == "learned"
+
+
+def test_the_batch_one_entry_leaves_bad_input_to_the_checks(planner, problems):
+    """Input the batch-1 entry does not take (NaN, joints outside the limits, a state, a batch) is
+    checked and explained as every plan's is."""
+    from kinlearn.errors import JointLimitError, NonFiniteError
+
+    start, goal, scene = problems.problem(0)
+    bad = start.clone()
+    bad[1] = float("nan")
+    with pytest.raises(NonFiniteError):
+        planner.plan(bad, goal, obstacles=scene)
+    far = goal.clone()
+    far[0] = 10.0
+    with pytest.raises(JointLimitError, match="goal"):
+        planner.plan(start, far, obstacles=scene)
+    with pytest.raises(ShapeError):
+        planner.plan(start[:3], goal, obstacles=scene)
+    assert planner.plan(start, start, obstacles=scene).joints.eq(start).all()  # no move: the start held
+
+
 def test_deterministic(planner, problems):
     start, goal, scene = problems.problem(3)
     a = planner.plan(start, goal, obstacles=scene)

@@ -148,13 +148,17 @@ class ObstacleStages:
             return line, np.zeros(n, dtype=np.int64), _lines_free(self, line, packed)
         net, body = self._compiled_tm, self._np_body
         lo, hi = self._boxes(theta0, thetaT)
-        paths = np.empty((n, *net.candidates_shape(bool(steps))))
+        paths = None if n == 1 else np.empty((n, *net.candidates_shape(bool(steps))))
         pick, free = np.empty(n, dtype=np.int64), np.empty(n, dtype=bool)
         for i in range(n):
             p, order, k = net.first_free(
                 theta0[i], ef0[i], thetaT[i], efT[i], lo[i], hi[i], bool(steps), body, packed[i], CHECK_TRAVEL
             )
-            paths[i], pick[i], free[i] = p, k if k >= 0 else order[0], k >= 0
+            if paths is None:  # a batch-1 plan: its candidates as they are (no copy)
+                paths = p[None]
+            else:
+                paths[i] = p
+            pick[i], free[i] = k if k >= 0 else order[0], k >= 0
         return paths, pick, free
 
     def _plan_around(
@@ -167,6 +171,7 @@ class ObstacleStages:
         steps: int,
         deadline: Deadline,
         iterations: int = 0,
+        first: tuple | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Joint paths ``(N, K, dof)`` around ``scene``, whether each is collision-free ``(N,)`` and the
         stage that made it ``(N,)`` (:data:`~kinlearn.planning.stages.STAGES`).
@@ -180,11 +185,15 @@ class ObstacleStages:
         (:meth:`_sample`). Each plan is its problem's alone: proposals are made as at batch 1, the
         optimiser starts from the very path a batch-1 plan starts from, and paths of other lengths (the
         retreat stage's, the sampler's) are brought to the batch's longest by splitting segments (the
-        same polylines, checked again).
+        same polylines, checked again). ``first``: stage 1's ``(paths, pick, free)`` for these very
+        problems where the caller already ran it (the planner's batch-1 entry).
         """
         n = theta0.shape[0]
         packed = _packed_scenes(scene, n)  # the scene converted once, for the TM and the check
-        paths, pick, free = self._learned(theta0, ef0, thetaT, efT, packed, steps)
+        if first is None:
+            paths, pick, free = self._learned(theta0, ef0, thetaT, efT, packed, steps)
+        else:  # stage 1 already run (the planner's batch-1 entry), on this very problem
+            paths, pick, free = first
         out = paths[np.arange(n), pick]
         if free.all():  # every plan cleared by stage 1 (a batch-1 plan most often): no later stage runs
             return out, free, np.full(n, "learned", dtype=object)

@@ -453,7 +453,7 @@ def _judge_small(
     problem, J, waypoints, found, tolerance, max_travel, body, collision_free, stage=None
 ) -> Plan:
     """:func:`judge` for at most ``SMALL_BATCH`` float64 paths ``J (..., T+1, dof)``: the same rule, in
-    NumPy and the compiled kernels."""
+    NumPy and the compiled kernels (:func:`verdict_small`, given the problem's arrays)."""
     robot, batch = problem.robot, problem.batch_shape
     dof = robot.dof
     if J.shape[:-2] != batch or J.shape[-2] < 2:
@@ -464,26 +464,13 @@ def _judge_small(
     K = J.shape[-2]
     flat = np.ascontiguousarray(J.reshape(-1, K, dof))
     n = flat.shape[0]
-    from ..collision.kernel import KernelChain
-
-    ef, ok = KernelChain.of(robot).checked(flat.reshape(n * K, dof), LIMIT_TOLERANCE)
-    ok = ok.reshape(n, K)
-    if not ok.all() and not np.isfinite(flat).all():
-        check_finite(torch.from_numpy(flat), "joint paths")
-    ef = ef.reshape(n, K, 3)
-    within = ok.all(-1)
-    got = _found_array(found, batch)
-    if got is not None:
-        within &= got
-    # The problem's tensors as arrays (views: no torch operation on the fast path).
-    s_np = _as_numpy(problem.start).reshape(n, problem.start.shape[-1])
-    g_np = _as_numpy(problem.goal).reshape(n, problem.goal.shape[-1])
-    within &= np.abs(flat[:, 0] - s_np[:, :dof]).max(-1) <= START_TOLERANCE
     free = None
     if problem.obstacles is not None:
         if collision_free is not None:
             free = np.asarray(collision_free, dtype=bool).reshape(n)
         else:
+            if not np.isfinite(flat).all():
+                check_finite(torch.from_numpy(flat), "joint paths")
             from ..collision import kernel
 
             kb = kernel.KernelBody.of(planning_body(robot) if body is None else body)
@@ -494,24 +481,72 @@ def _judge_small(
             for i in range(n):
                 ks = kernel.KernelScene.of(scene) if unbatched else kernel.KernelScene(flat_scene[i])
                 free[i] = kernel.first_free(kb, flat[i : i + 1], ks, max_travel=float(max_travel)) == 0
-    state = problem.goal_kind == "state"
-    goal = g_np if state else np.concatenate((flat[:, -1], ef[:, -1]), -1)
-    target = g_np[:, dof:] if state else g_np
     wp = None
     if waypoints is not None:
         wp = waypoints.detach().double().cpu().numpy() if isinstance(waypoints, torch.Tensor) else waypoints
         wp = wp.reshape(n, *wp.shape[len(batch) :])
+    # The problem's tensors as arrays (views: no torch operation on the fast path).
+    return verdict_small(
+        robot,
+        flat,
+        _as_numpy(problem.start).reshape(n, problem.start.shape[-1]),
+        _as_numpy(problem.goal).reshape(n, problem.goal.shape[-1]),
+        problem.goal_kind == "state",
+        tuple(batch),
+        free,
+        tolerance,
+        waypoints=wp,
+        found=_found_array(found, batch),
+        stage=stage,
+    )
+
+
+def verdict_small(
+    robot: Robot,
+    flat: np.ndarray,
+    start: np.ndarray,
+    goal: np.ndarray,
+    state_goal: bool,
+    batch: tuple,
+    free: np.ndarray | None,
+    tolerance: Tolerance = DEFAULT_TOLERANCE,
+    *,
+    waypoints: np.ndarray | None = None,
+    found: np.ndarray | None = None,
+    stage=None,
+) -> Plan:
+    """The :class:`Plan` of ``n`` ≤ ``SMALL_BATCH`` float64 paths ``flat (n, T+1, dof)`` (C-contiguous) for
+    start states ``start (n, dof + 3)`` and goals ``goal (n, dof + 3)`` (states, ``state_goal``) or
+    ``(n, 3)`` (positions), judged by :func:`judge`'s rule (its batch-1 core; the planner's batch-1 entry
+    calls it with the arrays it already holds): the analytic FK of every configuration and the limits in
+    one compiled call, the path starting at the start, the goal within ``tolerance``; ``free (n,)`` the
+    dense check's verdicts among obstacles (None: no obstacles), ``found (n,)`` where a path was found
+    at all; every field shaped to ``batch``."""
+    n, K, dof = flat.shape
+    from ..collision.kernel import KernelChain
+
+    ef, ok = KernelChain.of(robot).checked(flat.reshape(n * K, dof), LIMIT_TOLERANCE)
+    ok = ok.reshape(n, K)
+    if not ok.all() and not np.isfinite(flat).all():
+        check_finite(torch.from_numpy(flat), "joint paths")
+    ef = ef.reshape(n, K, 3)
+    within = ok.all(-1)
+    if found is not None:
+        within &= found
+    within &= np.abs(flat[:, 0] - start[:, :dof]).max(-1) <= START_TOLERANCE
+    goal_state = goal if state_goal else np.concatenate((flat[:, -1], ef[:, -1]), -1)
+    target = goal[:, dof:] if state_goal else goal
 
     def shaped(a):  # (n, ...) → (*batch, ...): a view (batch () too)
         return None if a is None else a.reshape((*batch, *a.shape[1:]))
 
     return Plan.from_joints(
-        shaped(goal),
+        shaped(goal_state),
         shaped(flat),
         shaped(ef),
-        waypoints=shaped(wp),
+        waypoints=shaped(waypoints),
         target=shaped(target),
-        joint_goal=state,
+        joint_goal=state_goal,
         within_limits=shaped(within),
         collision_free=shaped(free),
         tolerance=tolerance,

@@ -56,9 +56,9 @@ from ..models.joint_path import JointPathModel, load_path_model
 from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model
 from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
-from .around import ObstacleStages, _load_kernels
+from .around import ObstacleStages, _kernel, _load_kernels
 from .inference import NumpyPathModel
-from .plan import DEFAULT_TOLERANCE, Plan, Tolerance, judge
+from .plan import DEFAULT_TOLERANCE, Plan, Tolerance, judge, verdict_small
 from .retreat import RetreatVias
 from .stages import Deadline
 from .stages import retreat_share as _retreat_share
@@ -350,7 +350,10 @@ class Planner(ObstacleStages):
         :class:`~kinlearn.data.problem.Problem` given as ``start`` (the planner protocol,
         :class:`~kinlearn.planning.plan.PlannerLike`: ``planner.plan(problem)``). The convenience form
         makes one :class:`Problem` of its arguments (:meth:`Problem.make`: every check, the start's and
-        goal's FK, the obstacles as a float64 scene) and plans it.
+        goal's FK, the obstacles as a float64 scene) and plans it; one problem given as joint vectors
+        and a :class:`~kinlearn.collision.Scene` is first tried without one (the start and goal checked
+        and FK'd in one compiled call, then stage 1), and made into a Problem only where stage 1 leaves
+        it colliding: the same plan, to the bit, for less Python.
 
         ``start``: joint values ``(..., dof)`` or a state ``(..., dof + 3)``. ``goal``: likewise — the plan
         ends at its joints — or an end-effector position ``(..., 3)`` (also as ``goal_position=``), reached
@@ -402,10 +405,59 @@ class Planner(ObstacleStages):
             self.warm_up()  # once, before the clock starts: no deadline is spent loading kernels
         timer = Deadline(deadline)  # started before the input is checked: the caller's time
         steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
+        first = None
+        if obstacles is not None and goal_position is None:
+            first = self._batch1(start, goal, obstacles, steps)
+            if first is not None and first[2][2][0]:  # stage 1 cleared it: no Problem made
+                return self._batch1_plan(first, start, goal)
         problem, dtype, device = self._problem(start, goal, goal_position, obstacles)
-        return self._plan(problem, steps, refine_steps is None, strict, dtype, device, timer)
+        return self._plan(
+            problem,
+            steps,
+            refine_steps is None,
+            strict,
+            dtype,
+            device,
+            timer,
+            None if first is None else first[2],
+        )
 
     __call__ = plan
+
+    def _batch1(self, start, goal, obstacles, steps: int) -> tuple | None:
+        """The batch-1 entry of a plan among obstacles, for the most common call, one problem given as
+        joint vectors ``(dof,)`` (float tensors on the CPU or float arrays) and an unbatched
+        :class:`Scene`, with an obstacle network: its joints ``(2, dof)`` (start, goal) and their end
+        effectors ``(2, 3)``, checked (finite, within the limits) and FK'd in one compiled call, and its
+        stage 1 (:meth:`_learned`: the same candidates and verdicts as the general path's). None for any
+        other input, or one that fails a check or does not move: :meth:`Problem.make` then checks it
+        (and explains what is wrong) and :meth:`_plan` plans it. The general path takes 0.2 ms more per
+        plan in the Python around the compiled calls (making a Problem, judging it)."""
+        if self.obstacle_tm is None or self._domain is not None or not isinstance(obstacles, Scene):
+            return None
+        dof = self.robot.dof
+        a, b = _joint_vector(start, dof), _joint_vector(goal, dof)
+        if a is None or b is None or obstacles.batch_shape:
+            return None
+        q = np.concatenate((a, b)).reshape(2, dof)  # (np.stack's Python costs more than the copy)
+        kernel = _kernel()
+        ef, ok = kernel.KernelChain.of(self.robot).checked(q, LIMIT_TOLERANCE)
+        if not ok.all() or np.abs(b - a).max() <= ZERO_MOVE:
+            return None
+        packed = [kernel.KernelScene.of(obstacles)]  # the general path finds it packed (a float64 scene)
+        return q, ef, self._learned(q[:1], ef[:1], q[1:], ef[1:], packed, steps)
+
+    def _batch1_plan(self, first: tuple, start, goal) -> Plan:
+        """The plan of a batch-1 problem stage 1 cleared (:meth:`_batch1`): judged by :func:`judge`'s rule
+        (:func:`~kinlearn.planning.plan.verdict_small`) on the arrays already at hand."""
+        q, ef, (paths, pick, free) = first
+        states = np.concatenate((q, ef), axis=1)
+        plan = verdict_small(
+            self.robot, paths[0, pick[0]][None], states[:1], states[1:], True, (), free, self.tolerance,
+            stage="learned",
+        )  # fmt: skip
+        (dtype, device), (other, _) = _out_dtype(start), _out_dtype(goal)
+        return _as_output(plan, torch.promote_types(dtype, other), device, self._lo_np, self._hi_np)
 
     def warm_up(self) -> None:
         """Load now what the first plan among obstacles would load (once per planner): the compiled
@@ -438,10 +490,12 @@ class Planner(ObstacleStages):
         dtype,
         device,
         deadline: Deadline,
+        first: tuple | None = None,
     ) -> Plan:
         """Plan a checked problem: its goal joints (solved first for a position goal), the joint paths
-        (free space: the TM's; among obstacles the stages of :meth:`_plan_around`), one verdict
-        (:func:`judge`), and the plan in the output's dtype and device."""
+        (free space: the TM's; among obstacles the stages of :meth:`_plan_around`; ``first``: the batch-1
+        entry's stage 1 of it, already run), one verdict (:func:`judge`), and the plan in the output's
+        dtype and device."""
         batch = problem.batch_shape
         dof, S = self.robot.dof, self.layout.size
         n = math.prod(batch)
@@ -485,7 +539,7 @@ class Planner(ObstacleStages):
                     stacklevel=4,
                 )
             joints, free, stage = self._plan_around(
-                theta0, ef0, thetaT, efT, scene, steps, deadline, iterations
+                theta0, ef0, thetaT, efT, scene, steps, deadline, iterations, first
             )
         elif self._np_tm is not None:
             joints, waypoints = self._joint_path(theta0, ef0, thetaT, efT)
@@ -513,18 +567,7 @@ class Planner(ObstacleStages):
             plan = dataclasses.replace(
                 plan, goal=torch.from_numpy(goal[0] if lead == () else goal.reshape(*lead, S))
             )
-        if dtype != torch.float64 or device.type != "cpu":
-            plan = dataclasses.replace(
-                plan,
-                **{
-                    f: v.to(device=device, dtype=dtype if v.is_floating_point() else v.dtype)
-                    for f in Plan._BATCHED
-                    if (v := getattr(plan, f)) is not None
-                },
-            )
-        if plan.joints.dtype in (torch.float16, torch.bfloat16):  # rounding may cross a limit by 2e-3 rad
-            plan = dataclasses.replace(plan, joints=_inside(plan.joints, self._lo_np, self._hi_np))
-        return plan
+        return _as_output(plan, dtype, device, self._lo_np, self._hi_np)
 
     # ----------------------------------------------------------------------------------------------
     # Free space
@@ -712,6 +755,36 @@ def step_to_position(
         e = fm(s, nxt - theta)[..., layout.ef]
         theta = nxt
     return theta.double().numpy()
+
+
+def _joint_vector(x, dof: int) -> np.ndarray | None:
+    """``x`` as float64 joints ``(dof,)`` where it is a float tensor on the CPU or a float array of that
+    shape (a view where it already is float64), else None (for :meth:`Problem.make` to check)."""
+    if isinstance(x, torch.Tensor):
+        if x.shape != (dof,) or not x.is_floating_point() or x.device.type != "cpu":
+            return None
+        x = x.detach()
+        return (x if x.dtype == torch.float64 else x.double()).numpy()
+    if isinstance(x, np.ndarray) and x.shape == (dof,) and x.dtype.kind == "f":
+        return x.astype(np.float64, copy=False)
+    return None
+
+
+def _as_output(plan: Plan, dtype: torch.dtype, device, lo: np.ndarray, hi: np.ndarray) -> Plan:
+    """``plan`` (float64 on the CPU) in the output's ``dtype`` and ``device``; its joints kept within the
+    limits ``lo``/``hi`` where half precision rounds them across."""
+    if dtype != torch.float64 or device.type != "cpu":
+        plan = dataclasses.replace(
+            plan,
+            **{
+                f: v.to(device=device, dtype=dtype if v.is_floating_point() else v.dtype)
+                for f in Plan._BATCHED
+                if (v := getattr(plan, f)) is not None
+            },
+        )
+    if plan.joints.dtype in (torch.float16, torch.bfloat16):  # rounding may cross a limit by 2e-3 rad
+        plan = dataclasses.replace(plan, joints=_inside(plan.joints, lo, hi))
+    return plan
 
 
 def _inside(joints: torch.Tensor, lo: np.ndarray, hi: np.ndarray) -> torch.Tensor:
