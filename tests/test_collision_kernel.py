@@ -447,3 +447,18 @@ def test_kernel_scene_is_one_buffer_with_each_primitive_s_bounding_radius():
         assert np.shares_memory(t, ks.packed)
     bare = K.KernelScene(Scene.from_spheres([[0.5, 0.0, 0.5, 0.25]], floor=None))
     np.testing.assert_array_equal(bare.packed, [1, 0, 0, 0, 0, 0.5, 0.0, 0.5, 0.25])
+
+
+def test_free_depths_refuse_nan_and_count_every_via_in_an_empty_scene():
+    robot = load_robot("panda")
+    kb = K.KernelBody(body_spheres(robot))
+    far = K.KernelScene(Scene.from_spheres([[5.0, 5.0, 5.0, 0.1]], floor=None))
+    theta = (robot.lower + robot.upper) / 2
+    vias = theta + np.linspace(0.02, 0.1, 3)[None, :, None] * np.ones((4, 1, robot.dof))
+    assert K.free_depths(kb, theta, vias, far).tolist() == [3] * 4
+    bad = vias.copy()
+    bad[2, 1, 0] = np.nan
+    with pytest.raises(NonFiniteError):
+        K.free_depths(kb, theta, bad, far)
+    with pytest.raises(ShapeError):
+        K.free_depths(kb, theta[:3], vias, far)

@@ -12,7 +12,7 @@ import torch
 
 from kinlearn.body.robot import load_robot
 from kinlearn.collision import Box, Scene, check_path
-from kinlearn.collision.kernel import KernelBody, KernelScene, check_paths, first_free, point_distances
+from kinlearn.collision.kernel import KernelBody, KernelScene, first_free, free_depths, point_distances
 from kinlearn.data.problems import ProblemSet
 from kinlearn.errors import ConfigError
 from kinlearn.models.chain import ChainFM
@@ -131,13 +131,9 @@ def test_bad_vias_settings_are_refused():
         Planner.load(DEFAULT_CHECKPOINTS / "panda", retreat="yes")
 
 
-def _checks(body, ks):
-    """The dense check's first colliding segment of a polyline, and its verdict of one configuration."""
-
-    def first_collision(path):
-        return int(check_paths(body, path[None], ks, max_travel=CHECK_TRAVEL, exact=False)[2][0])
-
-    return first_collision, lambda q: first_collision(q[None]) < 0
+def _depths(body, ks):
+    """The planner's free depths of chains from a configuration (one compiled call)."""
+    return lambda theta, vias: free_depths(body, theta, vias, ks, max_travel=CHECK_TRAVEL)
 
 
 def test_free_depths_stop_at_the_first_segment_torch_finds_colliding(panda, problems):
@@ -150,7 +146,7 @@ def test_free_depths_stop_at_the_first_segment_torch_finds_colliding(panda, prob
         theta = start.numpy()
         vias = panda._retreat_vias().vias(theta)
         ks = KernelScene(scene)
-        depth = R.free_depths(*_checks(body, ks), theta, vias)
+        depth = _depths(body, ks)(theta, vias)
         # the same depths as checking every segment apart
         for d in range(vias.shape[0]):
             chain = np.concatenate((theta[None], vias[d]))
@@ -216,9 +212,9 @@ def test_an_end_with_no_free_fixed_retreat_retreats_where_its_scene_is_open(pand
     body = KernelBody(panda.body)
 
     vias = panda._retreat_vias()
-    fixed, depth = vias.free(theta, *_checks(body, ks))
+    fixed, depth = vias.free(theta, _depths(body, ks))
     assert not depth.any() and np.array_equal(fixed, vias.vias(theta))
-    opened, depth = vias.free(theta, *_checks(body, ks), lambda x: point_distances(ks, x))
+    opened, depth = vias.free(theta, _depths(body, ks), lambda x: point_distances(ks, x))
     # the fixed chains (none free), then the open ones, of either kind of hand, the turning ones first
     D, O = len(R.RETREAT_DIRECTIONS), R.OPEN_DIRECTIONS
     assert opened.shape == (2 * (D + O), *fixed.shape[1:])
@@ -246,17 +242,17 @@ def test_open_directions_join_the_fixed_ones_where_none_is_free_all_the_way(pand
     def far(points):  # an empty scene: every direction open, the grid's order kept
         return np.full(len(points), 10.0)
 
-    def short(path):  # every chain collides in its third segment
-        return 2
+    def short(theta, chains):  # every chain collides in its third segment
+        return np.full(len(chains), 2)
 
-    opened, depth = vias.free(theta, short, lambda q: True, far)
+    opened, depth = vias.free(theta, short, far)
     O = R.OPEN_DIRECTIONS
     assert opened.shape == (2 * (D + O), L, theta.shape[0]) and depth.tolist() == [2] * (2 * (D + O))
     assert np.array_equal(opened[:D], fixed[:D]) and np.array_equal(opened[D + O : 2 * D + O], fixed[D:])
     assert np.array_equal(opened[D : D + O], vias.vias(theta, far)[:O])  # the turning open chains
     assert len(R.sampler_branches(opened, depth)) == D + O  # turning: fixed and open
 
-    kept, depth = vias.free(theta, lambda path: -1, lambda q: True, far)  # free all the way
+    kept, depth = vias.free(theta, lambda t, chains: np.full(len(chains), L), far)  # free all the way
     assert np.array_equal(kept, fixed) and depth.tolist() == [L] * (2 * D)
 
 

@@ -94,6 +94,7 @@ __all__ = [
     "clearances",
     "first_free",
     "first_free_boxed",
+    "free_depths",
     "near_pairs",
     "point_distances",
     "proven_apart",
@@ -1119,6 +1120,41 @@ def first_free_boxed(paths, order, max_travel, margin, box_lo, box_hi, f_in, n_i
 
 
 @_jit
+def _free_depths_boxed(theta, vias, max_travel, margin, box_lo, box_hi, f_in, n_in, f_all, n_all, s, depth):
+    """:func:`free_depths`' compiled core: each chain ``[theta, vias[d]]`` walked to its first collision
+    (the body packed as :func:`first_free_boxed` packs it for the chain), the via before a hit in a
+    later segment checked alone; ``depth (D,)`` filled. False if ``theta`` or ``vias`` hold NaN or
+    infinity (nothing checked)."""
+    D, L, dof = vias.shape
+    if not (_all_finite(theta) and _all_finite(vias)):
+        return False
+    chain, one = np.empty((L + 1, dof)), np.empty((1, dof))
+    for d in range(D):
+        for j in range(dof):
+            chain[0, j] = theta[j]
+        for k in range(L):
+            for j in range(dof):
+                chain[k + 1, j] = vias[d, k, j]
+        inside = _within(chain, box_lo, box_hi)
+        first = _verdict_packed(
+            chain, max_travel, margin, f_in if inside else f_all, n_in if inside else n_all, s
+        )[0]
+        if first < 0:
+            depth[d] = L
+        elif first == 0:
+            depth[d] = 0
+        else:  # a hit in segment f lies in it or at its first knot, via f − 1: checked alone, it tells which
+            for j in range(dof):
+                one[0, j] = vias[d, first - 1, j]
+            inside = _within(one, box_lo, box_hi)
+            hit = _verdict_packed(
+                one, max_travel, margin, f_in if inside else f_all, n_in if inside else n_all, s
+            )[0]
+            depth[d] = first - 1 if hit >= 0 else first
+    return True
+
+
+@_jit
 def _within(paths, lo, hi):
     """Whether every value of ``paths (..., dof)`` lies in ``[lo, hi]`` (NaN does not)."""
     dof = lo.shape[0]
@@ -1704,6 +1740,31 @@ def check_paths(
     return free, clear, first
 
 
+def free_depths(
+    body: KernelBody,
+    theta,
+    vias,
+    scene: KernelScene,
+    max_travel: float = 0.01,
+    margin: float = 0.0,
+) -> np.ndarray:
+    """``(D,)``: per chain of ``vias (D, L, dof)`` from ``theta (dof,)``, how many of its vias the polyline
+    ``[theta, vias[d]]`` reaches through segments :func:`check_paths` finds free (0: its first segment
+    collides; L: all free), in one compiled call. Each chain is walked once to its first collision: a
+    hit found in segment f (f > 0) lies in it or at its first knot, via f − 1, which the segment before
+    ends at; checked alone, that via tells which (the depths of checking every segment apart, to the
+    bit). Raises :class:`~kinlearn.errors.NonFiniteError` for NaN or infinity."""
+    _check_args(body, scene, max_travel, margin)
+    theta = _joints(theta, body.dof, "theta", 1, finite=False)
+    vias = _joints(vias, body.dof, "vias", 3, finite=False)
+    depth = np.empty(vias.shape[0], dtype=np.int64)
+    if not _free_depths_boxed(
+        theta, vias, float(max_travel), float(margin), *body.boxed, scene.packed, depth
+    ):
+        raise NonFiniteError("theta or the vias hold NaN or infinity")
+    return depth
+
+
 def first_free(
     body: KernelBody,
     paths,
@@ -1754,6 +1815,7 @@ def warm_up() -> None:
     check_paths(body, path, scene, exact=False)
     first_free(body, path, scene)
     first_free(body, path, scene, order=[0])
+    free_depths(body, path[0, 0], path, scene)
     clearances(body, scene, path[0])
     centres(body, path[0])
     point_distances(scene, np.zeros((1, 3)))

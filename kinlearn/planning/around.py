@@ -296,11 +296,8 @@ class ObstacleStages:
         def first_free(paths, order):
             return k.first_free(body, paths, nscene, order, max_travel=CHECK_TRAVEL)
 
-        def first_collision(path):  # the walk alone (a chain's depth is where it first collides)
-            return int(k.check_paths(body, path[None], nscene, max_travel=CHECK_TRAVEL, exact=False)[2][0])
-
-        def config_free(q):
-            return first_collision(q[None]) < 0
+        def depths(theta, chains):  # each chain walked to its first collision, all in one compiled call
+            return k.free_depths(body, theta, chains, nscene, max_travel=CHECK_TRAVEL)
 
         transfer = None
         if self.obstacle_tm is not None:
@@ -314,8 +311,8 @@ class ObstacleStages:
             return k.point_distances(nscene, points)
 
         (v0, d0), (vT, dT) = (
-            vias.free(theta0, first_collision, config_free, distance),
-            vias.free(thetaT, first_collision, config_free, distance),
+            vias.free(theta0, depths, distance),
+            vias.free(thetaT, depths, distance),
         )
         path = retreat_path(
             theta0,

@@ -55,7 +55,6 @@ __all__ = [
     "RETREAT_TRANSFERS",
     "RetreatVias",
     "free_chains",
-    "free_depths",
     "open_directions",
     "retreat_path",
     "sampler_branches",
@@ -156,13 +155,14 @@ class RetreatVias:
     def free(
         self,
         theta: np.ndarray,
-        first_collision: Callable[[np.ndarray], int],
-        config_free: Callable[[np.ndarray], bool],
+        depths: Callable[[np.ndarray, np.ndarray], np.ndarray],
         distance: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """One end's retreats: ``(vias (C, L, dof), free depths (C,))`` (:func:`free_depths`, with its
-        checks) in :data:`RETREAT_DIRECTIONS`; where none of those is free all the way (to the farthest
-        distance) and the scene's ``distance`` is given, in its most open directions as well (the
+        """One end's retreats: ``(vias (C, L, dof), free depths (C,))`` in :data:`RETREAT_DIRECTIONS`;
+        ``depths(theta, vias (C, L, dof)) -> (C,)``: how many vias each chain from ``theta`` reaches through
+        free segments (the planner's: :func:`~kinlearn.collision.kernel.free_depths`, one compiled call);
+        where none of those is free all the way (to the farthest distance) and the scene's ``distance``
+        is given, in its most open directions as well (the
         chains of either set, the hand turning first: :meth:`vias`' order). A retreat stopped short is
         often one that leads nowhere (toward the base under a table top): on the tuning problems (seeds
         3004–3010 and the grasp-like ones, fixed time; three open directions then) the open directions
@@ -170,10 +170,10 @@ class RetreatVias:
         (iiwa14), against 83.6 / 83.0, 97.1 / 99.0 and 98.6 / 98.0% with them only where no fixed
         retreat is free at all, and lost no problem."""
         vias = self.vias(theta)
-        depth = free_depths(first_collision, config_free, theta, vias)
+        depth = depths(theta, vias)
         if distance is not None and depth.max() < vias.shape[1]:
             more = self.vias(theta, distance)
-            extra = free_depths(first_collision, config_free, theta, more)
+            extra = depths(theta, more)
             vias, depth = _by_hand(vias, more), _by_hand(depth, extra)
         return vias, depth
 
@@ -241,35 +241,9 @@ def open_directions(
     return _GRID[np.argsort(-least, kind="stable")[:OPEN_DIRECTIONS]]
 
 
-def free_depths(
-    first_collision: Callable[[np.ndarray], int],
-    config_free: Callable[[np.ndarray], bool],
-    theta: np.ndarray,
-    vias: np.ndarray,
-) -> np.ndarray:
-    """``(D,)``: per direction, how many of ``vias (D, L, dof)``'s vias the chain from ``theta``
-    reaches through free segments (0: its first segment collides). ``first_collision(path (W, dof))``:
-    the dense check's first colliding segment of a polyline (−1: none), its walk stopping there;
-    ``config_free(q (dof,))``: its verdict of one configuration. Each chain is walked once as a
-    polyline: a collision found in segment f (f > 0) lies in it or at its first knot, via f − 1, which
-    the segment before it ends at; checked alone, that via tells which (the depths of checking every
-    segment apart, to the bit)."""
-    D, L, _ = vias.shape
-    depth = np.zeros(D, dtype=np.int64)
-    for d in range(D):
-        f = first_collision(np.concatenate((theta[None], vias[d])))
-        if f < 0:
-            depth[d] = L
-        elif f > 0 and not config_free(vias[d, f - 1]):  # the collision is at segment f's first knot
-            depth[d] = f - 1
-        else:
-            depth[d] = f
-    return depth
-
-
 def free_chains(vias: np.ndarray, depth: np.ndarray) -> list[np.ndarray]:
     """One end's free retreats as polylines from it (the end itself left out): per direction of ``vias
-    (D, L, dof)``, its first ``depth[d]`` vias (:func:`free_depths`), deepest prefixes only."""
+    (D, L, dof)``, its first ``depth[d]`` vias (their free depths: :meth:`RetreatVias.free`), deepest prefixes only."""
     return [vias[d, : int(n)] for d, n in enumerate(depth) if n]
 
 
@@ -308,7 +282,7 @@ def retreat_path(
 ) -> np.ndarray | None:
     """The retreat stage's path ``(V, dof)`` from ``theta0`` to ``thetaT`` (steps 2 and 3 of the module
     docstring), or None. ``vias*``/``depth*``: each end's vias and free depths (:class:`RetreatVias`,
-    :func:`free_depths`). ``first_free(paths (P, W, dof), order)``: the dense check's first free path
+    :meth:`RetreatVias.free`). ``first_free(paths (P, W, dof), order)``: the dense check's first free path
     in ``order`` (−1: none). ``transfer(a, b)``: a free path from configuration ``a`` to ``b`` by the
     network (None: none free, or no network). ``stop()``: asked before the joins and before each
     transfer; True gives up (a deadline that has run out)."""
