@@ -16,7 +16,8 @@ row alike and the ratios stay meaningful):
 
 Times are wall clock per call (µs) and, beside them, the thread's CPU time (``time.thread_time``),
 which a machine shared with other work inflates far less. Printed: p50 and p99 per row, the ratios the
-geometry issue names, and where an obstacle plan's time goes (its stages timed alone, medians).
+geometry issue names, and where the time of an obstacle plan stage 1 clears goes (its parts timed alone,
+medians).
 """
 
 from __future__ import annotations
@@ -37,7 +38,6 @@ from kinlearn.collision.ompl import OmplRrtConnect
 from kinlearn.data.problems import ProblemSet
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
 from kinlearn.planning.around import _packed_scenes
-from kinlearn.planning.plan import judge
 from kinlearn.planning.planner import Planner
 
 HELDOUT = Path(__file__).resolve().parent / "data" / "obstacle_problems_heldout.npz"
@@ -110,34 +110,34 @@ def main() -> None:
         r_cpu = np.percentile(cpu[a], q) / np.median(cpu[b])
         print(f"  {label}: {r_wall:.2f} | {r_cpu:.2f} ({goal})")
 
-    # Where an obstacle plan's time goes: its stages, each timed alone on the same problems (medians).
-    from kinlearn.data.problem import Problem
-
-    stages = {
+    # Where an obstacle plan's time goes, for the plans stage 1 clears (the batch-1 entry: no Problem
+    # made): its parts, each timed alone on the same problems (medians).
+    parts = {
         name: []
         for name in (
-            "the Problem (checks, FK)",
-            "the scene packed for the kernels",
-            "stage 1 (the line's check; where it collides the network and its candidates' check: one compiled call)",
-            "judge (verdict, the Plan)",
+            "the batch-1 entry (start and goal checked and FK'd, the scene packed, stage 1)",
+            "stage 1 alone, timed again (the line's check; where it collides the network and its candidates' check: one compiled call)",
+            "the verdict (judge's rule on the arrays at hand, the Plan)",
         )
     }
     for s, g, sc in problems:
         t0 = time.perf_counter()
-        problem = Problem.make(robot, s, g, obstacles=sc)
+        first = planner._batch1(s, g, sc, 0)
         t1 = time.perf_counter()
-        st, gl = problem.start.numpy()[None], problem.goal.numpy()[None]
-        d = robot.dof
-        packed = _packed_scenes(problem.obstacles, 1)
+        if first is None or not first[2][2][0]:
+            continue  # left to the later stages, which make a Problem
+        q, ef, _ = first
+        packed = _packed_scenes(sc, 1)
         t2 = time.perf_counter()
-        paths, pick, free_ = planner._learned(st[:, :d], st[:, d:], gl[:, :d], gl[:, d:], packed, 0)
+        planner._learned(q[:1], ef[:1], q[1:], ef[1:], packed, 0)
         t3 = time.perf_counter()
-        judge(problem, paths[0, pick[0]], tolerance=planner.tolerance, collision_free=free_[0])
+        planner._batch1_plan(first, s, g)
         t4 = time.perf_counter()
-        for name, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3), strict=True):
-            stages[name].append(dt)
-    print("\nan obstacle plan's stages, each timed alone (median µs):")
-    for name, ts in stages.items():
+        for name, dt in zip(parts, (t1 - t0, t3 - t2, t4 - t3), strict=True):
+            parts[name].append(dt)
+    n = len(next(iter(parts.values())))
+    print(f"\nan obstacle plan's parts, each timed alone ({n} plans stage 1 cleared; median µs):")
+    for name, ts in parts.items():
         print(f"  {name}: {1e6 * np.median(ts):.1f}")
     print(f"\n1-minute load average at the end {os.getloadavg()[0]:.1f} (on {os.cpu_count()} logical cores)")
 
