@@ -120,6 +120,15 @@ def test_the_batch_one_entry_plans_as_a_problem_plans(monkeypatch):
             arrays.joints, one.joints if one.stage == "learned" else arrays.joints
         )
     assert {"learned", "retreat"} <= stages
+    start, goal, _ = ps.problem(0)
+    balls = [[0.45, 0.0, 0.55, 0.08], [0.3, 0.3, 0.4, 0.06]]  # spheres (K, 4), read by the entry too
+    one = shipped.plan(start, goal, obstacles=balls)
+    ref = shipped.plan(Problem.make(shipped.robot, start, goal, obstacles=balls))
+    assert one.stage == ref.stage and all(
+        torch.equal(getattr(one, f), getattr(ref, f)) for f in Plan._BATCHED if getattr(ref, f) is not None
+    )
+    with pytest.raises(ObstacleError):
+        shipped.plan(start, goal, obstacles=[[0.45, 0.0, 0.55, -0.1]])
 
     def no_problem(*args, **kwargs):
         raise AssertionError("a Problem was made")

@@ -40,7 +40,7 @@ from ..body.robot import BUILTIN_ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import as_int
 from ..collision.body import BodySpheres
-from ..collision.scene import Scene
+from ..collision.scene import Scene, as_scene
 from ..data.babbling import MAX_STEP
 from ..data.problem import LIMIT_TOLERANCE, SMALL_BATCH, Problem, positions
 from ..errors import (
@@ -351,7 +351,7 @@ class Planner(ObstacleStages):
         :class:`~kinlearn.planning.plan.PlannerLike`: ``planner.plan(problem)``). The convenience form
         makes one :class:`Problem` of its arguments (:meth:`Problem.make`: every check, the start's and
         goal's FK, the obstacles as a float64 scene) and plans it; one problem given as joint vectors
-        and a :class:`~kinlearn.collision.Scene` is first tried without one (the start and goal checked
+        and a :class:`~kinlearn.collision.Scene` (or spheres ``(K, 4)``) is first tried without one (the start and goal checked
         and FK'd in one compiled call, then stage 1), and made into a Problem only where stage 1 leaves
         it colliding: the same plan, to the bit, for less Python.
 
@@ -427,22 +427,27 @@ class Planner(ObstacleStages):
     def _batch1(self, start, goal, obstacles, steps: int) -> tuple | None:
         """The batch-1 entry of a plan among obstacles, for the most common call, one problem given as
         joint vectors ``(dof,)`` (float tensors on the CPU or float arrays) and an unbatched
-        :class:`Scene`, with an obstacle network: its joints ``(2, dof)`` (start, goal) and their end
+        :class:`Scene` or spheres ``(K, 4)`` (read by :func:`~kinlearn.collision.scene.as_scene`, whose
+        :class:`ObstacleError` is the general path's too), with an obstacle network: its joints
+        ``(2, dof)`` (start, goal) and their end
         effectors ``(2, 3)``, checked (finite, within the limits) and FK'd in one compiled call, and its
         stage 1 (:meth:`_learned`: the same candidates and verdicts as the general path's). None for any
         other input, or one that fails a check or does not move: :meth:`Problem.make` then checks it
         (and explains what is wrong) and :meth:`_plan` plans it. The general path takes 0.2 ms more per
         plan in the Python around the compiled calls (making a Problem, judging it)."""
-        if self.obstacle_tm is None or self._domain is not None or not isinstance(obstacles, Scene):
+        if self.obstacle_tm is None or self._domain is not None:
             return None
         dof = self.robot.dof
         a, b = _joint_vector(start, dof), _joint_vector(goal, dof)
-        if a is None or b is None or obstacles.batch_shape:
+        if a is None or b is None:
             return None
         q = np.concatenate((a, b)).reshape(2, dof)  # (np.stack's Python costs more than the copy)
         kernel = _kernel()
         ef, ok = kernel.KernelChain.of(self.robot).checked(q, LIMIT_TOLERANCE)
         if not ok.all() or np.abs(b - a).max() <= ZERO_MOVE:
+            return None
+        obstacles = as_scene(obstacles)  # the start and goal passed: its error is the general path's
+        if obstacles.batch_shape:
             return None
         packed = [kernel.KernelScene.of(obstacles)]  # the general path finds it packed (a float64 scene)
         return q, ef, self._learned(q[:1], ef[:1], q[1:], ef[1:], packed, steps)
