@@ -351,9 +351,9 @@ class Planner(ObstacleStages):
         :class:`~kinlearn.planning.plan.PlannerLike`: ``planner.plan(problem)``). The convenience form
         makes one :class:`Problem` of its arguments (:meth:`Problem.make`: every check, the start's and
         goal's FK, the obstacles as a float64 scene) and plans it; one problem given as joint vectors
-        and a :class:`~kinlearn.collision.Scene` (or spheres ``(K, 4)``) is first tried without one (the start and goal checked
-        and FK'd in one compiled call, then stage 1), and made into a Problem only where stage 1 leaves
-        it colliding: the same plan, to the bit, for less Python.
+        and a :class:`~kinlearn.collision.Scene` (or spheres ``(K, 4)``) is first tried without one (the
+        start and goal checked and FK'd in one compiled call, then stage 1), and made into a Problem only
+        where stage 1 leaves it colliding: the same plan, to the bit, for less Python.
 
         ``start``: joint values ``(..., dof)`` or a state ``(..., dof + 3)``. ``goal``: likewise — the plan
         ends at its joints — or an end-effector position ``(..., 3)`` (also as ``goal_position=``), reached
@@ -405,22 +405,16 @@ class Planner(ObstacleStages):
             self.warm_up()  # once, before the clock starts: no deadline is spent loading kernels
         timer = Deadline(deadline)  # started before the input is checked: the caller's time
         steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
-        first = None
+        stage1 = None  # stage 1 of a batch-1 problem, where the batch-1 entry took it
         if obstacles is not None and goal_position is None:
             first = self._batch1(start, goal, obstacles, steps)
-            if first is not None and first[2][2][0]:  # stage 1 cleared it: no Problem made
-                return self._batch1_plan(first, start, goal)
+            if first is not None:
+                stage1 = first[2]
+                _, _, free = stage1
+                if free[0]:  # stage 1 cleared it: no Problem made
+                    return self._batch1_plan(first, start, goal)
         problem, dtype, device = self._problem(start, goal, goal_position, obstacles)
-        return self._plan(
-            problem,
-            steps,
-            refine_steps is None,
-            strict,
-            dtype,
-            device,
-            timer,
-            None if first is None else first[2],
-        )
+        return self._plan(problem, steps, refine_steps is None, strict, dtype, device, timer, stage1)
 
     __call__ = plan
 
@@ -428,10 +422,10 @@ class Planner(ObstacleStages):
         """The batch-1 entry of a plan among obstacles, for the most common call, one problem given as
         joint vectors ``(dof,)`` (float tensors on the CPU or float arrays) and an unbatched
         :class:`Scene` or spheres ``(K, 4)`` (read by :func:`~kinlearn.collision.scene.as_scene`, whose
-        :class:`ObstacleError` is the general path's too), with an obstacle network: its joints
-        ``(2, dof)`` (start, goal) and their end
-        effectors ``(2, 3)``, checked (finite, within the limits) and FK'd in one compiled call, and its
-        stage 1 (:meth:`_learned`: the same candidates and verdicts as the general path's). None for any
+        :class:`ObstacleError` is the general path's too), with an obstacle network: its joints ``(2,
+        dof)`` (start, goal) and their end effectors ``(2, 3)``, checked (finite, within the limits) and
+        FK'd in one compiled call, and its stage 1 ``(paths, pick, free)`` (:meth:`_learned`: the same
+        candidates and verdicts as the general path's). None for any
         other input, or one that fails a check or does not move: :meth:`Problem.make` then checks it
         (and explains what is wrong) and :meth:`_plan` plans it. The general path takes 0.2 ms more per
         plan in the Python around the compiled calls (making a Problem, judging it)."""
