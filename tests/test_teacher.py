@@ -10,7 +10,7 @@ import torch
 
 from kinlearn import load_robot
 from kinlearn.data.problems import ProblemConfig, make_problems
-from kinlearn.data.target_paths import target_paths_file
+from kinlearn.data.target_paths import read_target_paths, target_paths_file
 from kinlearn.errors import ConfigError
 from kinlearn.models.obstacle_path import load_obstacle_model
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS, Planner
@@ -48,6 +48,31 @@ def test_the_planners_own_plans_are_written_beside_the_set(problems):
     assert int(found.sum()) >= 2
     stamp = out.stat().st_mtime_ns
     assert planner_paths(folder, path, 6) == out and out.stat().st_mtime_ns == stamp  # kept, not made again
+
+
+def test_a_teacher_of_fixed_time_stages_shows_no_searched_path(problems, tmp_path):
+    path, pset = problems
+    own = tmp_path / path.name  # a copy of the set: its teacher file is this test's own
+    own.write_bytes(path.read_bytes())
+    folder = DEFAULT_CHECKPOINTS / "iiwa14"
+    with pytest.raises(ConfigError, match="stages must be one of"):
+        planner_paths(folder, own, 6, stages="sampler")
+    from kinlearn.training.obstacle_path import planner_paths as read
+
+    planner_paths(folder, own, 6)
+    _, found_default = read(own, load_robot("iiwa14"), 6)
+    planner_paths(folder, own, 6, stages="fixed")  # other stages: the file is made again
+    assert read_target_paths(own, "iiwa14", "planner", 6, 4)[0]["plan"] == "fixed"
+    paths, found = read(own, load_robot("iiwa14"), 6)
+    planner = Planner.load(folder, body=pset.body(load_robot("iiwa14")).double())
+    for i in range(4):  # the fixed-time plans alone: what plan(..., refine_steps=0) clears, no more
+        s, g, sc = pset.problem(i)
+        plan = planner.plan(s, g, obstacles=sc, refine_steps=0)
+        assert bool(found[i]) == bool(plan.success)
+        assert plan.stage in ("learned", "retreat", "none")
+        if found[i]:
+            assert torch.allclose(paths[i, 0], s.double()) and torch.allclose(paths[i, -1], g.double())
+    assert bool((found <= found_default).all())
 
 
 def test_a_training_taught_by_a_planner_reads_its_plans_and_says_so(problems, tmp_path):

@@ -180,8 +180,9 @@ def test_train_obstacle_planner_command(tmp_path):
 
 def test_train_obstacle_planner_taught_by_the_shipped_planner(tmp_path):
     """--teacher planner: the shipped planner plans the training problems first (its plans written beside
-    them), the network is distilled from them and says so, and the run records its teacher; naming a
-    teacher planner without --teacher planner is refused before anything is written."""
+    them), the network is distilled from them and says so, and the run records its teacher (and its stages,
+    --teacher-stages fixed); naming a teacher planner or its stages without --teacher planner is refused
+    before anything is written."""
     from kinlearn.cli.main import main
     from kinlearn.models.obstacle_path import load_obstacle_model
 
@@ -204,7 +205,12 @@ def test_train_obstacle_planner_taught_by_the_shipped_planner(tmp_path):
     assert record["teacher"]["planner"].endswith("iiwa14") and record["imitation"] == 300
     other = tmp_path / "other"
     assert main([*args, "--teacher-planner", str(run), "--run-dir", str(other)]) == 2
+    assert main([*args, "--teacher-stages", "fixed", "--run-dir", str(other)]) == 2
     assert not other.exists()
+    fixed = tmp_path / "fixed"  # taught by the fixed-time stages alone: recorded with the teacher
+    assert main([*args, *taught, "--teacher-stages", "fixed", "--run-dir", str(fixed)]) == 0
+    record = json.loads((fixed / "config.json").read_text())["obstacle_planner"]
+    assert record["teacher"]["stages"] == "fixed"
 
 
 def test_train_obstacle_planner_refuses_a_planner_folder_without_a_planner(tmp_path, capsys):

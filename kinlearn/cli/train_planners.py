@@ -240,6 +240,14 @@ def _add_train_obstacle_planner(sub) -> None:
         help="the planner folder whose plans teach with --teacher planner (default: the robot's shipped planner)",
     )
     p.add_argument(
+        "--teacher-stages",
+        choices=("default", "fixed"),
+        default="default",
+        help="what the teacher planner plans with (--teacher planner): plan()'s default stages (the fixed-time "
+        "stages, then 2,000 sampler iterations; default) or its fixed-time stages alone ('fixed': the network "
+        "and the retreat stage, no sampler, so no searched path is shown)",
+    )
+    p.add_argument(
         "--solvable-only",
         action="store_true",
         help="train only on the problems the teacher solves (--teacher; the sampler within 20,000 iterations; "
@@ -313,10 +321,13 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         network = teacher_dir / OBSTACLE_TM
         teacher_record = {
             "planner": str(teacher_dir),
+            **({"stages": args.teacher_stages} if args.teacher_stages != "default" else {}),
             **({"network": file_identity(network)} if network.is_file() else {}),
         }
-    elif args.teacher_planner is not None:
-        raise ConfigError("--teacher-planner names the planner of --teacher planner; add --teacher planner")
+    elif args.teacher_planner is not None or args.teacher_stages != "default":
+        raise ConfigError(
+            "--teacher-planner and --teacher-stages describe the planner of --teacher planner; add --teacher planner"
+        )
     run = open_command_run(
         args,
         ("tm_obstacles.pt", "metrics.jsonl", "tensorboard", "problems"),
@@ -361,7 +372,7 @@ def _run_train_obstacle_planner(args: argparse.Namespace) -> int:
         knots = ObstaclePathConfig.for_robot(robot, candidates=args.candidates).steps
         for p in paths:
             t0 = time.perf_counter()
-            planner_paths(teacher_dir, p, knots)
+            planner_paths(teacher_dir, p, knots, stages=args.teacher_stages)
             print(f"the teacher planner's plans of {p.name}: {time.perf_counter() - t0:.0f} s", flush=True)
     cfg = ObstacleTrainConfig(
         robot=robot.name,
