@@ -14,6 +14,7 @@ from ..errors import ConfigError
 from ..io import atomic_copy
 from ..models.forward_inverse import load_fm, load_im
 from ..planning.planner import Planner
+from ..planning.teacher import TEACHER_STAGES
 from .common import (
     EXISTING_DIR,
     EXISTING_FILE,
@@ -241,7 +242,7 @@ def _add_train_obstacle_planner(sub) -> None:
     )
     p.add_argument(
         "--teacher-stages",
-        choices=("default", "fixed"),
+        choices=TEACHER_STAGES,
         default="default",
         help="what the teacher planner plans with (--teacher planner): plan()'s default stages (the fixed-time "
         "stages, then 2,000 sampler iterations; default) or its fixed-time stages alone ('fixed': the network "

@@ -6,10 +6,11 @@ fixed-time stages leave. :func:`planner_paths` plans every problem of a training
 (``plan(start, goal, obstacles=scene)``, its default: the fixed-time stages, then a fixed budget of
 sampler iterations, so the same paths on every machine; or, ``stages="fixed"``, its fixed-time stages
 alone, ``refine_steps=0``: the network and the retreat stage, no sampler, so no searched path is shown)
-and writes the plans that succeed, resampled to the network's knots, beside the set (:mod:`kinlearn.data.target_paths`, teacher ``"planner"``). A
-training with ``ObstacleTrainConfig(teacher="planner", loss=ObstacleLossConfig(imitation=w))`` then
-pulls the nearest candidate of each solved problem towards its plan: the next network learns the paths
-its planner had to find by structure or by search. The problems a planner does not solve have no target
+and writes the plans that succeed, resampled to the network's knots, beside the set
+(:mod:`kinlearn.data.target_paths`, teacher ``"planner"``). A training with
+``ObstacleTrainConfig(teacher="planner", loss=ObstacleLossConfig(imitation=w))`` then pulls the nearest
+candidate of each solved problem towards its plan: the next network learns the paths its planner had to
+find by structure or by search. The problems a planner does not solve have no target
 (and ``solvable_only`` drops them).
 """
 
