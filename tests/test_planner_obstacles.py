@@ -90,7 +90,7 @@ def test_the_batch_one_entry_plans_as_a_problem_plans(monkeypatch):
     stage 1 clears it) is the plan of the same Problem (the general path) in every field, to the bit:
     on held-out problems the learned proposals clear and ones they leave to the retreat stage (which
     take the entry's stage 1 along), with float32 tensors and float64 arrays too; where stage 1 clears
-    it, no Problem is made."""
+    it, or the retreat stage, or (in fixed time) neither, no Problem is made."""
     from kinlearn.data.problem import Problem
     from kinlearn.planning.plan import Plan
 
@@ -135,8 +135,29 @@ def test_the_batch_one_entry_plans_as_a_problem_plans(monkeypatch):
 
     start, goal, scene = ps.problem(0)
     assert shipped.plan(start, goal, obstacles=scene).stage == "learned"
+    fixed = {}  # a problem of each fixed-time verdict, planned in fixed time
+    for i in range(140):
+        s, g, sc = ps.problem(i)
+        fixed.setdefault(shipped.plan(s, g, obstacles=sc, refine_steps=0).stage, (s, g, sc))
+        if len(fixed) == 3:
+            break
+    assert set(fixed) == {"learned", "retreat", "none"}
+    for s, g, sc in fixed.values():
+        one = shipped.plan(s, g, obstacles=sc, refine_steps=0)
+        ref = shipped.plan(Problem.make(shipped.robot, s, g, obstacles=sc), refine_steps=0)
+        assert one.stage == ref.stage and all(
+            torch.equal(getattr(one, f), getattr(ref, f)) for f in Plan._BATCHED
+        )
     monkeypatch.setattr(Problem, "make", no_problem)
     assert shipped.plan(start, goal, obstacles=scene).stage == "learned"
+    for stage, (s, g, sc) in fixed.items():  # the entry runs the retreat stage too, and flags a miss
+        plan = shipped.plan(s, g, obstacles=sc, refine_steps=0)
+        assert plan.stage == stage and bool(plan.collision_free) == (stage != "none")
+    s, g, sc = fixed["none"]
+    with pytest.raises(
+        AssertionError, match="a Problem was made"
+    ):  # a later stage asked for: the general path
+        shipped.plan(s, g, obstacles=sc, refine_steps=1)
 
 
 def test_the_batch_one_entry_leaves_bad_input_to_the_checks(planner, problems):

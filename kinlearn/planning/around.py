@@ -172,6 +172,7 @@ class ObstacleStages:
         deadline: Deadline,
         iterations: int = 0,
         first: tuple | None = None,
+        retreated: tuple | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Joint paths ``(N, K, dof)`` around ``scene``, whether each is collision-free ``(N,)`` and the
         stage that made it ``(N,)`` (:data:`~kinlearn.planning.stages.STAGES`).
@@ -186,7 +187,9 @@ class ObstacleStages:
         optimiser starts from the very path a batch-1 plan starts from, and paths of other lengths (the
         retreat stage's, the sampler's) are brought to the batch's longest by splitting segments (the
         same polylines, checked again). ``first``: stage 1's ``(paths, pick, free)`` for these very
-        problems where the caller already ran it (the planner's batch-1 entry).
+        problems where the caller already ran it (the planner's batch-1 entry); ``retreated``: where the
+        entry ran the retreat stage on its one problem too and it cleared nothing, its free retreats (the
+        sampler's first branches; the stage is not run again).
         """
         n = theta0.shape[0]
         packed = _packed_scenes(scene, n)  # the scene converted once, for the TM and the check
@@ -204,6 +207,9 @@ class ObstacleStages:
         branches: dict[int, tuple] = {}  # each problem's free retreats, the sampler's first branches
         if self.retreat and self._retreat_vias() is not None:
             for i in np.flatnonzero(~free):
+                if retreated is not None:  # run by the batch-1 entry already, clearing nothing
+                    branches[int(i)] = retreated
+                    continue
                 if _retreat_over(deadline, self.retreat_share):
                     break
                 path, branches[int(i)] = self._retreat(theta0[i], thetaT[i], packed[i], steps, deadline)

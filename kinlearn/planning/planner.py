@@ -56,7 +56,7 @@ from ..models.joint_path import JointPathModel, load_path_model
 from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model
 from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
-from .around import ObstacleStages, _kernel, _load_kernels
+from .around import ObstacleStages, _kernel, _load_kernels, _retreat_over
 from .inference import NumpyPathModel
 from .plan import DEFAULT_TOLERANCE, Plan, Tolerance, judge, verdict_small
 from .retreat import RetreatVias
@@ -405,16 +405,29 @@ class Planner(ObstacleStages):
             self.warm_up()  # once, before the clock starts: no deadline is spent loading kernels
         timer = Deadline(deadline)  # started before the input is checked: the caller's time
         steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
-        stage1 = None  # stage 1 of a batch-1 problem, where the batch-1 entry took it
+        stage1 = retreated = None  # what the batch-1 entry ran of a batch-1 problem's stages
         if obstacles is not None and goal_position is None:
             first = self._batch1(start, goal, obstacles, steps)
             if first is not None:
-                stage1 = first[2]
-                _, _, free = stage1
+                q, ef, stage1, packed = first
+                paths, pick, free = stage1
                 if free[0]:  # stage 1 cleared it: no Problem made
-                    return self._batch1_plan(first, start, goal)
+                    return self._batch1_plan(q, ef, paths[0, pick[0]], "learned", start, goal)
+                if (
+                    self.retreat
+                    and self._retreat_vias() is not None
+                    and not _retreat_over(timer, self.retreat_share)
+                ):
+                    path, branches = self._retreat(q[0], q[1], packed, steps, timer)
+                    if path is not None:  # the retreat stage cleared it: no Problem made either
+                        return self._batch1_plan(q, ef, path, "retreat", start, goal)
+                    retreated = branches  # the later stages start from its free retreats
+                if refine_steps is not None and steps == 0 and deadline is None:  # no later stage runs
+                    return self._batch1_plan(q, ef, paths[0, pick[0]], "none", start, goal, free=False)
         problem, dtype, device = self._problem(start, goal, goal_position, obstacles)
-        return self._plan(problem, steps, refine_steps is None, strict, dtype, device, timer, stage1)
+        return self._plan(
+            problem, steps, refine_steps is None, strict, dtype, device, timer, stage1, retreated
+        )
 
     __call__ = plan
 
@@ -443,17 +456,18 @@ class Planner(ObstacleStages):
         obstacles = as_scene(obstacles)  # the start and goal passed: its error is the general path's
         if obstacles.batch_shape:
             return None
-        packed = [kernel.KernelScene.of(obstacles)]  # the general path finds it packed (a float64 scene)
-        return q, ef, self._learned(q[:1], ef[:1], q[1:], ef[1:], packed, steps)
+        packed = kernel.KernelScene.of(obstacles)  # the general path finds it packed (a float64 scene)
+        return q, ef, self._learned(q[:1], ef[:1], q[1:], ef[1:], [packed], steps), packed
 
-    def _batch1_plan(self, first: tuple, start, goal) -> Plan:
-        """The plan of a batch-1 problem stage 1 cleared (:meth:`_batch1`): judged by :func:`judge`'s rule
-        (:func:`~kinlearn.planning.plan.verdict_small`) on the arrays already at hand."""
-        q, ef, (paths, pick, free) = first
+    def _batch1_plan(self, q, ef, path: np.ndarray, stage: str, start, goal, free: bool = True) -> Plan:
+        """The plan of a batch-1 problem whose joint path ``path (K, dof)`` a fixed-time stage cleared
+        (:meth:`_batch1`'s stage 1, or the retreat stage run on its arrays), or, ``free`` False, that no
+        stage cleared and no later stage is asked for (stage 1's shortest proposal, flagged): judged by
+        :func:`judge`'s rule (:func:`~kinlearn.planning.plan.verdict_small`) on the arrays at hand."""
         states = np.concatenate((q, ef), axis=1)
         plan = verdict_small(
-            self.robot, paths[0, pick[0]][None], states[:1], states[1:], True, (), free, self.tolerance,
-            stage="learned",
+            self.robot, np.ascontiguousarray(path[None]), states[:1], states[1:], True, (),
+            np.full(1, free), self.tolerance, stage=stage,
         )  # fmt: skip
         (dtype, device), (other, _) = _out_dtype(start), _out_dtype(goal)
         return _as_output(plan, torch.promote_types(dtype, other), device, self._lo_np, self._hi_np)
@@ -490,10 +504,12 @@ class Planner(ObstacleStages):
         device,
         deadline: Deadline,
         first: tuple | None = None,
+        retreated: tuple | None = None,
     ) -> Plan:
         """Plan a checked problem: its goal joints (solved first for a position goal), the joint paths
         (free space: the TM's; among obstacles the stages of :meth:`_plan_around`; ``first``: the batch-1
-        entry's stage 1 of it, already run), one verdict (:func:`judge`), and the plan in the output's
+        entry's stage 1 of it, already run; ``retreated``: the free retreats of its retreat stage, run
+        by the entry too and clearing nothing), one verdict (:func:`judge`), and the plan in the output's
         dtype and device."""
         batch = problem.batch_shape
         dof, S = self.robot.dof, self.layout.size
@@ -538,7 +554,7 @@ class Planner(ObstacleStages):
                     stacklevel=4,
                 )
             joints, free, stage = self._plan_around(
-                theta0, ef0, thetaT, efT, scene, steps, deadline, iterations, first
+                theta0, ef0, thetaT, efT, scene, steps, deadline, iterations, first, retreated
             )
         elif self._np_tm is not None:
             joints, waypoints = self._joint_path(theta0, ef0, thetaT, efT)
