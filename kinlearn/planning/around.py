@@ -330,6 +330,7 @@ class ObstacleStages:
             first_free,
             transfer,
             stop=lambda: _retreat_over(deadline, self.retreat_share),
+            midpoints=None if transfer is None else vias.midpoints,
         )
         return path, (sampler_branches(v0, d0), sampler_branches(vT, dT))
 

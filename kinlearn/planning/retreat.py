@@ -29,9 +29,16 @@ keeps the network for what it does well, the transfer between two points in the 
 3. **Learned transfers.** Where no straight transfer is free: between the deepest free retreats (at
    most :data:`RETREAT_TRANSFERS` pairs), the obstacle network's candidates for the transfer, as a
    problem of its own (the straight line first, then its paths both ways), the shortest free.
+4. **Transfers through a midpoint.** Where none of those is free: the deepest pair's transfer split in
+   two at a via (:meth:`RetreatVias.midpoints`: the hand halfway between the two ends, lifted by each
+   of :data:`MIDPOINT_LIFTS` and pulled toward the base's axis by each of :data:`MIDPOINT_PULLS`, solved
+   from the joints halfway), each half a learned transfer of its own. A transfer that turns several
+   joints by a turn or more (the ur5's, whose joints span ±2π) is two smaller problems the network
+   clears more often than the whole.
 
 Every count is fixed: the solver's steps, the vias (an end's open directions at most once), the path
-checks, at most 2 × :data:`RETREAT_TRANSFERS` network passes. The stage runs only for problems the
+checks, at most 2 × :data:`RETREAT_TRANSFERS` network passes for step 3 and 2 × 2 × (the midpoints) for
+step 4. The stage runs only for problems the
 learned proposals left colliding, so the plans they clear do not change
 (:mod:`kinlearn.planning.stages`).
 """
@@ -48,6 +55,8 @@ from ..models.chain import ChainFM
 
 __all__ = [
     "KEEP_WEIGHT",
+    "MIDPOINT_LIFTS",
+    "MIDPOINT_PULLS",
     "OPEN_DIRECTIONS",
     "RETREAT_DIRECTIONS",
     "RETREAT_DISTANCES",
@@ -100,6 +109,15 @@ RETREAT_DAMPING = 0.05
 RETREAT_HANDS: tuple[str, ...] = ("turning", "kept")
 #: Weight (m/rad) of the orientation error against the position error in a kept chain's steps.
 KEEP_WEIGHT = 0.1
+#: How far a midpoint via lifts the hand above the midpoint of the two ends' hands (m, for an arm of the
+#: iiwa14's reach; scaled), and :data:`MIDPOINT_PULLS`: what share of its horizontal distance from the
+#: base's vertical axis it is pulled in by; every pair of the two, in order (lifts outer).
+MIDPOINT_LIFTS: tuple[float, ...] = (0.0, 0.2, 0.4)
+MIDPOINT_PULLS: tuple[float, ...] = (0.0, 0.5)
+#: Damped least-squares steps a midpoint via is solved with (from the joints halfway between the ends).
+MIDPOINT_ITERATIONS = 30
+#: Learned transfers step 4 runs at most (each half of a split transfer is one).
+MIDPOINT_TRANSFERS = 12
 
 
 class RetreatVias:
@@ -176,6 +194,27 @@ class RetreatVias:
             extra = depths(theta, more)
             vias, depth = _by_hand(vias, more), _by_hand(depth, extra)
         return vias, depth
+
+    def midpoints(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """The vias ``(V, dof)`` a transfer from ``a`` to ``b (dof,)`` is split at (step 4 of the module
+        docstring): per lift of :data:`MIDPOINT_LIFTS` (outer) and pull of :data:`MIDPOINT_PULLS`, the
+        joints solved (:data:`MIDPOINT_ITERATIONS` damped least-squares steps, within the limits) from
+        those halfway between ``a`` and ``b`` for the hand halfway between theirs, lifted by the lift and
+        pulled toward the base's vertical axis by the pull's share of its horizontal distance."""
+        from ..models.chain_kernel import solve_position_numba
+
+        ends = np.ascontiguousarray(np.stack((a, b)), dtype=np.float64)
+        hand = self._position(ends).mean(axis=0)
+        lifts = self.distances[-1] / RETREAT_DISTANCES[-1] * np.asarray(MIDPOINT_LIFTS)  # scaled
+        targets = np.array(
+            [[hand[0] * (1 - s), hand[1] * (1 - s), hand[2] + h] for h in lifts for s in MIDPOINT_PULLS]
+        )
+        seed = np.clip(ends.mean(axis=0), self.lower, self.upper)
+        q, _ = solve_position_numba(
+            *self.arrays, np.repeat(seed[None], len(targets), axis=0), targets, self.lower, self.upper,
+            self._no_seeds, iterations=MIDPOINT_ITERATIONS, damping=RETREAT_DAMPING, tolerance=1e-4,
+        )  # fmt: skip
+        return q
 
     def _solve(self, theta: np.ndarray, p: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """The vias ``(H · D, L, dof)`` of ``theta (1, dof)`` (end effector at ``p``) along ``directions
@@ -279,13 +318,15 @@ def retreat_path(
     first_free: Callable[[np.ndarray, np.ndarray], int],
     transfer: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None,
     stop: Callable[[], bool] | None = None,
+    midpoints: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray | None:
-    """The retreat stage's path ``(V, dof)`` from ``theta0`` to ``thetaT`` (steps 2 and 3 of the module
+    """The retreat stage's path ``(V, dof)`` from ``theta0`` to ``thetaT`` (steps 2 to 4 of the module
     docstring), or None. ``vias*``/``depth*``: each end's vias and free depths (:class:`RetreatVias`,
     :meth:`RetreatVias.free`). ``first_free(paths (P, W, dof), order)``: the dense check's first free path
     in ``order`` (−1: none). ``transfer(a, b)``: a free path from configuration ``a`` to ``b`` by the
     network (None: none free, or no network). ``stop()``: asked before the joins and before each
-    transfer; True gives up (a deadline that has run out)."""
+    transfer; True gives up (a deadline that has run out). ``midpoints(a, b) -> (V, dof)``: the vias a
+    transfer is split at (:meth:`RetreatVias.midpoints`; None: no step 4)."""
     (ends0, len0), (endsT, lenT) = _ends(theta0, vias0, depth0), _ends(thetaT, viasT, depthT)
     if len(ends0) == 1 and len(endsT) == 1:  # no free retreat at either end: the straight line again
         return None
@@ -307,11 +348,30 @@ def retreat_path(
         return None
     depth = np.add.outer([len(a) for a in ends0], [len(b) for b in endsT]).ravel()
     depth[0] = 0
-    for k in np.argsort(-depth, kind="stable")[:RETREAT_TRANSFERS]:  # the deepest first
+    deepest = np.argsort(-depth, kind="stable")[:RETREAT_TRANSFERS]  # the deepest first
+    for k in deepest:
         if depth[k] == 0 or (stop is not None and stop()):
-            break
+            return None
         a, b = ends0[k // len(endsT)], endsT[k % len(endsT)]
         middle = transfer(a[-1], b[-1])
         if middle is not None:
             return np.concatenate((a[:-1], middle, b[::-1][1:]))
+    if midpoints is None:
+        return None
+    left = MIDPOINT_TRANSFERS
+    for k in deepest:  # the pairs of step 3, the deepest first
+        a, b = ends0[k // len(endsT)], endsT[k % len(endsT)]
+        for m in midpoints(a[-1], b[-1]):
+            if left <= 0 or (stop is not None and stop()):
+                return None
+            if first_free(np.stack((m, m))[None], np.zeros(1, dtype=np.int64)) < 0:  # the via collides
+                continue
+            left -= 1
+            first = transfer(a[-1], m)
+            if first is None:
+                continue
+            left -= 1
+            second = transfer(m, b[-1])
+            if second is not None:
+                return np.concatenate((a[:-1], first, second[1:], b[::-1][1:]))
     return None
