@@ -1,6 +1,7 @@
 """The retreat stage: vias along fixed end-effector retreats (or, where none is free, along the scene's
-most open directions), chains cut at their first colliding segment, the shortest free join, the network across between the deepest retreats, and the planner's
-plans from it (free by torch's independent dense check, the same alone and in a batch)."""
+most open directions), chains cut at their first colliding segment, the shortest free join, the network
+across between the deepest retreats (whole, or split at a midpoint), and the planner's plans from it
+(free by torch's independent dense check, the same alone and in a batch)."""
 
 from __future__ import annotations
 
@@ -437,3 +438,74 @@ def test_the_sampler_grows_from_the_retreats_the_stage_found_free(panda, problem
         for chain in chains:
             poly = torch.cat([end.double()[None], torch.from_numpy(chain)])
             assert bool(check_path(alone.body, poly, scene).collision_free)
+
+
+def test_midpoint_vias_put_the_hand_halfway_lifted_and_pulled_in(problems):
+    robot = load_robot("panda")
+    chain = ChainFM.from_robot(robot)
+    vias = R.RetreatVias(chain, robot.lower, robot.upper, scale=1.0)
+    a, b = problems.start[1].numpy(), problems.goal[1].numpy()
+    out = vias.midpoints(a, b)
+    assert out.shape == (len(R.MIDPOINT_LIFTS) * len(R.MIDPOINT_PULLS), robot.dof)
+    assert (out >= robot.lower).all() and (out <= robot.upper).all()
+    arrays = chain.kernel_arrays()
+    hand = chain_positions(*arrays, np.stack((a, b))).mean(axis=0)
+    reached = chain_positions(*arrays, out)
+    for (lift, pull), p in zip(
+        [(h, s) for h in R.MIDPOINT_LIFTS for s in R.MIDPOINT_PULLS], reached, strict=True
+    ):
+        target = np.array([hand[0] * (1 - pull), hand[1] * (1 - pull), hand[2] + lift])
+        assert np.linalg.norm(p - target) < 1e-3, (lift, pull)  # every target of this pair is reachable
+
+
+def test_a_transfer_is_split_at_a_midpoint_where_no_whole_one_is_free_a_bounded_number_of_times():
+    theta0, thetaT, v0, vT = _chains(L=3, D=2)
+    vias = np.array([[9.0, 9.0], [2.0, 5.0], [2.0, 6.0]])  # the first collides (below)
+    whole, halves = [], []
+
+    def first_free(paths, order):  # every join collides; of the vias (checked alone) the one at (9, 9)
+        p = paths[order[0]]
+        return int(order[0]) if (p[0] == p[-1]).all() and not (p == 9.0).all() else -1
+
+    def transfer(a, b):  # whole transfers (end to end) all collide; halves through (2, 6) are free
+        if a[0] == 0.0 and b[0] == 4.0:
+            whole.append(1)
+            return None
+        halves.append((a.copy(), b.copy()))
+        return np.stack((a, b)) if 6.0 in (a[1], b[1]) else None
+
+    path = R.retreat_path(
+        theta0, thetaT, v0, vT, np.array([3, 2]), np.array([1, 3]), first_free, transfer,
+        midpoints=lambda a, b: vias,
+    )  # fmt: skip
+    assert len(whole) == R.RETREAT_TRANSFERS  # step 3 first, all of it
+    # Step 4: the colliding via skipped unasked, the second's first half refused, the third's two halves.
+    assert len(halves) == 3
+    np.testing.assert_array_equal(halves[1][1], [2.0, 6.0])
+    np.testing.assert_array_equal(path[0], theta0)
+    np.testing.assert_array_equal(path[-1], thetaT)
+    assert any((path == [2.0, 6.0]).all(-1)) and not any((path == [2.0, 5.0]).all(-1))
+    asked = []
+    none = R.retreat_path(
+        theta0, thetaT, v0, vT, np.array([3, 3]), np.array([3, 3]), first_free,
+        lambda a, b: asked.append(1), midpoints=lambda a, b: np.array([[2.0, 5.0]] * 50),
+    )  # fmt: skip
+    assert none is None and len(asked) == R.RETREAT_TRANSFERS + R.MIDPOINT_TRANSFERS  # bounded
+
+
+#: Held-out ur5 problems (its gripper carried) whose transfer the network clears only split at a midpoint.
+UR5_SPLIT = (82, 100)
+
+
+def test_the_ur5s_long_turns_are_cleared_through_a_midpoint(monkeypatch):
+    ur5 = Planner.default("ur5")
+    problems = ProblemSet.load(SCENES.with_name("scene_problems_ur5.npz"), robot="ur5")
+    for i in UR5_SPLIT:
+        start, goal, scene = problems.problem(i)
+        plan = ur5.plan(start, goal, obstacles=scene, refine_steps=0)
+        assert plan.stage == "retreat" and bool(plan.success)
+        assert bool(check_path(ur5.body, plan.joints, scene).collision_free)  # torch agrees
+    monkeypatch.setattr(R, "MIDPOINT_TRANSFERS", 0)  # no step 4: the same problems stay colliding
+    for i in UR5_SPLIT:
+        start, goal, scene = problems.problem(i)
+        assert ur5.plan(start, goal, obstacles=scene, refine_steps=0).stage == "none"
