@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 
 from ..body.robot import load_robot
+from ..data.target_paths import TEACHERS
 from ..errors import ConfigError
 from ..io import atomic_copy
 from ..models.forward_inverse import load_fm, load_im
@@ -227,7 +228,7 @@ def _add_train_obstacle_planner(sub) -> None:
     )
     p.add_argument(
         "--teacher",
-        choices=("sampler", "planner"),
+        choices=tuple(TEACHERS),
         default="sampler",
         help="whose paths --imitation and --solvable-only read: the compiled RRT-Connect's (20,000 iterations "
         "per problem; default) or a kinlearn planner's own plans (plan(..., obstacles=...) by default: its "
