@@ -491,6 +491,14 @@ def test_a_transfer_is_split_at_a_midpoint_where_no_whole_one_is_free_a_bounded_
         lambda a, b: asked.append(1), midpoints=lambda a, b: np.array([[2.0, 5.0]] * 50),
     )  # fmt: skip
     assert none is None and len(asked) == R.RETREAT_TRANSFERS + R.MIDPOINT_TRANSFERS  # bounded
+    # One free retreat in all (the goal has none): one pair, its whole transfer, then its split ones.
+    whole.clear(), halves.clear()
+    path = R.retreat_path(
+        theta0, thetaT, v0, vT, np.array([1, 0]), np.array([0, 0]), first_free, transfer,
+        midpoints=lambda a, b: vias,
+    )  # fmt: skip
+    assert len(whole) == 1 and len(halves) == 3  # the retreat's end to the goal whole, then split
+    assert any((path == [2.0, 6.0]).all(-1)) and (path[-1] == thetaT).all()
 
 
 #: Held-out ur5 problems (its gripper carried) whose transfer the network clears only split at a midpoint.

@@ -29,18 +29,17 @@ keeps the network for what it does well, the transfer between two points in the 
 3. **Learned transfers.** Where no straight transfer is free: between the deepest free retreats (at
    most :data:`RETREAT_TRANSFERS` pairs), the obstacle network's candidates for the transfer, as a
    problem of its own (the straight line first, then its paths both ways), the shortest free.
-4. **Transfers through a midpoint.** Where none of those is free: the deepest pair's transfer split in
-   two at a via (:meth:`RetreatVias.midpoints`: the hand halfway between the two ends, lifted by each
-   of :data:`MIDPOINT_LIFTS` and pulled toward the base's axis by each of :data:`MIDPOINT_PULLS`, solved
-   from the joints halfway), each half a learned transfer of its own. A transfer that turns several
-   joints by a turn or more (the ur5's, whose joints span ±2π) is two smaller problems the network
-   clears more often than the whole.
+4. **Transfers through a midpoint.** Where none of those is free: the same pairs' transfers, the
+   deepest first, each split in two at vias (:meth:`RetreatVias.midpoints`: the hand halfway between
+   the two ends, lifted by each of :data:`MIDPOINT_LIFTS` and pulled toward the base's axis by each of
+   :data:`MIDPOINT_PULLS`, solved from the joints halfway), each half a learned transfer of its own, at
+   most :data:`MIDPOINT_TRANSFERS` of them. A transfer that turns several joints by a turn or more (the
+   ur5's, whose joints span ±2π) is two smaller problems the network clears more often than the whole.
 
 Every count is fixed: the solver's steps, the vias (an end's open directions at most once), the path
-checks, at most 2 × :data:`RETREAT_TRANSFERS` network passes for step 3 and 2 × 2 × (the midpoints) for
-step 4. The stage runs only for problems the
-learned proposals left colliding, so the plans they clear do not change
-(:mod:`kinlearn.planning.stages`).
+checks, at most 2 × :data:`RETREAT_TRANSFERS` network passes for step 3 and 2 ×
+:data:`MIDPOINT_TRANSFERS` for step 4. The stage runs only for problems the learned proposals left
+colliding, so the plans they clear do not change (:mod:`kinlearn.planning.stages`).
 """
 
 from __future__ import annotations
@@ -348,9 +347,10 @@ def retreat_path(
         return None
     depth = np.add.outer([len(a) for a in ends0], [len(b) for b in endsT]).ravel()
     depth[0] = 0
-    deepest = np.argsort(-depth, kind="stable")[:RETREAT_TRANSFERS]  # the deepest first
+    # the deepest pairs first (the pair without a retreat at either end, depth 0, is stage 1's problem)
+    deepest = [k for k in np.argsort(-depth, kind="stable")[:RETREAT_TRANSFERS] if depth[k]]
     for k in deepest:
-        if depth[k] == 0 or (stop is not None and stop()):
+        if stop is not None and stop():
             return None
         a, b = ends0[k // len(endsT)], endsT[k % len(endsT)]
         middle = transfer(a[-1], b[-1])
