@@ -517,3 +517,39 @@ def test_the_ur5s_long_turns_are_cleared_through_a_midpoint(monkeypatch):
     for i in UR5_SPLIT:
         start, goal, scene = problems.problem(i)
         assert ur5.plan(start, goal, obstacles=scene, refine_steps=0).stage == "none"
+
+
+def test_wiggles_turn_one_joint_then_retreat(problems):
+    robot = load_robot("panda")
+    vias = R.RetreatVias(ChainFM.from_robot(robot), robot.lower, robot.upper, scale=1.0)
+    theta = problems.start[1].numpy()
+    out = vias.wiggled(theta)
+    H, D, L = len(R.RETREAT_HANDS), len(R.RETREAT_DIRECTIONS), len(R.RETREAT_DISTANCES)
+    W = out.shape[0] // (H * D)
+    assert out.shape == (H * W * D, L, robot.dof) and W <= 2 * robot.dof
+    moved = out[:, 0] - theta
+    assert ((np.abs(moved) > 1e-12).sum(-1) == 1).all()  # one joint each
+    size = np.abs(moved).max(-1)
+    at_limit = np.isclose(out[:, 0], robot.lower).any(-1) | np.isclose(out[:, 0], robot.upper).any(-1)
+    assert (np.isclose(size, R.WIGGLE) | at_limit).all()  # WIGGLE rad, or as far as the limit allows
+    assert (out[:, 0] >= robot.lower).all() and (out[:, 0] <= robot.upper).all()
+    turning = out.reshape(H, W, D, L, robot.dof)[0]
+    for w in range(W):  # each wiggle's chains are that configuration's retreats, the farthest via left out
+        np.testing.assert_allclose(turning[w, :, 1:], vias.vias(turning[w, 0, 0])[:D, :-1])
+
+
+#: A held-out ur5 problem whose start is wedged in a bookcase's cell: no retreat free at all, until a wiggle.
+UR5_WEDGED = 11
+
+
+def test_a_wedged_end_retreats_after_a_wiggle(monkeypatch):
+    ur5 = Planner.default("ur5")
+    start, goal, scene = ProblemSet.load(SCENES.with_name("scene_problems_ur5.npz"), robot="ur5").problem(
+        UR5_WEDGED
+    )
+    plan = ur5.plan(start, goal, obstacles=scene, refine_steps=0)
+    assert plan.stage == "retreat" and bool(plan.success)
+    assert bool(check_path(ur5.body, plan.joints, scene).collision_free)
+    wiggled = R.RetreatVias.wiggled
+    monkeypatch.setattr(R.RetreatVias, "wiggled", lambda self, theta: wiggled(self, theta)[:0])
+    assert ur5.plan(start, goal, obstacles=scene, refine_steps=0).stage == "none"
