@@ -62,6 +62,7 @@ __all__ = [
     "RETREAT_HANDS",
     "RETREAT_TRANSFERS",
     "WIGGLE",
+    "WIGGLE_DEPTH",
     "RetreatVias",
     "free_chains",
     "open_directions",
@@ -109,12 +110,17 @@ RETREAT_DAMPING = 0.05
 RETREAT_HANDS: tuple[str, ...] = ("turning", "kept")
 #: Weight (m/rad) of the orientation error against the position error in a kept chain's steps.
 KEEP_WEIGHT = 0.1
-#: How far (rad) an end none of whose retreats is free at all turns one joint, either way, before it
-#: retreats again (:meth:`RetreatVias.wiggled`). On the tuning problems (seeds 3004–3010 and the
-#: grasp-like ones, fixed time, with step 4) the wiggles cleared 94.3 / 93.8% (ur5 with its gripper),
-#: 97.9 / 100% (panda) and 98.6 / 100% (iiwa14), against 93.6 / 93.8, 97.1 / 100 and 98.6 / 100%
-#: without; 0.6 rad left both of the ur5's wedged tuning ends wedged.
+#: How far (rad) an end none of whose retreats gets past :data:`WIGGLE_DEPTH` vias turns one joint,
+#: either way, before it retreats again (:meth:`RetreatVias.wiggled`). 0.6 rad left both of the ur5's
+#: wedged tuning ends wedged.
 WIGGLE = 0.3
+#: The free depth at or below which every retreat of an end must stop for the end to wiggle. On the tuning
+#: problems (seeds 3004–3010 and the grasp-like ones, fixed time, with step 4), wiggling where every
+#: retreat stops within its first via cleared 94.3 / 96.2% (ur5 with its gripper), 98.6 / 100% (panda)
+#: and 98.6 / 100% (iiwa14); only where none is free at all (0) 94.3 / 93.8, 97.9 / 100 and 98.6 / 100%;
+#: wherever none is free all the way (2) 93.6 / 96.2, 98.6 / 100 and 98.6 / 100%; without wiggles 93.6 /
+#: 93.8, 97.1 / 100 and 98.6 / 100%.
+WIGGLE_DEPTH = 1
 #: How far a midpoint via lifts the hand above the midpoint of the two ends' hands (m, for an arm of the
 #: iiwa14's reach; scaled), and :data:`MIDPOINT_PULLS`: what share of its horizontal distance from the
 #: base's vertical axis it is pulled in by; every pair of the two, in order (lifts outer).
@@ -193,15 +199,15 @@ class RetreatVias:
         added there cleared 86.4 / 86.0% (ur5 with its gripper), 97.9 / 99.0% (panda) and 98.6 / 99.0%
         (iiwa14), against 83.6 / 83.0, 97.1 / 99.0 and 98.6 / 98.0% with them only where no fixed
         retreat is free at all, and lost no problem. Given the scene too, an end none of whose retreats
-        is free at all (not even to its first via: a hand wedged in a cell) also retreats from each of
-        its wiggles (:meth:`wiggled`)."""
+        gets past :data:`WIGGLE_DEPTH` vias (a hand wedged in a cell) also retreats from each of its
+        wiggles (:meth:`wiggled`)."""
         vias = self.vias(theta)
         depth = depths(theta, vias)
         if distance is not None and depth.max() < vias.shape[1]:
             more = self.vias(theta, distance)
             extra = depths(theta, more)
             vias, depth = _by_hand(vias, more), _by_hand(depth, extra)
-        if distance is not None and depth.max() == 0:
+        if distance is not None and depth.max() <= WIGGLE_DEPTH:
             more = self.wiggled(theta)
             if len(more):
                 extra = depths(theta, more)
