@@ -150,6 +150,8 @@ class RetreatVias:
         self.lower = np.ascontiguousarray(lower, dtype=np.float64)
         self.upper = np.ascontiguousarray(upper, dtype=np.float64)
         self.distances = scale * np.asarray(RETREAT_DISTANCES, dtype=np.float64)
+        #: What lengths given for the iiwa14's reach are multiplied by (as the distances were).
+        self._scaled = self.distances[-1] / RETREAT_DISTANCES[-1]
         self._no_seeds = np.zeros((0, self.dof))
 
     def within(self, lower: np.ndarray, upper: np.ndarray) -> RetreatVias:
@@ -178,9 +180,13 @@ class RetreatVias:
         theta = np.ascontiguousarray(theta, dtype=np.float64).reshape(1, self.dof)
         p = self._position(theta)[0]
         if distance is None:
-            return self._solve(theta, p, _directions(p))
-        cap = OPEN_CLEARANCE * self.distances[-1] / RETREAT_DISTANCES[-1]  # scaled as the distances
-        return self._solve(theta, p, open_directions(p, distance, self.distances[-1], cap))
+            directions = _directions(p)
+        else:
+            directions = open_directions(p, distance, self.distances[-1], OPEN_CLEARANCE * self._scaled)
+        starts = np.repeat(theta, len(directions), axis=0)
+        return self._solve(starts, self._targets(p, directions)).reshape(
+            -1, self.distances.shape[0], self.dof
+        )
 
     def free(
         self,
@@ -222,20 +228,21 @@ class RetreatVias:
         once its wrist has turned a little (a sampler's first steps do as much)."""
         theta = np.asarray(theta, dtype=np.float64)
         H, D, L = len(RETREAT_HANDS), len(RETREAT_DIRECTIONS), self.distances.shape[0]
-        chains = []
+        wiggles = []
         for j in range(self.dof):
             for sign in (-1.0, 1.0):
                 w = theta.copy()
                 w[j] = min(max(w[j] + sign * WIGGLE, self.lower[j]), self.upper[j])
-                if w[j] == theta[j]:
-                    continue
-                v = self.vias(w).reshape(H, D, L, self.dof)
-                chain = np.empty_like(v)
-                chain[:, :, 0], chain[:, :, 1:] = w, v[:, :, :-1]
-                chains.append(chain)
-        if not chains:
+                if w[j] != theta[j]:
+                    wiggles.append(w)
+        if not wiggles:
             return np.zeros((0, L, self.dof))
-        return np.stack(chains, axis=1).reshape(-1, L, self.dof)  # (H, W, D, L, dof): by hand first
+        w = np.stack(wiggles)  # (W, dof): every wiggle's retreats solved in one batch
+        targets = np.stack([self._targets(p, _directions(p)) for p in self._position(w)])  # (W, D, L, 3)
+        v = self._solve(np.repeat(w, D, axis=0), targets.reshape(-1, L, 3)).reshape(H, len(w), D, L, self.dof)
+        chain = np.empty_like(v)
+        chain[..., 0, :], chain[..., 1:, :] = w[None, :, None], v[..., :-1, :]
+        return chain.reshape(-1, L, self.dof)  # (H, W, D, L, dof): by hand first
 
     def midpoints(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """The vias ``(V, dof)`` a transfer from ``a`` to ``b (dof,)`` is split at (step 4 of the module
@@ -247,7 +254,7 @@ class RetreatVias:
 
         ends = np.ascontiguousarray(np.stack((a, b)), dtype=np.float64)
         hand = self._position(ends).mean(axis=0)
-        lifts = self.distances[-1] / RETREAT_DISTANCES[-1] * np.asarray(MIDPOINT_LIFTS)  # scaled
+        lifts = self._scaled * np.asarray(MIDPOINT_LIFTS)
         targets = np.array(
             [[hand[0] * (1 - s), hand[1] * (1 - s), hand[2] + h] for h in lifts for s in MIDPOINT_PULLS]
         )
@@ -258,15 +265,19 @@ class RetreatVias:
         )  # fmt: skip
         return q
 
-    def _solve(self, theta: np.ndarray, p: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """The vias ``(H · D, L, dof)`` of ``theta (1, dof)`` (end effector at ``p``) along ``directions
-        (D, 3)``: the hand turning, then kept."""
+    def _targets(self, p: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """The hand's via positions ``(D, L, 3)`` from ``p (3,)`` along ``directions (D, 3)``, near to far."""
+        return p + self.distances[None, :, None] * directions[:, None]
+
+    def _solve(self, starts: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """The vias ``(H, R, L, dof)`` of chains from ``starts (R, dof)`` through the hand positions ``targets
+        (R, L, 3)``: the hand turning, then kept (each row solved alone, so a batch of rows gives what each
+        would alone)."""
         from ..models.chain_kernel import moves_keeping_orientation, solve_position_numba
 
-        D, L = directions.shape[0], self.distances.shape[0]
-        out = np.empty((len(RETREAT_HANDS), D, L, self.dof))
-        q = np.repeat(theta, D, axis=0)
-        targets = p + self.distances[None, :, None] * directions[:, None]  # (D, L, 3)
+        R, L = targets.shape[:2]
+        out = np.empty((len(RETREAT_HANDS), R, L, self.dof))
+        q = starts
         for k in range(L):  # each via from the one before (continuation)
             q, _ = solve_position_numba(
                 *self.arrays, q, targets[:, k], self.lower, self.upper, self._no_seeds,
@@ -274,10 +285,10 @@ class RetreatVias:
             )  # fmt: skip
             out[0, :, k] = q
         out[1] = moves_keeping_orientation(
-            *self.arrays, np.repeat(theta, D, axis=0), targets, self.lower, self.upper,
+            *self.arrays, starts, targets, self.lower, self.upper,
             iterations=RETREAT_ITERATIONS, damping=RETREAT_DAMPING, weight=KEEP_WEIGHT,
         )  # fmt: skip
-        return out.reshape(-1, L, self.dof)
+        return out
 
 
 def _by_hand(first: np.ndarray, then: np.ndarray) -> np.ndarray:
