@@ -205,7 +205,7 @@ class ObstacleStages:
 
         found: dict[int, tuple[np.ndarray, str]] = {}  # paths of other lengths, joined at the end
         branches: dict[int, tuple] = {}  # each problem's free retreats, the sampler's first branches
-        if self.retreat and self._retreat_vias() is not None:
+        if self._retreat_vias() is not None:
             for i in np.flatnonzero(~free):
                 if retreated is not None:  # run by the batch-1 entry already, clearing nothing
                     branches[int(i)] = retreated
@@ -276,8 +276,10 @@ class ObstacleStages:
 
     def _retreat_vias(self) -> RetreatVias | None:
         """The retreat stage's via solver (made once): on the planner's identified chain, else on the
-        chain its robot's model describes; None for an arm that is not all revolute joints (the stage
-        is then skipped)."""
+        chain its robot's model describes; None where the stage is skipped: a planner made with
+        ``retreat=False``, or an arm that is not all revolute joints."""
+        if not self.retreat:
+            return None
         if self._vias is None:
             from ..data.scenes import scene_scale
 

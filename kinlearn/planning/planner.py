@@ -413,11 +413,7 @@ class Planner(ObstacleStages):
                 paths, pick, free = stage1
                 if free[0]:  # stage 1 cleared it: no Problem made
                     return self._batch1_plan(q, ef, paths[0, pick[0]], "learned", start, goal)
-                if (
-                    self.retreat
-                    and self._retreat_vias() is not None
-                    and not _retreat_over(timer, self.retreat_share)
-                ):
+                if self._retreat_vias() is not None and not _retreat_over(timer, self.retreat_share):
                     path, branches = self._retreat(q[0], q[1], packed, steps, timer)
                     if path is not None:  # the retreat stage cleared it: no Problem made either
                         return self._batch1_plan(q, ef, path, "retreat", start, goal)
@@ -483,7 +479,7 @@ class Planner(ObstacleStages):
             return
         self._warm = True
         _load_kernels()
-        if self.retreat and self._retreat_vias() is not None:  # the chain's compiled solver
+        if self._retreat_vias() is not None:  # the chain's compiled solver
             self._retreat_vias().vias((self._lo_np + self._hi_np) / 2)
         _ = self._np_body.boxed  # the proof of the pairs apart: here, not in a plan
         if self.obstacle_tm is not None:
