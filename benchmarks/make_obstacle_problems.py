@@ -10,6 +10,8 @@
         --hand grasp --per-family 20 [--out benchmarks/data/grasp_problems_R.npz]  # hands held as grasps
     python benchmarks/make_obstacle_problems.py --robot ur5 --families scenes --per-family 20 --within body \
         [--out benchmarks/data/scene_problems_ur5_within.npz]  # within the benchmarks' UR5 limits (±π)
+    python benchmarks/make_obstacle_problems.py --robot R --families scenes --per-family 20 --seeds tuning \
+        --budget 3600 [--out runs/tune/R_scenes.npz]  # the tuning problems (seeds 3004–3010), not committed
 
 Families: tabletop, shelf, barrier (the default set), or the seven of ``kinlearn/data/scenes.py``
 (``--families scenes``), or any names (see ``kinlearn/data/problems.py``), each from a fixed
@@ -51,6 +53,9 @@ HELDOUT_SEEDS = {name: 1001 + k for k, name in enumerate(FAMILIES)}
 GRASP_SEEDS = {name: 1101 + k for k, name in enumerate(FAMILIES)}
 #: Held-out seeds of the sets made within the body's limits (``--within body``): 1204, … (other scenes again).
 WITHIN_SEEDS = {name: 1201 + k for k, name in enumerate(FAMILIES)}
+#: Seeds of the tuning problems (``--seeds tuning``: bookcase 3004, …, clutter 3010), apart from the
+#: held-out and the training seeds: every constant of the planner's fixed-time stages was chosen on these.
+TUNING_SEEDS = {name: 3001 + k for k, name in enumerate(FAMILIES)}
 
 
 def main() -> None:
@@ -82,6 +87,12 @@ def main() -> None:
         help="'body': starts, goals and the verifying search within the body's joint limits (the ur5's tool "
         "model: ±π, the benchmarks' UR5) (ProblemConfig.within)",
     )
+    ap.add_argument(
+        "--seeds",
+        choices=("heldout", "tuning"),
+        default="heldout",
+        help="'tuning': the tuning problems' seeds (TUNING_SEEDS), written to runs/tune/ by default",
+    )
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
@@ -95,10 +106,16 @@ def main() -> None:
         if args.within == "body":
             name = name.replace(".npz", "_within.npz")
         args.out = Path(__file__).parent / "data" / name
+        if args.seeds == "tuning":
+            args.out = Path("runs") / "tune" / f"{args.robot}_scenes.npz"
     robot = load_robot(args.robot)
     print(header(f"obstacle benchmark problems ({args.robot})", args.threads))
     cfg = ProblemConfig(sphere_set=args.sphere_set, hand=args.hand, within=args.within)
     seeds = GRASP_SEEDS if args.hand == "grasp" else WITHIN_SEEDS if args.within == "body" else HELDOUT_SEEDS
+    if args.seeds == "tuning":
+        if args.hand != "free" or args.within != "robot":
+            raise SystemExit("--seeds tuning makes the free-hand sets within the robot's limits only")
+        seeds = TUNING_SEEDS
     parts: dict[str, list[ProblemSet]] = {f: [] for f in families}
     spent = {f: 0.0 for f in families}
     t_start = time.perf_counter()

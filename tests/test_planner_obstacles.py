@@ -177,6 +177,17 @@ def test_the_batch_one_entry_leaves_bad_input_to_the_checks(planner, problems):
     with pytest.raises(ShapeError):
         planner.plan(start[:3], goal, obstacles=scene)
     assert planner.plan(start, start, obstacles=scene).joints.eq(start).all()  # no move: the start held
+    negative = [[0.45, 0.0, 0.55, -0.1]]  # a ball of negative radius
+    with pytest.raises(ObstacleError):
+        planner.plan(start, goal, obstacles=negative)
+    with pytest.raises(JointLimitError):  # the joints are checked before the scene, as on every path
+        planner.plan(start, far, obstacles=negative)
+    # input the entry leaves to the general path (a tensor with a gradient, in bfloat16) plans the same
+    ref = planner.plan(start, goal, obstacles=scene, refine_steps=0)
+    grad = planner.plan(start.clone().requires_grad_(), goal, obstacles=scene, refine_steps=0)
+    assert torch.equal(grad.joints, ref.joints) and grad.stage == ref.stage
+    half = planner.plan(start.bfloat16(), goal.bfloat16(), obstacles=scene, refine_steps=0)
+    assert half.joints.dtype == torch.bfloat16 and half.stage in ("learned", "retreat", "none")
 
 
 def test_deterministic(planner, problems):

@@ -241,3 +241,38 @@ def test_evaluate_workspace_takes_planners_and_says_what_it_wants(robot):
         evaluate_workspace(robot, pairs, {"lambda": lambda a, b: None})
     with pytest.raises(ConfigError, match="goal_kind"):
         evaluate_workspace(robot, pairs, {"line": JointLine(robot)}, goal_kind="pose")
+
+
+@pytest.mark.parametrize("name", ["iiwa14", "ur5"])
+def test_a_few_paths_and_many_get_one_verdict(name):
+    """Up to SMALL_BATCH float64 paths are judged in one compiled call
+    (:meth:`~kinlearn.collision.kernel.KernelChain.judged`), more in torch: the same verdict on paths
+    that pass and that fail each part of it (a knot past a limit, a first knot off the start, the goal
+    missed in joints or in position, not found), for joint goals and position goals; NaN refused by both."""
+    from kinlearn.data.problem import SMALL_BATCH
+
+    robot = load_robot(name)
+    g = torch.Generator().manual_seed(3)
+    n, K = SMALL_BATCH + 4, 6
+    lo, hi = torch.as_tensor(robot.lower), torch.as_tensor(robot.upper)
+    u = lambda *s: torch.rand(*s, generator=g, dtype=torch.float64)  # noqa: E731
+    start, goal = lo + 0.1 + (hi - lo - 0.2) * u(n, robot.dof), lo + 0.1 + (hi - lo - 0.2) * u(n, robot.dof)
+    paths = start[:, None] + torch.linspace(0, 1, K, dtype=torch.float64)[:, None] * (goal - start)[:, None]
+    paths[1::5, 2, 0] = hi[0] + 0.01  # past a limit
+    paths[2::5, 0, 1] += 1e-5  # off the start
+    paths[3::5, -1, 2] += 0.04  # the goal's joints missed (and its position by a few cm or not)
+    paths[4::5, -1, 3] += 0.2
+    found = u(n) > 0.2
+    for p in (Problem.make(robot, start, goal), Problem.make(robot, start, goal).position_goals()):
+        many = judge(p, paths, found=found)  # torch
+        assert 0 < int(many.success.sum()) < n
+        for part in (slice(0, 8), slice(8, n)):  # compiled
+            few = judge(p[part], paths[part].numpy(), found=found[part])
+            assert torch.equal(few.success, many.success[part])
+            for f in ("goal_error", "joint_error", "ef", "goal", "target", "waypoints"):
+                assert torch.allclose(getattr(few, f), getattr(many, f)[part], atol=1e-12, equal_nan=True), f
+        bad = paths[:4].clone()
+        bad[0, 3, 0] = float("nan")
+        for batch in (bad, bad.numpy()):
+            with pytest.raises(NonFiniteError):
+                judge(p[:4], batch)

@@ -91,6 +91,7 @@ __all__ = [
     "KernelScene",
     "centres",
     "check_paths",
+    "checked_tips",
     "clearances",
     "first_free",
     "first_free_boxed",
@@ -338,6 +339,55 @@ def _checked_tips(qs, F, prismatic, lower, upper, tol, ok):
                 good = False
         ok[i] = good
     return _tip_positions(qs, F, prismatic)
+
+
+#: :func:`_checked_tips` for other compiled code to call (a batch-1 plan's stage 1 checks its ends with it).
+checked_tips = _checked_tips
+
+
+@_jit
+def _judged(
+    flat, K, start, goal, state_goal, F, prismatic, lower, upper, limit_tol, start_tol, position_tol, joint_tol,
+    found, free, scores, ok,
+):  # fmt: skip
+    """The verdict of ``n`` joint paths of ``K`` configurations, ``flat (n · K, dof)`` (:meth:`KernelChain.judged`):
+    their end effectors ``(n · K, 3)`` (:func:`_checked_tips`) returned, and per path ``scores (2, n)`` its
+    goal error (m) and joint error (rad; NaN for a position goal) and ``ok (n,)`` whether it succeeds:
+    it stays within the limits (widened by ``limit_tol``), was ``found``, starts within ``start_tol`` of
+    ``start (n, dof + 3)``'s joints, is ``free``, its last end effector lies within ``position_tol`` of the
+    target, and, for ``state_goal``, its last joints within ``joint_tol`` of the goal's: ``goal (n, dof +
+    3)`` the goal states (``state_goal``) or ``(n, 3)`` the target positions. Also whether every value of
+    ``flat`` is finite."""
+    nK, dof = flat.shape
+    knots = np.empty(nK, dtype=np.bool_)
+    ef = _checked_tips(flat, F, prismatic, lower, upper, limit_tol, knots)
+    finite = True
+    for i in range(nK // K):
+        good = found[i] and free[i]
+        for k in range(i * K, (i + 1) * K):
+            if not knots[k]:
+                good = False
+                for j in range(dof):
+                    if not math.isfinite(flat[k, j]):
+                        finite = False
+        far = 0.0
+        for j in range(dof):
+            far = max(far, abs(flat[i * K, j] - start[i, j]))
+        last = (i + 1) * K - 1
+        t = dof if state_goal else 0  # the target's first column
+        e0, e1, e2 = ef[last, 0] - goal[i, t], ef[last, 1] - goal[i, t + 1], ef[last, 2] - goal[i, t + 2]
+        scores[0, i] = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        good = good and far <= start_tol and scores[0, i] <= position_tol
+        if state_goal:
+            off = 0.0
+            for j in range(dof):
+                off = max(off, abs(flat[last, j] - goal[i, j]))
+            scores[1, i] = off
+            good = good and off <= joint_tol
+        else:
+            scores[1, i] = np.nan
+        ok[i] = good
+    return ef, finite
 
 
 @_jit
@@ -1451,6 +1501,24 @@ class KernelChain:
         ok = np.empty(q.shape[0], dtype=np.bool_)
         q = q if q.flags.c_contiguous else np.ascontiguousarray(q)
         return _checked_tips(q, self.F, self.prismatic, self.lower, self.upper, float(tol), ok), ok
+
+    def judged(
+        self, flat, K: int, start, goal, state_goal: bool, tols: tuple, found, free
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        """The arithmetic of a plan's verdict in one call (:func:`~kinlearn.planning.plan.verdict_small`
+        holds the rule): ``flat (n · K, dof)`` float64 joint paths of K configurations, start states
+        ``start (n, dof + 3)``, goal states ``goal (n, dof + 3)`` (``state_goal``) or target positions
+        ``(n, 3)``, ``tols`` (limit, start, position, joint tolerance), ``found``, ``free (n,)`` bool
+        (C-contiguous, as every array: one compiled version) → end effectors ``(n · K, 3)``, ``scores (2, n)`` (goal error,
+        joint error: NaN unless ``state_goal``), ``ok (n,)`` (success) and whether every joint value is
+        finite."""
+        n = flat.shape[0] // K
+        scores, ok = np.empty((2, n)), np.empty(n, dtype=np.bool_)
+        ef, finite = _judged(
+            flat, K, start, goal, state_goal, self.F, self.prismatic, self.lower, self.upper, *tols, found,
+            free, scores, ok,
+        )  # fmt: skip
+        return ef, scores, ok, finite
 
     def position(self, q: np.ndarray) -> np.ndarray:
         """End-effector positions ``(N, 3)`` of float64 joints ``q (N, dof)`` (the caller's checked

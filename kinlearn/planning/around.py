@@ -20,7 +20,7 @@ import torch
 
 from ..collision.body import BodySpheres, planning_body
 from ..collision.scene import Scene
-from ..data.problem import positions
+from ..data.problem import LIMIT_TOLERANCE
 from ..models.chain import ChainFM
 from .plan import CHECK_TRAVEL
 from .retreat import RetreatVias, retreat_path, sampler_branches
@@ -309,11 +309,16 @@ class ObstacleStages:
 
         transfer = None
         if self.obstacle_tm is not None:
+            net, chain, limits = self._compiled_tm, k.KernelChain.of(self.robot), self.body.limits
 
-            def transfer(a, b):
-                ends = positions(self.robot, np.stack((a, b)))
-                paths, pick, free = self._learned(a[None], ends[:1], b[None], ends[1:], [nscene], steps)
-                return paths[0, pick[0]] if free[0] else None
+            def transfer(a, b):  # stage 1 between two configurations (:meth:`_learned`'s, in one call)
+                first = net.stage_one(
+                    np.stack((a, b)), chain, limits, bool(steps), body, nscene, CHECK_TRAVEL, LIMIT_TOLERANCE, -1.0
+                )  # fmt: skip
+                if first is None:  # a via outside the limits (they are solved within them)
+                    return None
+                _, paths, pick, free = first
+                return paths[pick[0]] if free[0] else None
 
         def distance(points):
             return k.point_distances(nscene, points)

@@ -112,42 +112,39 @@ class Plan:
     @classmethod
     def from_joints(
         cls,
-        goal: torch.Tensor | np.ndarray,
-        joints: torch.Tensor | np.ndarray,
-        ef: torch.Tensor | np.ndarray,
+        goal: torch.Tensor,
+        joints: torch.Tensor,
+        ef: torch.Tensor,
         *,
-        waypoints: torch.Tensor | np.ndarray | None = None,
-        target: torch.Tensor | np.ndarray | None = None,
+        waypoints: torch.Tensor | None = None,
+        target: torch.Tensor | None = None,
         joint_goal: bool = True,
-        within_limits: torch.Tensor | np.ndarray | None = None,
-        collision_free: torch.Tensor | np.ndarray | None = None,
+        within_limits: torch.Tensor | None = None,
+        collision_free: torch.Tensor | None = None,
         tolerance: Tolerance = DEFAULT_TOLERANCE,
         robot: str | None = None,
         stage: str | np.ndarray | None = None,
     ) -> Plan:
         """A plan of the joint path ``joints (..., T+1, dof)`` whose true end effector is ``ef (..., T+1, 3)``:
-        the one way every planner (learned or baseline) makes its :class:`Plan`.
+        the one way every planner (learned or baseline) makes its :class:`Plan` from tensors (a few
+        float64 paths on the CPU are judged by the same rule in one compiled call instead:
+        :func:`verdict_small`).
 
         ``waypoints`` default to the end effector of the interior configurations; ``target`` to the
         goal state's end effector. ``joint_goal``: whether the goal's joints must be reached too.
         ``within_limits (...)``: where the path is known to stay within the joint limits (default: all).
         ``collision_free (...)``: where the path was checked among obstacles and found free (None: not
-        checked); ``success`` requires it. Tensors, or NumPy arrays (the CPU planner's fast path: judged
-        in NumPy, a few microseconds less per plan, and handed back as tensors sharing their memory).
+        checked); ``success`` requires it.
         """
         dof = joints.shape[-1]
         if target is None:
             target = goal[..., dof:]
-        arrays = isinstance(joints, np.ndarray)
-        end = ef[..., -1, :] - target
-        # (for arrays the sum of squares: np.linalg.norm's dispatch costs more than the arithmetic here)
-        goal_error = np.sqrt((end * end).sum(-1)) if arrays else torch.linalg.vector_norm(end, dim=-1)
+        goal_error = torch.linalg.vector_norm(ef[..., -1, :] - target, dim=-1)
         if joint_goal:
-            off = abs(joints[..., -1, :] - goal[..., :dof])
-            joint_error = off.max(-1) if arrays else off.amax(-1)
+            joint_error = (joints[..., -1, :] - goal[..., :dof]).abs().amax(-1)
             ok = (goal_error <= tolerance.position) & (joint_error <= tolerance.joints)
         else:
-            joint_error = (np.full_like if arrays else torch.full_like)(goal_error, float("nan"))
+            joint_error = torch.full_like(goal_error, float("nan"))
             ok = goal_error <= tolerance.position
         if within_limits is not None:
             ok = ok & within_limits
@@ -164,8 +161,6 @@ class Plan:
             success=ok,
             collision_free=collision_free,
         )
-        if arrays:
-            fields = {k: None if v is None else torch.from_numpy(np.asarray(v)) for k, v in fields.items()}
         return cls(**fields, tolerance=tolerance, robot=robot, stage=stage)
 
     @property
@@ -501,6 +496,10 @@ def _judge_small(
     )
 
 
+#: Every path of a small batch (:func:`verdict_small`'s ``found`` and ``free`` where none is given).
+_EVERY = np.ones(SMALL_BATCH, dtype=bool)
+
+
 def verdict_small(
     robot: Robot,
     flat: np.ndarray,
@@ -518,38 +517,37 @@ def verdict_small(
     """The :class:`Plan` of ``n`` ≤ ``SMALL_BATCH`` float64 paths ``flat (n, T+1, dof)`` (C-contiguous) for
     start states ``start (n, dof + 3)`` and goals ``goal (n, dof + 3)`` (states, ``state_goal``) or
     ``(n, 3)`` (positions), judged by :func:`judge`'s rule (its batch-1 core; the planner's batch-1 entry
-    calls it with the arrays it already holds): the analytic FK of every configuration and the limits in
-    one compiled call, the path starting at the start, the goal within ``tolerance``; ``free (n,)`` the
-    dense check's verdicts among obstacles (None: no obstacles), ``found (n,)`` where a path was found
-    at all; every field shaped to ``batch``."""
+    calls it with the arrays it already holds): the analytic FK of every configuration, the limits, the
+    path starting at the start and the goal within ``tolerance``, all in one compiled call
+    (:meth:`~kinlearn.collision.kernel.KernelChain.judged`, :meth:`Plan.from_joints`' rule);
+    ``free (n,)`` the dense check's verdicts among obstacles (None: no obstacles), ``found (n,)`` where
+    a path was found at all; every field shaped to ``batch``, a tensor sharing its array's memory. A
+    batch-1 plan's few NumPy and torch calls cost microseconds each where other work ran before them
+    (the code they run has left the caches): one compiled call replaced a dozen array operations."""
     n, K, dof = flat.shape
     from ..collision.kernel import KernelChain
 
-    ef, ok = KernelChain.of(robot).checked(flat.reshape(n * K, dof), LIMIT_TOLERANCE)
-    ok = ok.reshape(n, K)
-    if not ok.all() and not np.isfinite(flat).all():
+    tols = (LIMIT_TOLERANCE, START_TOLERANCE, tolerance.position, tolerance.joints)
+    every = _EVERY[:n] if n <= SMALL_BATCH else np.ones(n, dtype=bool)  # read only
+    ef, scores, ok, finite = KernelChain.of(robot).judged(
+        flat.reshape(n * K, dof), K, start, goal, state_goal, tols,
+        every if found is None else found, every if free is None else free,
+    )  # fmt: skip
+    if not finite:
         check_finite(torch.from_numpy(flat), "joint paths")
     ef = ef.reshape(n, K, 3)
-    within = ok.all(-1)
-    if found is not None:
-        within &= found
-    within &= np.abs(flat[:, 0] - start[:, :dof]).max(-1) <= START_TOLERANCE
-    goal_state = goal if state_goal else np.concatenate((flat[:, -1], ef[:, -1]), -1)
-    target = goal[:, dof:] if state_goal else goal
-
-    def shaped(a):  # (n, ...) → (*batch, ...): a view (batch () too)
-        return None if a is None else a.reshape((*batch, *a.shape[1:]))
-
-    return Plan.from_joints(
-        shaped(goal_state),
-        shaped(flat),
-        shaped(ef),
-        waypoints=shaped(waypoints),
-        target=shaped(target),
-        joint_goal=state_goal,
-        within_limits=shaped(within),
-        collision_free=shaped(free),
-        tolerance=tolerance,
-        robot=robot.name,
-        stage=stage,
+    fields = dict(
+        goal=goal if state_goal else np.concatenate((flat[:, -1], ef[:, -1]), -1),
+        waypoints=ef[:, 1:-1] if waypoints is None else waypoints,
+        joints=flat,
+        ef=ef,
+        target=goal[:, dof:] if state_goal else goal,
+        goal_error=scores[0],
+        joint_error=scores[1],
+        success=ok,
+        collision_free=free,
     )
+    return Plan(
+        **{k: None if v is None else torch.from_numpy(v.reshape((*batch, *v.shape[1:]))) for k, v in fields.items()},
+        tolerance=tolerance, robot=robot.name, stage=stage,
+    )  # fmt: skip

@@ -47,6 +47,7 @@ from ..errors import (
     ConfigError,
     DomainError,
     DomainWarning,
+    KinlearnError,
     NoObstacleModelWarning,
 )
 from ..io import load_checkpoint, resolve_dependency
@@ -58,7 +59,7 @@ from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
 from .around import ObstacleStages, _kernel, _load_kernels, _retreat_over
 from .inference import NumpyPathModel
-from .plan import DEFAULT_TOLERANCE, Plan, Tolerance, judge, verdict_small
+from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance, judge, verdict_small
 from .retreat import RetreatVias
 from .stages import Deadline
 from .stages import retreat_share as _retreat_share
@@ -409,17 +410,17 @@ class Planner(ObstacleStages):
         if obstacles is not None and goal_position is None:
             first = self._batch1(start, goal, obstacles, steps)
             if first is not None:
-                q, ef, stage1, packed = first
+                q, ef, stage1, packed, dtype = first
                 paths, pick, free = stage1
                 if free[0]:  # stage 1 cleared it: no Problem made
-                    return self._batch1_plan(q, ef, paths[0, pick[0]], "learned", start, goal)
+                    return self._batch1_plan(q, ef, paths[0, pick[0]], "learned", dtype)
                 if self._retreat_vias() is not None and not _retreat_over(timer, self.retreat_share):
                     path, branches = self._retreat(q[0], q[1], packed, steps, timer)
                     if path is not None:  # the retreat stage cleared it: no Problem made either
-                        return self._batch1_plan(q, ef, path, "retreat", start, goal)
+                        return self._batch1_plan(q, ef, path, "retreat", dtype)
                     retreated = branches  # the later stages start from its free retreats
                 if refine_steps is not None and steps == 0 and deadline is None:  # no later stage runs
-                    return self._batch1_plan(q, ef, paths[0, pick[0]], "none", start, goal, free=False)
+                    return self._batch1_plan(q, ef, paths[0, pick[0]], "none", dtype, free=False)
         problem, dtype, device = self._problem(start, goal, goal_position, obstacles)
         return self._plan(
             problem, steps, refine_steps is None, strict, dtype, device, timer, stage1, retreated
@@ -430,43 +431,57 @@ class Planner(ObstacleStages):
     def _batch1(self, start, goal, obstacles, steps: int) -> tuple | None:
         """The batch-1 entry of a plan among obstacles, for the most common call, one problem given as
         joint vectors ``(dof,)`` (float tensors on the CPU or float arrays) and an unbatched
-        :class:`Scene` or spheres ``(K, 4)`` (read by :func:`~kinlearn.collision.scene.as_scene`, whose
-        :class:`ObstacleError` is the general path's too), with an obstacle network: its joints ``(2,
-        dof)`` (start, goal) and their end effectors ``(2, 3)``, checked (finite, within the limits) and
-        FK'd in one compiled call, and its stage 1 ``(paths, pick, free)`` (:meth:`_learned`: the same
-        candidates and verdicts as the general path's). None for any
-        other input, or one that fails a check or does not move: :meth:`Problem.make` then checks it
-        (and explains what is wrong) and :meth:`_plan` plans it. The general path takes 0.2 ms more per
-        plan in the Python around the compiled calls (making a Problem, judging it)."""
+        :class:`Scene` or spheres ``(K, 4)`` (read by :func:`~kinlearn.collision.scene.as_scene`), with an
+        obstacle network: its joints ``(2, dof)`` (start, goal), their end effectors ``(2, 3)`` and its
+        stage 1 ``(paths, pick, free)`` (:meth:`_learned`'s: the same candidates and verdicts as the
+        general path's), the ends checked (finite, within the limits, apart), FK'd and planned in one
+        compiled call (:meth:`~kinlearn.planning.proposals.CompiledObstacleModel.stage_one`). None for
+        any other input, or one that fails a check or does not move: :meth:`Problem.make` then checks it
+        (and explains what is wrong, the joints before the scene) and :meth:`_plan` plans it. The
+        general path takes 0.2 ms more per plan in the Python around the compiled calls (making a
+        Problem, judging it); each NumPy or torch call costs microseconds where other work ran before
+        the plan (its code has left the caches), so this entry makes few."""
         if self.obstacle_tm is None or self._domain is not None:
             return None
         dof = self.robot.dof
         a, b = _joint_vector(start, dof), _joint_vector(goal, dof)
         if a is None or b is None:
             return None
+        (a, da), (b, db) = a, b
         q = np.concatenate((a, b)).reshape(2, dof)  # (np.stack's Python costs more than the copy)
-        kernel = _kernel()
-        ef, ok = kernel.KernelChain.of(self.robot).checked(q, LIMIT_TOLERANCE)
-        if not ok.all() or np.abs(b - a).max() <= ZERO_MOVE:
+        try:  # a scene the general path refuses: it explains (after the joints, as it checks them first)
+            obstacles = as_scene(obstacles)
+            if obstacles.batch_shape:
+                return None
+            kernel = _kernel()
+            packed = kernel.KernelScene.of(obstacles)  # the general path finds it packed (a float64 scene)
+        except KinlearnError:
             return None
-        obstacles = as_scene(obstacles)  # the start and goal passed: its error is the general path's
-        if obstacles.batch_shape:
+        first = self._compiled_tm.stage_one(
+            q, kernel.KernelChain.of(self.robot), self.body.limits, bool(steps), self._np_body, packed,
+            CHECK_TRAVEL, LIMIT_TOLERANCE, ZERO_MOVE,
+        )  # fmt: skip
+        if first is None:  # an end outside the limits, or no move: the general path explains or plans it
             return None
-        packed = kernel.KernelScene.of(obstacles)  # the general path finds it packed (a float64 scene)
-        return q, ef, self._learned(q[:1], ef[:1], q[1:], ef[1:], [packed], steps), packed
+        ef, paths, pick, free = first
+        return q, ef, (paths[None], pick, free), packed, torch.promote_types(da, db)
 
-    def _batch1_plan(self, q, ef, path: np.ndarray, stage: str, start, goal, free: bool = True) -> Plan:
+    def _batch1_plan(
+        self, q, ef, path: np.ndarray, stage: str, dtype: torch.dtype, free: bool = True
+    ) -> Plan:
         """The plan of a batch-1 problem whose joint path ``path (K, dof)`` a fixed-time stage cleared
         (:meth:`_batch1`'s stage 1, or the retreat stage run on its arrays), or, ``free`` False, that no
         stage cleared and no later stage is asked for (stage 1's shortest proposal, flagged): judged by
-        :func:`judge`'s rule (:func:`~kinlearn.planning.plan.verdict_small`) on the arrays at hand."""
+        :func:`judge`'s rule (:func:`~kinlearn.planning.plan.verdict_small`) on the arrays at hand, in the
+        output's ``dtype`` (on the CPU, as the batch-1 entry's input)."""
         states = np.concatenate((q, ef), axis=1)
         plan = verdict_small(
             self.robot, np.ascontiguousarray(path[None]), states[:1], states[1:], True, (),
-            np.full(1, free), self.tolerance, stage=stage,
+            (_FREE if free else _NOT_FREE).copy(), self.tolerance, stage=stage,
         )  # fmt: skip
-        (dtype, device), (other, _) = _out_dtype(start), _out_dtype(goal)
-        return _as_output(plan, torch.promote_types(dtype, other), device, self._lo_np, self._hi_np)
+        if dtype == torch.float64:
+            return plan
+        return _as_output(plan, dtype, _CPU, self._lo_np, self._hi_np)
 
     def warm_up(self) -> None:
         """Load now what the first plan among obstacles would load (once per planner): the compiled
@@ -768,17 +783,31 @@ def step_to_position(
     return theta.double().numpy()
 
 
-def _joint_vector(x, dof: int) -> np.ndarray | None:
-    """``x`` as float64 joints ``(dof,)`` where it is a float tensor on the CPU or a float array of that
-    shape (a view where it already is float64), else None (for :meth:`Problem.make` to check)."""
+def _joint_vector(x, dof: int) -> tuple[np.ndarray, torch.dtype] | None:
+    """``x`` as float64 joints ``(dof,)`` (a view where it already is float64) and the dtype a plan of it is
+    handed back in (:func:`_out_dtype`'s), where it is a float tensor on the CPU without a gradient and
+    whose values NumPy reads, or a float array, of that shape; else None (for :meth:`Problem.make` to
+    check). The tensor is read as an array first: NumPy's attributes cost less than torch's."""
     if isinstance(x, torch.Tensor):
-        if x.shape != (dof,) or not x.is_floating_point() or x.device.type != "cpu":
+        try:
+            a = x.numpy()  # refused for a tensor on another device, with a gradient or in bfloat16
+        except (TypeError, RuntimeError):
             return None
-        x = x.detach()
-        return (x if x.dtype == torch.float64 else x.double()).numpy()
-    if isinstance(x, np.ndarray) and x.shape == (dof,) and x.dtype.kind == "f":
-        return x.astype(np.float64, copy=False)
-    return None
+        dtype = _TORCH_FLOATS.get(a.dtype.type)
+    elif isinstance(x, np.ndarray):
+        a, dtype = x, torch.float64 if x.dtype == np.float64 else torch.get_default_dtype()
+    else:
+        return None
+    if a.shape != (dof,) or a.dtype.kind != "f" or dtype is None:
+        return None
+    return a.astype(np.float64, copy=False), dtype
+
+
+#: The torch dtype of a tensor whose values NumPy reads as a float array of each type.
+_TORCH_FLOATS = {np.float64: torch.float64, np.float32: torch.float32, np.float16: torch.float16}
+#: A batch-1 plan's collision verdict (:meth:`Planner._batch1_plan`: a copy of one, as its plan holds
+#: it), and its device.
+_FREE, _NOT_FREE, _CPU = np.ones(1, dtype=bool), np.zeros(1, dtype=bool), torch.device("cpu")
 
 
 def _as_output(plan: Plan, dtype: torch.dtype, device, lo: np.ndarray, hi: np.ndarray) -> Plan:

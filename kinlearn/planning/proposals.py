@@ -30,7 +30,7 @@ import numba
 import numpy as np
 import torch
 
-from ..collision.kernel import first_free_boxed
+from ..collision.kernel import checked_tips, first_free_boxed
 from ..errors import NonFiniteError
 from ..models.obstacle_path import ObstaclePathModel
 from .inference import _arr, _folded_mlp
@@ -233,6 +233,38 @@ def _first_free_proposal(
 
 
 @_jit
+def _stage_one(
+    q, F, prismatic, lower, upper, limit_tol, zero_move, body_lo, body_hi, ef, rows, floor, halve, columns,
+    enc_w, enc_b, trunk_w, trunk_b, silu, emb_size, fractions, basis, half_range, paths, order, max_travel,
+    margin, box_lo, box_hi, f_in, n_in, f_all, n_all, s,
+):  # fmt: skip
+    """A batch-1 plan's stage 1 from its start and goal joints ``q (2, dof)``, in one call (:meth:`CompiledObstacleModel.stage_one`):
+    their end effectors into ``ef (2, 3)`` (:func:`~kinlearn.collision.kernel.checked_tips`); −3 where
+    either is outside the limits widened by ``limit_tol`` (or not finite) or no joint moves more than
+    ``zero_move``; else the problem's joint box (``body_lo``/``body_hi`` where both ends lie within them,
+    else ``lower``/``upper``: :meth:`~kinlearn.collision.BodySpheres.joint_box`'s rule) and
+    :func:`_first_free_proposal`'s answer."""
+    ok = np.empty(2, dtype=np.bool_)
+    tips = checked_tips(q, F, prismatic, lower, upper, limit_tol, ok)
+    moved = 0.0
+    for j in range(q.shape[1]):
+        moved = max(moved, abs(q[1, j] - q[0, j]))
+    if not (ok[0] and ok[1]) or moved <= zero_move:
+        return -3
+    ef[:] = tips
+    inside = True
+    for j in range(q.shape[1]):
+        if not (min(q[0, j], q[1, j]) >= body_lo[j] and max(q[0, j], q[1, j]) <= body_hi[j]):
+            inside = False
+    lo, hi = (body_lo, body_hi) if inside else (lower, upper)
+    return _first_free_proposal(
+        q[0], ef[0], q[1], ef[1], rows, floor, lo, hi, halve, columns, enc_w, enc_b, trunk_w, trunk_b, silu,
+        emb_size, fractions, basis, half_range, paths, order, max_travel, margin, box_lo, box_hi, f_in, n_in,
+        f_all, n_all, s,
+    )  # fmt: skip
+
+
+@_jit
 def _forward(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_b, silu, emb_size, fractions,
              basis, half_range, out):  # fmt: skip
     """One problem's candidates' knots into ``out (C, T − 1, dof)`` (:meth:`CompiledObstacleModel.__call__`)."""
@@ -303,6 +335,47 @@ class CompiledObstacleModel:
                 "a candidate path holds NaN or infinity (the problem's joints or the network's output)"
             )
         return paths, order, int(k)
+
+    def stage_one(
+        self,
+        q,
+        chain,
+        body_limits,
+        halve: bool,
+        body,
+        scene,
+        max_travel: float,
+        limit_tol: float,
+        zero_move: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """A batch-1 plan's stage 1 in one compiled call, from its start and goal joints ``q (2, dof)``
+        (float64, C-contiguous): the ends' FK and limits (``chain``: a
+        :class:`~kinlearn.collision.kernel.KernelChain`; ``limit_tol``), the problem's joint box
+        (``body_limits``: the planning body's :attr:`~kinlearn.collision.BodySpheres.limits`), then
+        :meth:`first_free`. Returns the ends' end effectors ``(2, 3)``, the candidates ``(2C + 1, K, dof)``,
+        the one picked ``(1,)`` (the first free in their order, else the shortest) and whether it is free
+        ``(1,)`` (:meth:`~kinlearn.planning.around.ObstacleStages._learned`'s answer for the problem), or
+        None where an end is outside the limits or not finite or no joint moves more than ``zero_move``
+        (for the caller's general path to explain). Raises :class:`NonFiniteError` as
+        :meth:`first_free` does."""
+        paths = np.empty(self.candidates_shape(halve))
+        order = np.empty(paths.shape[0], dtype=np.int64)
+        ef = np.empty((2, 3))
+        k = _stage_one(
+            q, chain.F, chain.prismatic, chain.lower, chain.upper, float(limit_tol), float(zero_move),
+            *body_limits, ef, scene.model_rows(), scene.floor, bool(halve), self.columns, self.enc_w,
+            self.enc_b, self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions, self.basis,
+            self.half_range, paths, order, float(max_travel), 0.0, *body.boxed, scene.packed,
+        )  # fmt: skip
+        if k == -3:
+            return None
+        if k == -2:
+            raise NonFiniteError(
+                "a candidate path holds NaN or infinity (the problem's joints or the network's output)"
+            )
+        pick, free = np.empty(1, dtype=np.int64), np.empty(1, dtype=np.bool_)
+        pick[0], free[0] = k if k >= 0 else order[0], k >= 0
+        return ef, paths, pick, free
 
     def __call__(self, theta0, ef0, thetaT, efT, rows, mask, floor) -> np.ndarray:
         """The network's forward pass on a batch (:meth:`ObstaclePathModel.forward`, unclipped):
