@@ -208,3 +208,36 @@ def test_moves_keeping_orientation_reach_small_moves_without_turning_the_hand(na
         *arrays, q0, p0[:, None], lo, hi, iterations=15, damping=0.05, weight=0.1
     )
     np.testing.assert_allclose(still[:, 0], q0, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_a_chain_of_position_targets_is_solved_as_target_after_target(name, gen):
+    """The compiled continuation (the retreat stage's turning chains) gives, to the bit, the joints of one
+    :func:`solve_position_numba` per target from the joints of the one before; within the limits."""
+    from kinlearn.models.chain_kernel import chain_positions, solve_position_chains, solve_position_numba
+
+    robot = load_robot(name)
+    arrays = ChainFM.from_robot(robot).kernel_arrays()
+    lo, hi = (t.numpy() for t in robot.limits(torch.float64))
+    q0 = _within(robot, 20, gen, frac=0.6).numpy()
+    step = 0.1 * torch.nn.functional.normalize(
+        torch.randn(20, 3, 3, generator=gen, dtype=torch.float64), dim=-1
+    )
+    targets = chain_positions(*arrays, q0)[:, None] + np.cumsum(step.numpy(), axis=1)
+    out = solve_position_chains(*arrays, q0, targets, lo, hi, iterations=15, damping=0.05, tolerance=1e-4)
+    assert out.shape == (20, 3, robot.dof) and ((out >= lo) & (out <= hi)).all()
+    q = q0
+    for k in range(3):
+        q, _ = solve_position_numba(
+            *arrays,
+            q,
+            targets[:, k],
+            lo,
+            hi,
+            np.zeros((0, robot.dof)),
+            iterations=15,
+            damping=0.05,
+            tolerance=1e-4,
+        )
+        assert np.array_equal(out[:, k], q)
+    assert np.median(np.linalg.norm(chain_positions(*arrays, out[:, -1]) - targets[:, -1], axis=-1)) < 1e-3

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["chain_positions", "moves_keeping_orientation", "solve_position_numba"]
+__all__ = ["chain_positions", "moves_keeping_orientation", "solve_position_chains", "solve_position_numba"]
 
 
 @numba.njit(cache=True, fastmath=False)
@@ -215,6 +215,48 @@ def solve_position_numba(
         err,
     )
     return out, err
+
+
+@numba.njit(cache=True, fastmath=False)
+def _solve_chains(w, q, tip, ref, theta0, targets, lo, hi, seeds, iterations, damping, tolerance, out):
+    """:func:`_solve` through ``targets (N, L, 3)`` in turn, each target's from the joints of the one before
+    (the first's from ``theta0``), into ``out (N, L, n)``."""
+    N, L = targets.shape[0], targets.shape[1]
+    start, nxt = theta0.copy(), np.empty_like(theta0)
+    target, err = np.empty((N, 3)), np.empty(N)
+    for k in range(L):
+        for m in range(N):
+            for a in range(3):
+                target[m, a] = targets[m, k, a]
+        _solve(w, q, tip, ref, start, target, lo, hi, seeds, iterations, damping, tolerance, nxt, err)
+        out[:, k] = nxt
+        start, nxt = nxt, start
+
+
+def solve_position_chains(
+    w: np.ndarray,
+    q: np.ndarray,
+    tip: np.ndarray,
+    ref: np.ndarray,
+    theta0: np.ndarray,
+    targets: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    *,
+    iterations: int,
+    damping: float,
+    tolerance: float,
+) -> np.ndarray:
+    """Joints ``(N, L, n)`` reaching ``targets (N, L, 3)`` in turn from joints ``theta0 (N, n)``: per target
+    :func:`solve_position_numba` without restarts from the joints of the one before (a continuation), in
+    one compiled call: the same joints as L calls."""
+    w, q, tip, ref, theta0, targets, lower, upper = _float64(w, q, tip, ref, theta0, targets, lower, upper)
+    out = np.empty((theta0.shape[0], targets.shape[1], theta0.shape[1]))
+    _solve_chains(
+        w, q, tip, ref, theta0, targets, lower, upper, np.zeros((0, theta0.shape[1])), int(iterations),
+        float(damping), float(tolerance), out,
+    )  # fmt: skip
+    return out
 
 
 @numba.njit(cache=True, fastmath=False)

@@ -274,17 +274,14 @@ class RetreatVias:
         """The vias ``(H, R, L, dof)`` of chains from ``starts (R, dof)`` through the hand positions ``targets
         (R, L, 3)``: the hand turning, then kept (each row solved alone, so a batch of rows gives what each
         would alone)."""
-        from ..models.chain_kernel import moves_keeping_orientation, solve_position_numba
+        from ..models.chain_kernel import moves_keeping_orientation, solve_position_chains
 
         R, L = targets.shape[:2]
         out = np.empty((len(RETREAT_HANDS), R, L, self.dof))
-        q = starts
-        for k in range(L):  # each via from the one before (continuation)
-            q, _ = solve_position_numba(
-                *self.arrays, q, targets[:, k], self.lower, self.upper, self._no_seeds,
-                iterations=RETREAT_ITERATIONS, damping=RETREAT_DAMPING, tolerance=1e-4,
-            )  # fmt: skip
-            out[0, :, k] = q
+        out[0] = solve_position_chains(  # each via from the one before (continuation)
+            *self.arrays, starts, targets, self.lower, self.upper,
+            iterations=RETREAT_ITERATIONS, damping=RETREAT_DAMPING, tolerance=1e-4,
+        )  # fmt: skip
         out[1] = moves_keeping_orientation(
             *self.arrays, starts, targets, self.lower, self.upper,
             iterations=RETREAT_ITERATIONS, damping=RETREAT_DAMPING, weight=KEEP_WEIGHT,
@@ -353,12 +350,13 @@ def _ends(theta: np.ndarray, vias: np.ndarray, depth: np.ndarray) -> tuple[list[
     """The free retreats of one end as vertex lists from it, ``[theta]`` (none) first, then each
     direction's free prefixes, shallow to deep; and each one's joint length."""
     ends, lengths = [theta[None]], [0.0]
-    for free in free_chains(vias, depth):
-        chain = np.concatenate((theta[None], free))
-        steps = np.cumsum(np.linalg.norm(np.diff(chain, axis=0), axis=-1))
-        for k in range(len(free)):
-            ends.append(chain[: k + 2])
-            lengths.append(float(steps[k]))
+    chains = np.empty((vias.shape[0], vias.shape[1] + 1, vias.shape[2]))  # every chain from theta
+    chains[:, 0], chains[:, 1:] = theta, vias
+    steps = np.cumsum(np.linalg.norm(np.diff(chains, axis=1), axis=-1), axis=1)  # (the same sums, at once)
+    for d, n in enumerate(depth.tolist()):
+        for k in range(n):
+            ends.append(chains[d, : k + 2])
+        lengths.extend(steps[d, :n].tolist())
     return ends, np.array(lengths)
 
 
