@@ -96,6 +96,7 @@ __all__ = [
     "first_free",
     "first_free_boxed",
     "free_depths",
+    "free_depths_boxed",
     "near_pairs",
     "point_distances",
     "proven_apart",
@@ -1170,8 +1171,9 @@ def first_free_boxed(paths, order, max_travel, margin, box_lo, box_hi, f_in, n_i
 
 
 @_jit
-def _free_depths_boxed(theta, vias, max_travel, margin, box_lo, box_hi, f_in, n_in, f_all, n_all, s, depth):
-    """:func:`free_depths`' compiled core: each chain ``[theta, vias[d]]`` walked to its first collision
+def free_depths_boxed(theta, vias, max_travel, margin, box_lo, box_hi, f_in, n_in, f_all, n_all, s, depth):
+    """:func:`free_depths`' compiled core (the planner's retreat stage calls it with its own float64 arrays,
+    as :func:`first_free_boxed`): each chain ``[theta, vias[d]]`` walked to its first collision
     (the body packed as :func:`first_free_boxed` packs it for the chain), the via before a hit in a
     later segment checked alone; ``depth (D,)`` filled. False if ``theta`` or ``vias`` hold NaN or
     infinity (nothing checked)."""
@@ -1826,9 +1828,7 @@ def free_depths(
     theta = _joints(theta, body.dof, "theta", 1, finite=False)
     vias = _joints(vias, body.dof, "vias", 3, finite=False)
     depth = np.empty(vias.shape[0], dtype=np.int64)
-    if not _free_depths_boxed(
-        theta, vias, float(max_travel), float(margin), *body.boxed, scene.packed, depth
-    ):
+    if not free_depths_boxed(theta, vias, float(max_travel), float(margin), *body.boxed, scene.packed, depth):
         raise NonFiniteError("theta or the vias hold NaN or infinity")
     return depth
 

@@ -21,6 +21,7 @@ import torch
 from ..collision.body import BodySpheres, planning_body
 from ..collision.scene import Scene
 from ..data.problem import LIMIT_TOLERANCE
+from ..errors import NonFiniteError
 from ..models.chain import ChainFM
 from .plan import CHECK_TRAVEL
 from .retreat import RetreatVias, retreat_path, sampler_branches
@@ -301,11 +302,19 @@ class ObstacleStages:
         lo, hi = self._boxes(theta0[None], thetaT[None])
         vias = self._retreat_vias().within(lo[0], hi[0])  # the vias kept in the problem's box
 
+        # The kernels' compiled cores on the stage's own float64 arrays (C-contiguous; orders of distinct
+        # indices): the public wrappers' checks and conversions cost more than the joins' check itself.
         def first_free(paths, order):
-            return k.first_free(body, paths, nscene, order, max_travel=CHECK_TRAVEL)
+            found = k.first_free_boxed(paths, order, CHECK_TRAVEL, 0.0, *body.boxed, nscene.packed)
+            if found == -2:
+                raise NonFiniteError("a retreat path holds NaN or infinity")
+            return found
 
         def depths(theta, chains):  # each chain walked to its first collision, all in one compiled call
-            return k.free_depths(body, theta, chains, nscene, max_travel=CHECK_TRAVEL)
+            depth = np.empty(chains.shape[0], dtype=np.int64)
+            if not k.free_depths_boxed(theta, chains, CHECK_TRAVEL, 0.0, *body.boxed, nscene.packed, depth):
+                raise NonFiniteError("a retreat via holds NaN or infinity")
+            return depth
 
         transfer = None
         if self.obstacle_tm is not None:
