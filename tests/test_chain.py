@@ -178,10 +178,14 @@ def test_chain_checkpoint_round_trip(tmp_path, gen):
 
 @pytest.mark.parametrize("name", ["panda", "ur5", "iiwa14"])
 def test_moves_keeping_orientation_reach_small_moves_without_turning_the_hand(name, gen):
-    """The compiled pose-keeping steps (the retreat stage's kept chains): small moves of the hand from
+    """The compiled pose-keeping steps (the retreat stage's kept chains, :func:`chain_retreats`' second
+    kind): small moves of the hand from
     configurations inside the limits are mostly reached with its orientation held (by the fast
     kinematics, not the chain), within the limits; a target at the hand itself moves nothing."""
-    from kinlearn.models.chain_kernel import chain_positions, moves_keeping_orientation
+    from kinlearn.models.chain_kernel import chain_positions, chain_retreats
+
+    def moves_keeping_orientation(*args, **kwargs):
+        return chain_retreats(*args, **kwargs, tolerance=1e-4)[1]
 
     robot = load_robot(name)
     chain = ChainFM.from_robot(robot)
@@ -212,9 +216,10 @@ def test_moves_keeping_orientation_reach_small_moves_without_turning_the_hand(na
 
 @pytest.mark.parametrize("name", ["panda", "ur5"])
 def test_a_chain_of_position_targets_is_solved_as_target_after_target(name, gen):
-    """The compiled continuation (the retreat stage's turning chains) gives, to the bit, the joints of one
-    :func:`solve_position_numba` per target from the joints of the one before; within the limits."""
-    from kinlearn.models.chain_kernel import chain_positions, solve_position_chains, solve_position_numba
+    """The compiled continuation (the retreat stage's turning chains, :func:`chain_retreats`' first kind)
+    gives, to the bit, the joints of one :func:`solve_position_numba` per target from the joints of the
+    one before; within the limits."""
+    from kinlearn.models.chain_kernel import chain_positions, chain_retreats, solve_position_numba
 
     robot = load_robot(name)
     arrays = ChainFM.from_robot(robot).kernel_arrays()
@@ -224,7 +229,9 @@ def test_a_chain_of_position_targets_is_solved_as_target_after_target(name, gen)
         torch.randn(20, 3, 3, generator=gen, dtype=torch.float64), dim=-1
     )
     targets = chain_positions(*arrays, q0)[:, None] + np.cumsum(step.numpy(), axis=1)
-    out = solve_position_chains(*arrays, q0, targets, lo, hi, iterations=15, damping=0.05, tolerance=1e-4)
+    out = chain_retreats(
+        *arrays, q0, targets, lo, hi, iterations=15, damping=0.05, tolerance=1e-4, weight=0.1
+    )[0]
     assert out.shape == (20, 3, robot.dof) and ((out >= lo) & (out <= hi)).all()
     q = q0
     for k in range(3):

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["chain_positions", "moves_keeping_orientation", "solve_position_chains", "solve_position_numba"]
+__all__ = ["chain_positions", "chain_retreats", "solve_position_numba"]
 
 
 @numba.njit(cache=True, fastmath=False)
@@ -233,32 +233,6 @@ def _solve_chains(w, q, tip, ref, theta0, targets, lo, hi, seeds, iterations, da
         start, nxt = nxt, start
 
 
-def solve_position_chains(
-    w: np.ndarray,
-    q: np.ndarray,
-    tip: np.ndarray,
-    ref: np.ndarray,
-    theta0: np.ndarray,
-    targets: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    *,
-    iterations: int,
-    damping: float,
-    tolerance: float,
-) -> np.ndarray:
-    """Joints ``(N, L, n)`` reaching ``targets (N, L, 3)`` in turn from joints ``theta0 (N, n)``: per target
-    :func:`solve_position_numba` without restarts from the joints of the one before (a continuation), in
-    one compiled call: the same joints as L calls."""
-    w, q, tip, ref, theta0, targets, lower, upper = _float64(w, q, tip, ref, theta0, targets, lower, upper)
-    out = np.empty((theta0.shape[0], targets.shape[1], theta0.shape[1]))
-    _solve_chains(
-        w, q, tip, ref, theta0, targets, lower, upper, np.zeros((0, theta0.shape[1])), int(iterations),
-        float(damping), float(tolerance), out,
-    )  # fmt: skip
-    return out
-
-
 @numba.njit(cache=True, fastmath=False)
 def _solve_spd(A, b, x):
     """x ← A⁻¹ b for a small symmetric positive-definite A (Cholesky; A is overwritten)."""
@@ -343,7 +317,17 @@ def _moves_keeping(w, q, tip, ref, theta0, targets, lo, hi, iterations, damping,
                 out[k, m, i] = th[i]
 
 
-def moves_keeping_orientation(
+@numba.njit(cache=True, fastmath=False)
+def _retreats(w, q, tip, ref, theta0, targets, lo, hi, iterations, damping, tolerance, weight, out):
+    """Both kinds of :func:`chain_retreats` into ``out (2, N, L, n)``."""
+    _solve_chains(
+        w, q, tip, ref, theta0, targets, lo, hi, np.zeros((0, theta0.shape[1])), iterations, damping, tolerance,
+        out[0],
+    )  # fmt: skip
+    _moves_keeping(w, q, tip, ref, theta0, targets, lo, hi, iterations, damping, weight, out[1])
+
+
+def chain_retreats(
     w: np.ndarray,
     q: np.ndarray,
     tip: np.ndarray,
@@ -355,19 +339,25 @@ def moves_keeping_orientation(
     *,
     iterations: int,
     damping: float,
+    tolerance: float,
     weight: float,
 ) -> np.ndarray:
-    """Joints ``(N, L, n)`` that move the chain's end effector from joints ``theta0 (N, n)`` through
-    ``targets (N, L, 3)`` in turn while keeping the hand's orientation at ``theta0``: ``iterations``
-    projected damped least-squares steps per target on the position error and the orientation error
-    (times ``weight``, metres per radian), each target's from the joints of the one before. The
-    orientation error is the axis of the rotation still to make times the sine of its angle (the
-    skew part of R₀Rᵀ: exact for small turns, which is all the steps see)."""
+    """Joints ``(2, N, L, n)`` that move the chain's end effector from joints ``theta0 (N, n)`` through
+    ``targets (N, L, 3)`` in turn, each target's from the joints of the one before (a continuation), in one
+    compiled call, two ways (the retreat stage's two kinds of hand):
+
+    0. the hand free to turn: per target :func:`solve_position_numba` without restarts (``iterations``
+       projected damped least-squares steps on the position alone, stopping within ``tolerance``);
+    1. the hand's orientation at ``theta0`` kept: ``iterations`` projected damped least-squares steps per
+       target on the position error and the orientation error (times ``weight``, metres per radian). The
+       orientation error is the axis of the rotation still to make times the sine of its angle (the
+       skew part of R₀Rᵀ: exact for small turns, which is all the steps see)."""
     w, q, tip, ref, theta0, targets, lower, upper = _float64(w, q, tip, ref, theta0, targets, lower, upper)
-    out = np.empty((theta0.shape[0], targets.shape[1], theta0.shape[1]))
-    _moves_keeping(
-        w, q, tip, ref, theta0, targets, lower, upper, int(iterations), float(damping), float(weight), out
-    )
+    out = np.empty((2, theta0.shape[0], targets.shape[1], theta0.shape[1]))
+    _retreats(
+        w, q, tip, ref, theta0, targets, lower, upper, int(iterations), float(damping), float(tolerance),
+        float(weight), out,
+    )  # fmt: skip
     return out
 
 

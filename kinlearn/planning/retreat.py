@@ -274,19 +274,12 @@ class RetreatVias:
         """The vias ``(H, R, L, dof)`` of chains from ``starts (R, dof)`` through the hand positions ``targets
         (R, L, 3)``: the hand turning, then kept (each row solved alone, so a batch of rows gives what each
         would alone)."""
-        from ..models.chain_kernel import moves_keeping_orientation, solve_position_chains
+        from ..models.chain_kernel import chain_retreats
 
-        R, L = targets.shape[:2]
-        out = np.empty((len(RETREAT_HANDS), R, L, self.dof))
-        out[0] = solve_position_chains(  # each via from the one before (continuation)
-            *self.arrays, starts, targets, self.lower, self.upper,
-            iterations=RETREAT_ITERATIONS, damping=RETREAT_DAMPING, tolerance=1e-4,
+        return chain_retreats(  # each via from the one before (continuation)
+            *self.arrays, starts, targets, self.lower, self.upper, iterations=RETREAT_ITERATIONS,
+            damping=RETREAT_DAMPING, tolerance=1e-4, weight=KEEP_WEIGHT,
         )  # fmt: skip
-        out[1] = moves_keeping_orientation(
-            *self.arrays, starts, targets, self.lower, self.upper,
-            iterations=RETREAT_ITERATIONS, damping=RETREAT_DAMPING, weight=KEEP_WEIGHT,
-        )  # fmt: skip
-        return out
 
 
 def _by_hand(first: np.ndarray, then: np.ndarray) -> np.ndarray:
