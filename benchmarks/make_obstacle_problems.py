@@ -18,7 +18,10 @@ Families: tabletop, shelf, barrier (the default set), or the seven of ``kinlearn
 seed (held-out seeds below; training sets use other seeds). Problems are made round-robin, one of
 each family in turn, so that a time budget cuts every family at the same count; problem i of a
 family is the same whatever the budget (its sub-seed depends on (seed, i) only). Every problem is
-verified solvable by OMPL RRT-Connect within 5 s on kinlearn's checker. Prints the generation time,
+verified solvable by OMPL RRT-Connect within 5 s on kinlearn's checker (a wall-clock limit: on a machine busy
+with other work a verification can fail and its problem be replaced by the next attempt, so remake a set
+on an idle one to get it to the bit; the tuning sets' first problems came back identical there, and one
+differed under two trainings' load). Prints the generation time,
 the rate and, per family, the number of problems, the share of hard ones (straight joint-space line
 collides) and RRT-Connect's verification times.
 """
