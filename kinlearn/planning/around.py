@@ -321,6 +321,7 @@ class ObstacleStages:
             net, chain, limits = self._compiled_tm, k.KernelChain.of(self.robot), self.body.limits
 
             def transfer(a, b):  # stage 1 between two configurations (:meth:`_learned`'s, in one call)
+                # (a zero move of −1: no pair of vias is refused for lying close, as _learned refuses none)
                 first = net.stage_one(
                     np.stack((a, b)), chain, limits, bool(steps), body, nscene, CHECK_TRAVEL, LIMIT_TOLERANCE, -1.0
                 )  # fmt: skip
