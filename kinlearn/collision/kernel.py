@@ -328,8 +328,9 @@ def _tip_positions(qs, F, prismatic):
 
 
 @_jit
-def _checked_tips(qs, F, prismatic, lower, upper, tol, ok):
-    """:func:`_tip_positions`, and ``ok (N,)`` filled with whether each configuration is finite and within
+def checked_tips(qs, F, prismatic, lower, upper, tol, ok):
+    """(Compiled; other compiled code calls it too: a batch-1 plan's stage 1 checks its ends with it.)
+    :func:`_tip_positions`, and ``ok (N,)`` filled with whether each configuration is finite and within
     ``[lower − tol, upper + tol]`` (a comparison with NaN is false)."""
     n, dof = qs.shape
     for i in range(n):
@@ -342,17 +343,13 @@ def _checked_tips(qs, F, prismatic, lower, upper, tol, ok):
     return _tip_positions(qs, F, prismatic)
 
 
-#: :func:`_checked_tips` for other compiled code to call (a batch-1 plan's stage 1 checks its ends with it).
-checked_tips = _checked_tips
-
-
 @_jit
 def _judged(
     flat, K, start, goal, state_goal, F, prismatic, lower, upper, limit_tol, start_tol, position_tol, joint_tol,
     found, free, scores, ok,
 ):  # fmt: skip
     """The verdict of ``n`` joint paths of ``K`` configurations, ``flat (n · K, dof)`` (:meth:`KernelChain.judged`):
-    their end effectors ``(n · K, 3)`` (:func:`_checked_tips`) returned, and per path ``scores (2, n)`` its
+    their end effectors ``(n · K, 3)`` (:func:`checked_tips`) returned, and per path ``scores (2, n)`` its
     goal error (m) and joint error (rad; NaN for a position goal) and ``ok (n,)`` whether it succeeds:
     it stays within the limits (widened by ``limit_tol``), was ``found``, starts within ``start_tol`` of
     ``start (n, dof + 3)``'s joints, is ``free``, its last end effector lies within ``position_tol`` of the
@@ -361,7 +358,7 @@ def _judged(
     ``flat`` is finite."""
     nK, dof = flat.shape
     knots = np.empty(nK, dtype=np.bool_)
-    ef = _checked_tips(flat, F, prismatic, lower, upper, limit_tol, knots)
+    ef = checked_tips(flat, F, prismatic, lower, upper, limit_tol, knots)
     finite = True
     for i in range(nK // K):
         good = found[i] and free[i]
@@ -1502,7 +1499,7 @@ class KernelChain:
         each configuration is finite and within the joint limits widened by ``tol`` (one call)."""
         ok = np.empty(q.shape[0], dtype=np.bool_)
         q = q if q.flags.c_contiguous else np.ascontiguousarray(q)
-        return _checked_tips(q, self.F, self.prismatic, self.lower, self.upper, float(tol), ok), ok
+        return checked_tips(q, self.F, self.prismatic, self.lower, self.upper, float(tol), ok), ok
 
     def judged(
         self, flat, K: int, start, goal, state_goal: bool, tols: tuple, found, free

@@ -272,6 +272,15 @@ def _forward(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_
     _knots(a0, aT, coef[0], fractions, basis, half_range, out)
 
 
+def _finite(k: int) -> int:
+    """The index a compiled stage 1 picked (−1: none free); :class:`NonFiniteError` for its −2."""
+    if k == -2:
+        raise NonFiniteError(
+            "a candidate path holds NaN or infinity (the problem's joints or the network's output)"
+        )
+    return int(k)
+
+
 class CompiledObstacleModel:
     """An obstacle-aware TM packed for the compiled proposals (float32 weights with the input
     standardisation folded in, float64 knot constants), made once per planner."""
@@ -330,11 +339,7 @@ class CompiledObstacleModel:
             self.enc_w, self.enc_b, self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions,
             self.basis, self.half_range, paths, order, float(max_travel), 0.0, *body.boxed, scene.packed,
         )  # fmt: skip
-        if k == -2:
-            raise NonFiniteError(
-                "a candidate path holds NaN or infinity (the problem's joints or the network's output)"
-            )
-        return paths, order, int(k)
+        return paths, order, _finite(k)
 
     def stage_one(
         self,
@@ -369,10 +374,7 @@ class CompiledObstacleModel:
         )  # fmt: skip
         if k == -3:
             return None
-        if k == -2:
-            raise NonFiniteError(
-                "a candidate path holds NaN or infinity (the problem's joints or the network's output)"
-            )
+        k = _finite(k)
         pick, free = np.empty(1, dtype=np.int64), np.empty(1, dtype=np.bool_)
         pick[0], free[0] = k if k >= 0 else order[0], k >= 0
         return ef, paths, pick, free
