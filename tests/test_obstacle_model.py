@@ -197,3 +197,61 @@ def test_a_bad_record_of_training_families_is_refused(robot, tmp_path):
         )
         with pytest.raises(CheckpointError, match=why):
             load_obstacle_model(tmp_path / "bad.pt")
+
+
+def test_a_feature_that_never_varied_in_training_is_held_at_its_mean(robot):
+    """Every training scene had a floor at z = 0, so the floor flag and height never varied: the network
+    (torch and compiled alike) plans a scene without a floor, or with one at another height, as it plans
+    the floor it knows. Unheld, a missing floor put the flag 1,000 standard deviations out."""
+    from kinlearn.planning.proposals import CompiledObstacleModel
+
+    tm = _model(robot, candidates=3)
+    s0, sT = state_pairs(robot, 4, seed=2)
+    rows, mask, _ = scene_primitives(_scene(4), 4)
+    floors = torch.tensor([[1.0, 0.0]]).repeat(4, 1)
+    with torch.no_grad():
+        tm.fit_normalization(s0, sT, rows, mask, floors)  # the floor constant, as in training
+    in_scale, _ = tm.input_scales
+    assert torch.isinf(in_scale[-2:]).all() and torch.isfinite(in_scale[:-2]).all()
+    net = CompiledObstacleModel(tm)
+    dof = tm.config.dof
+    a = [x.double().numpy() for x in (s0[:, :dof], s0[:, dof:], sT[:, :dof], sT[:, dof:])]
+    with torch.no_grad():
+        ref = tm(s0, sT, rows, mask, floors)
+        compiled = net(*a, rows.double().numpy(), mask.numpy(), floors.double().numpy())
+        for other in ([0.0, 0.0], [1.0, -0.4], [1.0, 0.3]):  # no floor; a floor lower, higher
+            f = torch.tensor([other]).repeat(4, 1)
+            assert torch.equal(tm(s0, sT, rows, mask, f), ref)
+            assert np.array_equal(net(*a, rows.double().numpy(), mask.numpy(), f.double().numpy()), compiled)
+    # a feature that varied in training still counts
+    s1 = sT.clone()
+    s1[:, 0] += 0.5
+    with torch.no_grad():
+        assert not torch.equal(tm(s0, s1, rows, mask, floors), ref)
+
+
+def test_the_shipped_network_plans_a_scene_without_a_floor():
+    """A panda problem of the held-out scene families with its floor left out (as a MoveIt scene or a list
+    of balls comes): the network's candidates are what they are with the floor, and clear it alone."""
+    from pathlib import Path
+
+    import kinlearn
+    from kinlearn.collision.geometry import Plane
+    from kinlearn.collision.scene import as_scene
+    from kinlearn.data.problems import ProblemSet
+
+    data = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "scene_problems_panda.npz"
+    ps = ProblemSet.load(data, robot="panda")
+    alone = kinlearn.Planner.default("panda", retreat=False)
+    cleared = with_floor = 0
+    for i in range(6):
+        start, goal, scene = ps.problem(i)
+        bare = Scene.from_primitives([p for p in as_scene(scene).primitives() if not isinstance(p, Plane)])
+        assert bare.floor is None
+        a = alone.plan(start, goal, obstacles=scene, refine_steps=0)
+        b = alone.plan(start, goal, obstacles=bare, refine_steps=0)
+        if a.stage == "learned":  # the floor only narrows the free space: what clears with it clears without
+            assert b.stage == "learned" and bool(b.collision_free) and bool(b.success)
+        with_floor += a.stage == "learned"
+        cleared += b.stage == "learned" and bool(b.success)
+    assert cleared >= with_floor >= 1

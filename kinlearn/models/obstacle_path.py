@@ -35,6 +35,7 @@ from ..io import half_weights, load_checkpoint, save_checkpoint
 from .joint_path import RobotModelConfig, mlp_layers, register_path_buffers
 
 __all__ = [
+    "MIN_STD",
     "PRIMITIVE_FEATURES",
     "ROW_WIDTH",
     "ObstaclePathConfig",
@@ -55,6 +56,10 @@ ROW_WIDTH = 14
 _COLUMNS = {"aabb": 7, "shape": ROW_WIDTH}
 _FLAGS = {"aabb": (6,), "shape": (6, 13)}
 PRIMITIVE_FEATURES = {k: cols + 6 for k, cols in _COLUMNS.items()}  # aabb 13, shape 20
+#: The least standard deviation a feature is standardised with; a feature whose training spread was
+#: below it never varied there, and the network holds it at its training mean
+#: (:attr:`ObstaclePathModel.input_scales`).
+MIN_STD = 1e-3
 
 
 @dataclass(frozen=True)
@@ -231,25 +236,38 @@ class ObstaclePathModel(nn.Module):
         """Standardise problem and primitive features with statistics of training problems."""
         x = self.problem_features(s0.double(), sT.double(), floor.double())
         self.in_mean.copy_(x.mean(0))
-        self.in_std.copy_(x.std(0).clamp_min(1e-3))
+        self.in_std.copy_(x.std(0).clamp_min(MIN_STD))
         p = self.primitive_features(rows.double(), s0.double(), sT.double())[mask]
         self.prim_mean.copy_(p.mean(0))
-        self.prim_std.copy_(p.std(0).clamp_min(1e-3))
+        self.prim_std.copy_(p.std(0).clamp_min(MIN_STD))
         for k in _FLAGS[self.config.primitives]:  # the kind flags stay 0/1
             self.prim_mean[k], self.prim_std[k] = 0.0, 1.0
+
+    @property
+    def input_scales(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The standard deviations the problem and primitive features are divided by: ``in_std`` and
+        ``prim_std``, infinite for a feature that never varied in training (its standard deviation at
+        :data:`MIN_STD`), which is thereby held at its training mean whatever its value. Every
+        training scene had a floor at z = 0: without this a scene with no floor (a MoveIt scene, a list of
+        balls) put the floor flag 1,000 standard deviations from anything the network saw and its
+        candidates were noise (none of the panda's 33 cleared a lone ball, none of its held-out scene
+        problems read through a MoveIt file); held, the network plans as if the floor were at the base,
+        and the dense check judges the scene as given."""
+        held = lambda s: torch.where(s > MIN_STD, s, torch.full_like(s, torch.inf))  # noqa: E731
+        return held(self.in_std), held(self.prim_std)
 
     def scene_embedding(self, s0, sT, rows, mask) -> torch.Tensor:
         """``(N, encoder[-1])``: the masked max over the primitives' embeddings (zeros for no primitive)."""
         if rows.shape[1] == 0:
             return s0.new_zeros(s0.shape[0], self.config.encoder[-1])
-        h = self.encoder((self.primitive_features(rows, s0, sT) - self.prim_mean) / self.prim_std)
+        h = self.encoder((self.primitive_features(rows, s0, sT) - self.prim_mean) / self.input_scales[1])
         h = torch.where(mask[..., None], h, torch.full_like(h, -torch.inf)).amax(dim=1)
         return torch.where(torch.isfinite(h), h, torch.zeros_like(h))
 
     def coefficients(self, s0, sT, rows, mask, floor) -> torch.Tensor:
         """``(N, C, modes, dof)``: each candidate's sine-mode coefficients."""
         c = self.config
-        x = (self.problem_features(s0, sT, floor) - self.in_mean) / self.in_std
+        x = (self.problem_features(s0, sT, floor) - self.in_mean) / self.input_scales[0]
         y = self.trunk(torch.cat((x, self.scene_embedding(s0, sT, rows, mask)), dim=-1))
         return y.view(-1, c.candidates, c.modes, c.dof)
 

@@ -287,9 +287,10 @@ class CompiledObstacleModel:
 
     def __init__(self, tm: ObstaclePathModel):
         self.silu = tm.config.activation == "silu"
-        self.enc_w, self.enc_b = _packed_mlp(tm.encoder, tm.prim_mean, tm.prim_std)
+        in_scale, prim_scale = tm.input_scales  # a feature that never varied in training held at its mean
+        self.enc_w, self.enc_b = _packed_mlp(tm.encoder, tm.prim_mean, prim_scale)
         # Only the problem features are standardised; the pooled scene embedding follows them.
-        self.trunk_w, self.trunk_b = _packed_mlp(tm.trunk, tm.in_mean, tm.in_std, rows=tm.n_problem_features)
+        self.trunk_w, self.trunk_b = _packed_mlp(tm.trunk, tm.in_mean, in_scale, rows=tm.n_problem_features)
         c = tm.config
         self.C, self.modes, self.dof = c.candidates, c.modes, c.dof
         self.half_range = np.ascontiguousarray(_arr(tm.half_range).reshape(-1))
