@@ -2,17 +2,24 @@
 YAML layout against an independent parse (pinocchio's quaternions, written out here), base poses, and
 the typed errors."""
 
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
 import torch
 import yaml
 
+import kinlearn
 from kinlearn import load_robot
 from kinlearn.collision import Scene
 from kinlearn.collision.geometry import Box, Cylinder, Sphere, rotation_from_quaternion
-from kinlearn.collision.moveit import request_joints
+from kinlearn.collision.moveit import FLOOR_SLAB, request_joints
+from kinlearn.collision.scene import as_scene
+from kinlearn.data.problems import ProblemSet
 from kinlearn.errors import SceneFormatError
+
+DATA = Path(__file__).resolve().parents[1] / "benchmarks" / "data"
 
 # A planning scene as MoveIt writes it (moveit_msgs/PlanningScene): one object with an object pose and
 # two primitives posed relative to it, one written the older way (no object pose), one sphere.
@@ -126,10 +133,37 @@ def test_round_trip_through_moveit_yaml():
     assert torch.allclose(back.spheres, scene.spheres, atol=1e-12)
     assert torch.allclose(back.boxes, scene.boxes, atol=1e-12)
     assert torch.allclose(back.cylinders, scene.cylinders, atol=1e-12)
-    # A floor goes out as a slab under its height and comes back as that box.
+    # A floor goes out as a slab under its height and comes back as the floor, not as a box (which would
+    # hold the robot's base in collision); a box of other sizes named floor stays a box.
     floored = Scene.from_primitives(prims[:1], floor=0.1).to_moveit()
-    slab = Scene.from_moveit(floored).boxes[0]
-    assert float(slab[2] + slab[5]) == pytest.approx(0.1)
+    slab = floored["world"]["collision_objects"][-1]
+    assert slab["id"] == "floor_0" and slab["primitives"][0]["dimensions"] == list(FLOOR_SLAB)
+    back = Scene.from_moveit(floored)
+    assert back.num_boxes == 0 and float(back.floor) == pytest.approx(0.1, abs=1e-12)
+    slab["primitives"][0]["dimensions"] = [2.0, 2.0, 0.1]
+    assert Scene.from_moveit(floored).num_boxes == 1 and Scene.from_moveit(floored).floor is None
+
+
+def test_a_scene_read_back_from_moveit_plans_as_the_scene_itself():
+    """A held-out scene problem written to a MoveIt file and read back (the floor as the floor) is planned
+    as it was: the same stage and verdict. Before, the floor came back as a box that held the base's
+    spheres in collision, and every plan of every such scene failed."""
+    ps = ProblemSet.load(DATA / "scene_problems_panda.npz", robot="panda")
+    planner = kinlearn.Planner.default("panda")
+    solved = 0
+    for i in (0, 1, 2):
+        start, goal, scene = ps.problem(i)
+        back = Scene.from_moveit(yaml.safe_load(yaml.safe_dump(as_scene(scene).to_moveit())))
+        a = planner.plan(start, goal, obstacles=scene, refine_steps=0)
+        b = planner.plan(start, goal, obstacles=back, refine_steps=0)
+        assert (a.stage, bool(a.success), bool(a.collision_free)) == (
+            b.stage,
+            bool(b.success),
+            bool(b.collision_free),
+        )
+        assert torch.equal(a.joints, b.joints)
+        solved += bool(b.success)
+    assert solved >= 2
 
 
 def _as_lists(data):

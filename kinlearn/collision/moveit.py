@@ -51,7 +51,7 @@ __all__ = [
 
 #: ``shape_msgs/SolidPrimitive`` type codes.
 BOX, SPHERE, CYLINDER, CONE = 1, 2, 3, 4
-#: Full side lengths (m) of the box a scene's floor is written as by :func:`scene_to_moveit`.
+#: Full side lengths (m) of the box a scene's floor is written as by :func:`primitives_to_moveit`.
 FLOOR_SLAB = (10.0, 10.0, 1.0)
 _NAMES = {"box": BOX, "sphere": SPHERE, "cylinder": CYLINDER, "cone": CONE}
 
@@ -257,7 +257,24 @@ def primitives_from_moveit(source: str | Path | Mapping, base_pose=None) -> list
         for k, (prim, pose) in enumerate(zip(shapes, poses, strict=True)):
             sub = f"{where} primitive {k}"
             prims.append(_primitive(prim, T_obj @ pose_matrix(pose, f"{sub} pose"), sub))
+        if str(name).startswith("floor") and len(shapes) == 1:
+            prims[-1] = _as_floor(prims[-1])
     return prims
+
+
+def _as_floor(p: Primitive) -> Primitive:
+    """A floor written by :func:`primitives_to_moveit` (a level box :data:`FLOOR_SLAB` under its height,
+    its id ``floor_…``) read back as that floor (a :class:`Plane` at the slab's top), any other primitive as
+    it is. As a box the floor would hold the robot's base, whose collision spheres reach below it, in
+    collision at every configuration; as the floor it is the plane the base stands on (a scene's floor
+    is not checked against the base's spheres)."""
+    if (
+        isinstance(p, Box)
+        and np.allclose(2 * np.asarray(p.half_extents), FLOOR_SLAB, atol=1e-9)
+        and np.allclose(np.reshape(p.rotation, (3, 3)), np.eye(3), atol=1e-9)
+    ):
+        return Plane((0.0, 0.0, 1.0), float(p.centre[2] + p.half_extents[2]))
+    return p
 
 
 def primitives_to_moveit(
@@ -267,7 +284,8 @@ def primitives_to_moveit(
     dict (``yaml.safe_dump`` writes it):
     one collision object per primitive (ids ``sphere_0``, ``box_0``, ``cylinder_0``, …), each posed in
     ``frame_id`` (the robot's base) with its primitive at the object's origin. A floor becomes a box
-    :data:`FLOOR_SLAB` under its height (kinlearn reads no MoveIt planes), so it reads back as that box."""
+    :data:`FLOOR_SLAB` under its height (MoveIt scenes hold no usable planes), id ``floor_0``, which
+    :func:`primitives_from_moveit` reads back as the floor."""
     objects = []
     for p in primitives:
         T = np.eye(4)
