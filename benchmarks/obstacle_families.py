@@ -2,7 +2,7 @@
 and success against a time budget, for kinlearn and the baselines on the same problems and checker.
 
     python benchmarks/obstacle_families.py --robot panda [--problems benchmarks/data/scene_problems_panda.npz]
-        [--planner DIR] [--kinlearn-only] [--n 140] [--threads 1] [--out benchmarks/results/families_panda]
+        [--planner DIR] [--kinlearn-only] [--no-floor] [--n 140] [--threads 1] [--out benchmarks/results/families_panda]
 
 Problems: a held-out set of ``benchmarks/make_obstacle_problems.py --families scenes`` (seeds 1004–1010,
 verified solvable by OMPL RRT-Connect within 5 s); a set made with ``--within body`` (the ur5's within the
@@ -22,6 +22,10 @@ as points at their p99 time, and the fixed-time rows also as the share of proble
 budget (its plans' own times, dashed). After every call of every row the paper-size TM's forward pass is
 timed once, and each row's p50 and p99 are given over its p50 and p99 (the fixed-time goal's yardstick).
 
+``--no-floor``: every scene planned and judged without its floor plane, as the scene files of the standard
+benchmarks come (their obstacles alone, read through ``Scene.from_moveit``); the problems stay solvable (a
+floor only narrows the free space).
+
 Leave-one-family-out: ``--planner DIR`` plans with that folder's networks; the families its obstacle
 network was not trained on (it records those it was) are marked ``*`` in the table, and the summary
 gives their success apart (``left_out_success``).
@@ -30,6 +34,7 @@ gives their success apart (``left_out_success``).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import inspect
 import json
 import time
@@ -41,7 +46,7 @@ import torch
 from _common import header, markdown_table
 
 import kinlearn
-from kinlearn import load_robot
+from kinlearn import Scene, load_robot
 from kinlearn.data.problems import FAMILIES, ProblemSet
 from kinlearn.errors import NoObstacleModelWarning
 from kinlearn.evaluation.obstacles import obstacle_outcome
@@ -124,6 +129,12 @@ def main() -> None:
     ap.add_argument("--ompl-budgets", type=float, nargs="*", default=[0.05, 1.0])
     ap.add_argument("--opt-steps", type=int, nargs="*", default=[25])
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument(
+        "--no-floor",
+        action="store_true",
+        help="plan and judge every scene without its floor, as a standard benchmark's scene file comes "
+        "(boxes, cylinders and spheres; no floor plane)",
+    )
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -134,6 +145,11 @@ def main() -> None:
     problems = ProblemSet.load(path, robot=args.robot)
     if args.n:
         problems = problems[: args.n]
+    if args.no_floor:
+        sc = problems.scene
+        bare = Scene(sc.spheres, sc.boxes, None, sc.sphere_mask, sc.box_mask, sc.cylinders, sc.cylinder_mask)
+        problems = dataclasses.replace(problems, scene=bare)
+        print("scenes planned and judged without their floor (--no-floor)")
     robot = load_robot(args.robot)
     body = problems.body(robot).double()  # the body the problems were made for
     fams = [f for f in FAMILIES if len(problems.of(f))]

@@ -250,9 +250,9 @@ class ObstaclePathModel(nn.Module):
         :data:`MIN_STD`), which is thereby held at its training mean whatever its value. Every
         training scene had a floor at z = 0: without this a scene with no floor (a MoveIt scene, a list of
         balls) put the floor flag 1,000 standard deviations from anything the network saw and its
-        candidates were noise (none of the panda's 33 cleared a lone ball, none of its held-out scene
-        problems read through a MoveIt file); held, the network plans as if the floor were at the base,
-        and the dense check judges the scene as given."""
+        candidates were noise (the panda's cleared none of 120 problems with a ball across the path, and
+        16% of its held-out scene problems with their floor left out, against 63% with it); held, the
+        network plans as if the floor were at the base, and the dense check judges the scene as given."""
         held = lambda s: torch.where(s > MIN_STD, s, torch.full_like(s, torch.inf))  # noqa: E731
         return held(self.in_std), held(self.prim_std)
 
