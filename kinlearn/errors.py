@@ -115,5 +115,12 @@ class ObstaclesIgnoredWarning(UserWarning):
     is False): the plan does not avoid them; it is checked among them and says whether it collides."""
 
 
+class CollidingEndWarning(UserWarning):
+    """A plan among obstacles that no stage could make collision-free because its start or its goal
+    configuration itself collides (with the scene or with the arm itself) before any motion; the message
+    names the problems and, where the scene overlaps the robot's fixed base (a surface it stands on given
+    as a box), says so."""
+
+
 class DomainWarning(UserWarning):
     """A start or goal outside the domain the planner was trained on: its plan may be poor."""

@@ -528,3 +528,34 @@ def test_the_plan_command_takes_a_sphere_set(tmp_path, capsys):
     assert "no 'hand' sphere set" in capsys.readouterr().err
     assert main([*args, "--sphere-set", "spherized"]) == 2
     assert "--sphere-set" in capsys.readouterr().err
+
+
+def test_a_plan_whose_end_collides_says_why():
+    """A plan no stage can make collision-free because its start or goal collides before any motion comes
+    back flagged with a CollidingEndWarning naming the problem; where the scene overlaps the fixed base (a
+    floor given as a box), the warning says so and what to do. Plans whose ends are free warn nothing."""
+    from kinlearn.collision.geometry import Box
+    from kinlearn.errors import CollidingEndWarning
+
+    planner = Planner.default("iiwa14")
+    start = torch.tensor([-1.2, 0.9, 0.5, -1.6, 0.3, 1.2, -2.0], dtype=torch.float64)
+    goal = torch.tensor([1.5, -0.4, -0.8, 1.1, -1.9, -0.6, 2.4], dtype=torch.float64)
+    hand = kinematics(planner.robot, "fast").position(start)
+    slab = Box((0.0, 0.0, -0.5), (3.0, 3.0, 0.5), np.eye(3))  # the floor as a box: the base's spheres in it
+    ball = [*hand.tolist(), 0.05]  # a ball at the start's hand
+    for obstacles, base in ((Scene.from_primitives([slab]), True), (Scene.from_spheres([ball]), False)):
+        for kwargs in ({"refine_steps": 0}, {"deadline": 0.02}):
+            with pytest.warns(CollidingEndWarning, match="start of problem") as record:
+                plan = planner.plan(start, goal, obstacles=obstacles, **kwargs)
+            assert not bool(plan.collision_free) and not bool(plan.success)
+            assert ("fixed base" in str(record[0].message)) == base
+    with pytest.warns(CollidingEndWarning, match=r"problem\(s\) 0, 1"):  # a batch names each problem
+        planner.plan(
+            torch.stack((start, start)), torch.stack((goal, goal)), obstacles=Scene.from_primitives([slab])
+        )
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CollidingEndWarning)
+        far = Scene.from_spheres([[2.0, 2.0, 2.0, 0.1]])
+        assert bool(planner.plan(start, goal, obstacles=far, refine_steps=0).collision_free)

@@ -351,6 +351,41 @@ class ObstacleStages:
         )
         return path, (sampler_branches(v0, d0), sampler_branches(vT, dT))
 
+    def _colliding_ends(self, joints: np.ndarray, free: np.ndarray, packed: list) -> str | None:
+        """Why plans ``joints (N, K, dof)`` that are not ``free (N,)`` could not be: the problems whose start
+        or goal configuration (a path's first and last knot) itself collides with its scene ``packed``
+        (:class:`~kinlearn.collision.kernel.KernelScene` each) or with the arm, and whether the scene
+        overlaps the robot's fixed base; None where every failing plan's ends are free (a plan no stage
+        found). Run only for plans that failed."""
+        k, body = _kernel(), self._np_body
+        base = self.body.link.cpu().numpy() == 0  # the spheres no joint moves
+        starts, goals, overlap = [], [], False
+        for i in np.flatnonzero(~free):
+            ends = np.ascontiguousarray(joints[i, [0, -1]], dtype=np.float64)
+            d, s, per = k.clearances(body, packed[i], ends, per_sphere=True)
+            hit = (d <= 0.0) | (s <= 0.0)  # touching counts, as in the dense check
+            if hit[0]:
+                starts.append(int(i))
+            if hit[1]:
+                goals.append(int(i))
+            overlap |= bool((per[:, base] <= 0.0).any())
+        if not starts and not goals:
+            return None
+        named = lambda idx: ", ".join(map(str, idx[:8])) + (", …" if len(idx) > 8 else "")  # noqa: E731
+        parts = [f"the start of problem(s) {named(starts)}"] if starts else []
+        parts += [f"the goal of problem(s) {named(goals)}"] if goals else []
+        msg = (
+            f"{' and '.join(parts)} collide(s) with the scene or with the arm itself before any motion: no "
+            "collision-free plan can start or end there (plan.collision_free is False)"
+        )
+        if overlap:
+            msg += (
+                "; the scene overlaps the robot's fixed base (its spheres on link 0, which no joint moves), as a "
+                "surface the robot stands on given as a box does: leave that surface out of the scene or give "
+                "it as the floor (Scene(..., floor=height)), which the base stands on"
+            )
+        return msg
+
     def _sample(
         self,
         start: np.ndarray,
