@@ -137,3 +137,37 @@ def test_first_free_is_the_proposals_checked_in_their_order(robot):
     bad[0] = np.nan
     with pytest.raises(NonFiniteError):
         net.first_free(bad, e[0], q[1], e[1], lo, hi, False, body, KernelScene(_scene()), 0.01)
+
+
+def test_the_network_reads_only_what_the_arm_can_reach():
+    """A primitive whose bounding ball lies beyond the body's reach is left out of the network's rows, so a
+    plan among a scene is the same with a box 3 m behind the base added; one within reach is kept."""
+    import warnings
+    from pathlib import Path
+
+    import kinlearn
+    from kinlearn.collision.scene import as_scene
+    from kinlearn.data.problems import ProblemSet
+
+    data = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "scene_problems_panda.npz"
+    ps = ProblemSet.load(data, robot="panda")
+    planner = kinlearn.Planner.default("panda")
+    far = Box([-3.2, 0.0, 0.2], [0.2, 0.2, 0.2])
+    near = Box([-0.9, 0.0, 0.2], [0.2, 0.2, 0.2])
+    reach = planner._np_body.reach
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for i in range(4):
+            start, goal, scene = ps.problem(i)
+            prims = list(as_scene(scene).primitives())
+            a = planner.plan(start, goal, obstacles=Scene.from_primitives(prims), refine_steps=0)
+            b = planner.plan(start, goal, obstacles=Scene.from_primitives([*prims, far]), refine_steps=0)
+            assert torch.equal(a.joints, b.joints) and a.stage == b.stage
+    packed = KernelScene(Scene.from_primitives([*prims, far, near]))
+    assert packed.model_rows().shape[0] == len(prims) + 1  # the floor is no row
+    rows = packed.model_rows(reach)
+    assert rows.shape[0] == len(prims)
+    assert (
+        np.isclose(rows[:, :3], near.centre).all(1).any()
+        and not np.isclose(rows[:, :3], far.centre).all(1).any()
+    )

@@ -237,6 +237,7 @@ class BodySpheres(nn.Module):
         self.register_buffer("pairs", torch.as_tensor(np.asarray(pairs, dtype=np.int64).reshape(-1, 2)))
         self.register_buffer("floor_mask", torch.as_tensor(link > 0))
         self.register_buffer("lever", torch.as_tensor(_lever_arms(robot, link, spheres[:, 1:4])))
+        self._reach: float | None = None
         # Fast path: spheres sorted base first; a moving sphere's centre is folded by its joint's axis
         # rotation A (the fast kinematics turns every joint axis onto z), so that the joint's motion
         # is a plain rotation about (or translation along) z applied to a constant vector.
@@ -283,6 +284,31 @@ class BodySpheres(nn.Module):
             )
             for i in range(robot.dof)
         ]
+
+    @property
+    def reach(self) -> float:
+        """How far (m) from the base's origin any part of the body can be, in any configuration: per sphere
+        the fixed offsets from the base to the joint that moves its link, its offset in that link and its
+        radius, added (triangle inequality: rotations keep lengths; a prismatic joint adds its largest
+        travel). Nothing farther than this from the base can touch the robot."""
+        if self._reach is None:
+            F = self._kin.F  # F[i]: the fixed transform before joint i
+            travel = [
+                max(abs(j.lower), abs(j.upper)) if j.kind == "prismatic" else 0.0 for j in self.robot.joints
+            ]
+            offsets = np.concatenate(
+                (
+                    [0.0],
+                    np.cumsum(
+                        [float(np.linalg.norm(F[i, :3, 3])) + travel[i] for i in range(self.robot.dof)]
+                    ),
+                )
+            )
+            link = self.link.cpu().numpy()
+            local = self.local.detach().cpu().double().numpy()
+            radii = self.radii.detach().cpu().double().numpy()
+            self._reach = float((offsets[link] + np.linalg.norm(local, axis=1) + radii).max())
+        return self._reach
 
     def reach_past_end_effector(self) -> float:
         """How far (m) the body reaches past the end effector: the largest distance from the end

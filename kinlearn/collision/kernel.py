@@ -1290,6 +1290,9 @@ class KernelBody:
 
         robot = body.robot
         self.robot, self.name, self.dof = robot, body.name, robot.dof
+        #: How far from the base's origin the body can reach (:attr:`BodySpheres.reach`, m): the obstacle
+        #: network reads the primitives within it (:meth:`KernelScene.model_rows`).
+        self.reach = body.reach
         local = body.local.detach().cpu().double().numpy()
         self.link = np.ascontiguousarray(body.link.cpu().numpy().astype(np.int64))
         folded = local.copy()
@@ -1562,15 +1565,31 @@ class KernelScene:
         self.floor = buf[3:5]
         self._rows = None
 
-    def model_rows(self) -> np.ndarray:
+    def model_rows(self, reach: float = math.inf) -> np.ndarray:
         """The scene as the obstacle-aware TM reads it, float64 ``(P, 14)``: per primitive its centre, the
         half extents of its axis-aligned bounding box, whether it is a sphere, its extent tensor and
         whether it is a cylinder; spheres first, then boxes, then cylinders (the rows of
         :func:`~kinlearn.models.obstacle_path.scene_primitives` without padding, computed from this
-        packing: the scene is converted once)."""
+        packing: the scene is converted once). ``reach``: only the primitives whose bounding ball comes
+        within it of the base's origin (:attr:`~kinlearn.collision.BodySpheres.reach`: those the robot can
+        touch)."""
         if self._rows is None:
-            self._rows = _model_rows(self.spheres, self.boxes, self.cylinders)
-        return self._rows
+            self._rows = {}
+        rows = self._rows.get(reach)
+        if rows is None:
+            every = self._rows.get(math.inf)
+            if every is None:
+                every = self._rows[math.inf] = _model_rows(self.spheres, self.boxes, self.cylinders)
+            rows = every
+            if reach != math.inf:
+                centres = np.concatenate((self.spheres[:, :3], self.boxes[:, :3], self.cylinders[:, :3]))
+                bounds = np.concatenate(
+                    (self.spheres[:, 3], self.boxes[:, _BOX_BOUND], self.cylinders[:, _CYL_BOUND])
+                )
+                near = np.linalg.norm(centres, axis=1) - bounds <= reach
+                rows = every if near.all() else np.ascontiguousarray(every[near])
+            self._rows[reach] = rows
+        return rows
 
     def args(self) -> tuple:
         return self.spheres, self.boxes, self.cylinders, self.floor

@@ -330,13 +330,15 @@ class CompiledObstacleModel:
         and order) and its candidates checked in their order (:func:`~kinlearn.collision.kernel.first_free`'s
         verdicts). ``body``: a :class:`~kinlearn.collision.kernel.KernelBody`, ``scene`` a
         :class:`~kinlearn.collision.kernel.KernelScene` (its rows feed the network); the other arguments as
-        :meth:`proposals`'s. Returns the candidates ``(2C + 1, K, dof)`` (copies of the line where it is
+        :meth:`proposals`'s; the network reads the scene's primitives within the body's reach
+        (:meth:`~kinlearn.collision.kernel.KernelScene.model_rows`: one the robot cannot touch is no part
+        of its problem, and none of its training scenes held one). Returns the candidates ``(2C + 1, K, dof)`` (copies of the line where it is
         free), their order and the index of the first free one (−1: none is). Raises
         :class:`~kinlearn.errors.NonFiniteError` if a candidate holds NaN or infinity."""
         paths = np.empty(self.candidates_shape(halve))
         order = np.empty(paths.shape[0], dtype=np.int64)
         k = _first_free_proposal(
-            theta0, ef0, thetaT, efT, scene.model_rows(), scene.floor, lo, hi, bool(halve), self.columns,
+            theta0, ef0, thetaT, efT, scene.model_rows(body.reach), scene.floor, lo, hi, bool(halve), self.columns,
             self.enc_w, self.enc_b, self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions,
             self.basis, self.half_range, paths, order, float(max_travel), 0.0, *body.boxed, scene.packed,
         )  # fmt: skip
@@ -369,7 +371,7 @@ class CompiledObstacleModel:
         ef = np.empty((2, 3))
         k = _stage_one(
             q, chain.F, chain.prismatic, chain.lower, chain.upper, float(limit_tol), float(zero_move),
-            *body_limits, ef, scene.model_rows(), scene.floor, bool(halve), self.columns, self.enc_w,
+            *body_limits, ef, scene.model_rows(body.reach), scene.floor, bool(halve), self.columns, self.enc_w,
             self.enc_b, self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions, self.basis,
             self.half_range, paths, order, float(max_travel), 0.0, *body.boxed, scene.packed,
         )  # fmt: skip
