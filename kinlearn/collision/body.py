@@ -97,6 +97,12 @@ def _robots_with_spheres() -> list[str]:
     return sorted(p.parent.name for p in root.glob(f"*/{SPHERE_FILE}"))
 
 
+def _travel(robot: Robot) -> list[float]:
+    """Per joint the farthest a prismatic joint moves its child link (its largest |limit|, m); 0 for a
+    revolute joint, which keeps every length."""
+    return [max(abs(j.lower), abs(j.upper)) if j.kind == "prismatic" else 0.0 for j in robot.joints]
+
+
 def _lever_arms(robot: Robot, link: np.ndarray, local: np.ndarray) -> np.ndarray:
     """``(M, dof)``: an upper bound on sphere m's distance from joint j's axis, over all configurations.
 
@@ -109,7 +115,7 @@ def _lever_arms(robot: Robot, link: np.ndarray, local: np.ndarray) -> np.ndarray
     """
     F = kinematics(robot, "fast").F  # F[i]: fixed transform before joint i, in frames with the axis on z
     axes = [_z_to_axis(j.axis) for j in robot.joints]
-    reach = [max(abs(j.lower), abs(j.upper)) if j.kind == "prismatic" else 0.0 for j in robot.joints]
+    reach = _travel(robot)
     lever = np.zeros((len(link), robot.dof))
     for m, (lk, c) in enumerate(zip(link, local, strict=True)):
         own = lk - 1  # the joint that moves the sphere's link
@@ -151,7 +157,7 @@ def _axis_distances(robot: Robot, link: np.ndarray, local: np.ndarray) -> np.nda
     """
     F = kinematics(robot, "fast").F  # F[i]: fixed transform before joint i, in frames with the axis on z
     axes = [_z_to_axis(j.axis) for j in robot.joints]
-    reach = [max(abs(j.lower), abs(j.upper)) if j.kind == "prismatic" else 0.0 for j in robot.joints]
+    reach = _travel(robot)
     dof = robot.dof
     out = np.zeros((len(link), dof))
     for m, (lk, c) in enumerate(zip(link, local, strict=True)):
@@ -293,17 +299,9 @@ class BodySpheres(nn.Module):
         travel). Nothing farther than this from the base can touch the robot."""
         if self._reach is None:
             F = self._kin.F  # F[i]: the fixed transform before joint i
-            travel = [
-                max(abs(j.lower), abs(j.upper)) if j.kind == "prismatic" else 0.0 for j in self.robot.joints
-            ]
-            offsets = np.concatenate(
-                (
-                    [0.0],
-                    np.cumsum(
-                        [float(np.linalg.norm(F[i, :3, 3])) + travel[i] for i in range(self.robot.dof)]
-                    ),
-                )
-            )
+            travel = _travel(self.robot)
+            steps = [float(np.linalg.norm(F[i, :3, 3])) + travel[i] for i in range(self.robot.dof)]
+            offsets = np.concatenate(([0.0], np.cumsum(steps)))
             link = self.link.cpu().numpy()
             local = self.local.detach().cpu().double().numpy()
             radii = self.radii.detach().cpu().double().numpy()
