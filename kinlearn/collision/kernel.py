@@ -438,8 +438,9 @@ def _pack_scene(spheres, boxes, cylinders, has_floor, height):
 
 
 @_jit
-def _model_rows(spheres, boxes, cylinders):
-    """The obstacle TM's rows ``(K + B + C, 14)`` of packed tables (see :meth:`KernelScene.model_rows`)."""
+def _model_rows(spheres, boxes, cylinders, reach):
+    """The obstacle TM's rows ``(P, 14)`` of packed tables (see :meth:`KernelScene.model_rows`): every
+    primitive's whose bounding ball comes within ``reach`` of the origin."""
     K, B, C = spheres.shape[0], boxes.shape[0], cylinders.shape[0]
     out = np.zeros((K + B + C, 14))
     for i in range(K):
@@ -467,7 +468,20 @@ def _model_rows(spheres, boxes, cylinders):
             out[r, 3 + a] = cylinders[i, 3] * math.sqrt(max(1.0 - ax * ax, _TINY)) + cylinders[i, 4] * abs(ax)
         _extent_tensor(out, r, cylinders[i, 3], cylinders[i, 3], cylinders[i, 4], cylinders[i], 5)
         out[r, 13] = 1.0
-    return out
+    if reach == np.inf:
+        return out
+    kept = 0  # the rows of the primitives within reach, moved up in place
+    for r in range(K + B + C):
+        if r < K:
+            bound = spheres[r, 3]
+        elif r < K + B:
+            bound = boxes[r - K, _BOX_BOUND]
+        else:
+            bound = cylinders[r - K - B, _CYL_BOUND]
+        if math.sqrt(out[r, 0] ** 2 + out[r, 1] ** 2 + out[r, 2] ** 2) - bound <= reach:
+            out[kept] = out[r]
+            kept += 1
+    return out[:kept].copy()
 
 
 @_jit
@@ -1576,19 +1590,8 @@ class KernelScene:
         if self._rows is None:
             self._rows = {}
         rows = self._rows.get(reach)
-        if rows is None:
-            every = self._rows.get(math.inf)
-            if every is None:
-                every = self._rows[math.inf] = _model_rows(self.spheres, self.boxes, self.cylinders)
-            rows = every
-            if reach != math.inf:
-                centres = np.concatenate((self.spheres[:, :3], self.boxes[:, :3], self.cylinders[:, :3]))
-                bounds = np.concatenate(
-                    (self.spheres[:, 3], self.boxes[:, _BOX_BOUND], self.cylinders[:, _CYL_BOUND])
-                )
-                near = np.linalg.norm(centres, axis=1) - bounds <= reach
-                rows = every if near.all() else np.ascontiguousarray(every[near])
-            self._rows[reach] = rows
+        if rows is None:  # per reach asked (a planner asks with its body's, every plan)
+            rows = self._rows[reach] = _model_rows(self.spheres, self.boxes, self.cylinders, float(reach))
         return rows
 
     def args(self) -> tuple:
