@@ -14,6 +14,7 @@ also give the obstacle network its rows, and every batch size is checked by them
 from __future__ import annotations
 
 import copy
+import warnings
 
 import numpy as np
 import torch
@@ -21,7 +22,7 @@ import torch
 from ..collision.body import BodySpheres, planning_body
 from ..collision.scene import Scene
 from ..data.problem import LIMIT_TOLERANCE
-from ..errors import NonFiniteError
+from ..errors import CollidingEndWarning, NonFiniteError
 from ..models.chain import ChainFM
 from .plan import CHECK_TRAVEL
 from .retreat import RetreatVias, retreat_path, sampler_branches
@@ -258,6 +259,8 @@ class ObstacleStages:
                 out = np.empty((n, K, out.shape[2]))
             for i, dense in cleared.items():
                 out[i], free[i], stage[i] = dense, True, found[i][1]
+        if not free.all():  # the user's plan() is four calls up
+            self._explain(theta0, thetaT, free, packed, stacklevel=5)
         return out, free, stage
 
     def _cleared(self, found: dict, K: int, packed: list) -> dict[int, np.ndarray]:
@@ -351,17 +354,17 @@ class ObstacleStages:
         )
         return path, (sampler_branches(v0, d0), sampler_branches(vT, dT))
 
-    def _colliding_ends(self, joints: np.ndarray, free: np.ndarray, packed: list) -> str | None:
-        """Why plans ``joints (N, K, dof)`` that are not ``free (N,)`` could not be: the problems whose start
-        or goal configuration (a path's first and last knot) itself collides with its scene ``packed``
-        (:class:`~kinlearn.collision.kernel.KernelScene` each) or with the arm, and whether the scene
-        overlaps the robot's fixed base; None where every failing plan's ends are free (a plan no stage
-        found). Run only for plans that failed."""
+    def _explain(self, theta0, thetaT, free: np.ndarray, packed: list, stacklevel: int) -> None:
+        """Warn (:class:`~kinlearn.errors.CollidingEndWarning`) where plans that are not ``free (N,)`` failed
+        because their start ``theta0`` or goal ``thetaT (N, dof)`` itself collides with its scene ``packed``
+        (:class:`~kinlearn.collision.kernel.KernelScene` each) or with the arm, naming the problems, and
+        saying where the scene overlaps the robot's fixed base. Nothing where their ends are free (a plan no
+        stage found). Run only for plans that failed."""
         k, body = _kernel(), self._np_body
-        base = self.body.link.cpu().numpy() == 0  # the spheres no joint moves
+        base = body.link == 0  # the spheres no joint moves
         starts, goals, overlap = [], [], False
         for i in np.flatnonzero(~free):
-            ends = np.ascontiguousarray(joints[i, [0, -1]], dtype=np.float64)
+            ends = np.ascontiguousarray(np.stack((theta0[i], thetaT[i])), dtype=np.float64)
             d, s, per = k.clearances(body, packed[i], ends, per_sphere=True)
             hit = (d <= 0.0) | (s <= 0.0)  # touching counts, as in the dense check
             if hit[0]:
@@ -370,7 +373,7 @@ class ObstacleStages:
                 goals.append(int(i))
             overlap |= bool((per[:, base] <= 0.0).any())
         if not starts and not goals:
-            return None
+            return
         named = lambda idx: ", ".join(map(str, idx[:8])) + (", …" if len(idx) > 8 else "")  # noqa: E731
         parts = [f"the start of problem(s) {named(starts)}"] if starts else []
         parts += [f"the goal of problem(s) {named(goals)}"] if goals else []
@@ -384,7 +387,7 @@ class ObstacleStages:
                 "surface the robot stands on given as a box does: leave that surface out of the scene or give "
                 "it as the floor (Scene(..., floor=height)), which the base stands on"
             )
-        return msg
+        warnings.warn(msg, CollidingEndWarning, stacklevel=stacklevel)
 
     def _sample(
         self,

@@ -44,7 +44,6 @@ from ..collision.scene import Scene, as_scene
 from ..data.babbling import MAX_STEP
 from ..data.problem import LIMIT_TOLERANCE, SMALL_BATCH, Problem, positions
 from ..errors import (
-    CollidingEndWarning,
     ConfigError,
     DomainError,
     DomainWarning,
@@ -58,7 +57,7 @@ from ..models.joint_path import JointPathModel, load_path_model
 from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model
 from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
-from .around import ObstacleStages, _kernel, _load_kernels, _packed_scenes, _retreat_over
+from .around import ObstacleStages, _kernel, _load_kernels, _retreat_over
 from .inference import NumpyPathModel
 from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance, judge, verdict_small
 from .retreat import RetreatVias
@@ -424,28 +423,12 @@ class Planner(ObstacleStages):
                         return self._batch1_plan(q, ef, path, "retreat", dtype)
                     retreated = branches  # the later stages start from its free retreats
                 if refine_steps is not None and steps == 0 and deadline is None:  # no later stage runs
-                    self._explain(paths[0, pick[0]][None], _NOT_FREE, [packed])
+                    self._explain(q[:1], q[1:], _NOT_FREE, [packed], stacklevel=3)
                     return self._batch1_plan(q, ef, paths[0, pick[0]], "none", dtype, free=False)
         problem, dtype, device = self._problem(start, goal, goal_position, obstacles)
-        out = self._plan(
+        return self._plan(
             problem, steps, refine_steps is None, strict, dtype, device, timer, stage1, retreated
         )
-        if problem.obstacles is not None and not bool(out.collision_free.all()):
-            flat = out.joints.detach().reshape(-1, *out.joints.shape[-2:]).cpu().double().numpy()
-            scene = problem.obstacles
-            if len(scene.batch_shape):
-                scene = scene.reshape(flat.shape[0])
-            self._explain(
-                flat, out.collision_free.reshape(-1).cpu().numpy(), _packed_scenes(scene, flat.shape[0])
-            )
-        return out
-
-    def _explain(self, joints: np.ndarray, free: np.ndarray, packed: list) -> None:
-        """Warn (:class:`CollidingEndWarning`) where failed plans failed because an end collides
-        (:meth:`~kinlearn.planning.around.ObstacleStages._colliding_ends`)."""
-        msg = self._colliding_ends(joints, free, packed)
-        if msg is not None:
-            warnings.warn(msg, CollidingEndWarning, stacklevel=3)
 
     __call__ = plan
 
