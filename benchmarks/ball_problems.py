@@ -65,10 +65,8 @@ def make_problems(planner: kinlearn.Planner, n: int, seed: int, floor: bool) -> 
             for _ in range(1 + int(rng.random() < 0.5))
         ]
         scene = k.KernelScene.of(Scene.from_spheres(torch.tensor(balls), floor=0.0 if floor else None))
-        still = lambda q: np.ascontiguousarray(np.stack((q, q))[None])  # noqa: E731
-        if k.first_free(body, still(s), scene, max_travel=CHECK_TRAVEL) < 0:
-            continue
-        if k.first_free(body, still(g), scene, max_travel=CHECK_TRAVEL) < 0:
+        d, selfd = k.clearances(body, scene, np.stack((s, g)))  # both ends free (touching collides)
+        if (d <= 0.0).any() or (selfd <= 0.0).any():
             continue
         if k.first_free(body, line[None], scene, max_travel=CHECK_TRAVEL) == 0:  # the line is free
             continue
