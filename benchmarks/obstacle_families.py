@@ -147,7 +147,10 @@ def main() -> None:
         problems = problems[: args.n]
     if args.no_floor:
         sc = problems.scene
-        bare = Scene(sc.spheres, sc.boxes, None, sc.sphere_mask, sc.box_mask, sc.cylinders, sc.cylinder_mask)
+        bare = Scene(
+            spheres=sc.spheres, boxes=sc.boxes, cylinders=sc.cylinders,
+            sphere_mask=sc.sphere_mask, box_mask=sc.box_mask, cylinder_mask=sc.cylinder_mask,
+        )  # fmt: skip
         problems = dataclasses.replace(problems, scene=bare)
         print("scenes planned and judged without their floor (--no-floor)")
     robot = load_robot(args.robot)

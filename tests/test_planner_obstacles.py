@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -553,8 +554,6 @@ def test_a_plan_whose_end_collides_says_why():
         planner.plan(
             torch.stack((start, start)), torch.stack((goal, goal)), obstacles=Scene.from_primitives([slab])
         )
-    import warnings
-
     with warnings.catch_warnings():
         warnings.simplefilter("error", CollidingEndWarning)
         far = Scene.from_spheres([[2.0, 2.0, 2.0, 0.1]])
