@@ -252,7 +252,11 @@ class ObstaclePathModel(nn.Module):
         balls) put the floor flag 1,000 standard deviations from anything the network saw and its
         candidates were noise (the panda's cleared none of 120 problems with a ball across the path, and
         16% of its held-out scene problems with their floor left out, against 63% with it); held, the
-        network plans as if the floor were at the base, and the dense check judges the scene as given."""
+        network plans as if the floor were at the base, and the dense check judges the scene as given.
+        Likewise a primitive's tilt terms (``Lxz``, ``Lyz`` of its extent tensor) for a network trained
+        without the clutter family, whose every box is turned about z alone: a tilted box is read through
+        its bounding box and its other terms (the ur5's networks trained without clutter clear 100% of its
+        held-out clutter problems in fixed time, 75% before)."""
         held = lambda s: torch.where(s > MIN_STD, s, torch.full_like(s, torch.inf))  # noqa: E731
         return held(self.in_std), held(self.prim_std)
 
