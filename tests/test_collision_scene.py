@@ -156,3 +156,24 @@ def test_as_scene_takes_scenes_or_spheres_and_checks_the_batch():
     for bad in ("spheres", None, torch.ones(2, 3), torch.ones(2, 4, dtype=torch.bool), [[1, 2], [3]]):
         with pytest.raises(ObstacleError):
             as_scene(bad)
+
+
+def test_a_list_of_balls_is_converted_once_by_its_content():
+    """Planning query after query among the same balls converts them (and packs them) once; other balls,
+    another scene; a malformed list raises every time; a large array is converted each time, the same."""
+    from kinlearn.collision.scene import _REMEMBERED_FLOATS, as_scene
+
+    balls = [[0.5, 0.0, 0.6, 0.1], [0.2, 0.3, 0.4, 0.05]]
+    one = as_scene(balls)
+    assert as_scene([list(b) for b in balls]) is one
+    assert as_scene(np.array(balls)) is one
+    assert as_scene(torch.tensor(balls, dtype=torch.float64)) is one
+    moved = as_scene([[0.5, 0.0, 0.6, 0.1], [0.2, 0.3, 0.4, 0.06]])
+    assert moved is not one and float(moved.spheres[1, 3]) == 0.06
+    assert torch.equal(one.spheres, torch.tensor(balls, dtype=torch.float64))
+    for _ in range(2):
+        with pytest.raises(ObstacleError, match="radius"):
+            as_scene([[0.5, 0.0, 0.6, -0.1]])
+    many = np.random.default_rng(0).uniform(0.1, 0.5, (_REMEMBERED_FLOATS // 4 + 1, 4))
+    a, b = as_scene(many), as_scene(many)
+    assert a is not b and torch.equal(a.spheres, b.spheres)
