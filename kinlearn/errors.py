@@ -122,5 +122,12 @@ class CollidingEndWarning(UserWarning):
     as a box), says so."""
 
 
+class BeyondLimitsWarning(UserWarning):
+    """A plan among obstacles whose start or goal lies outside the robot's own joint limits but within
+    those of the model its planning body was read from (MoveIt's panda, the standard benchmarks', turns up
+    to 0.07 rad further than the Franka datasheet limits of kinlearn's panda): it is planned within the
+    model's limits, where the robot itself may not go."""
+
+
 class DomainWarning(UserWarning):
     """A start or goal outside the domain the planner was trained on: its plan may be poor."""

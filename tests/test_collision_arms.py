@@ -186,7 +186,8 @@ def test_register_robot_with_spheres(tmp_path):
 def test_a_body_read_from_a_urdf_carries_its_models_joint_limits_within_the_robots():
     """The ur5's sphere file (the benchmarks' UR5) limits every joint to ±π, kinlearn's ur5 turns ±2π: its
     bodies carry ±π; the panda's file is a little wider than kinlearn's panda, so its body keeps the
-    robot's; the iiwa14's spheres come with no model, and keep the robot's."""
+    robot's, and its outer limits are the file's; the iiwa14's spheres come with no model, and keep the
+    robot's."""
     ur5 = load_robot("ur5")
     assert (ur5.upper > 6.0).sum() == 5  # kinlearn's ur5: ±2π but the elbow
     for name in ("spherized", "gripper"):
@@ -196,11 +197,26 @@ def test_a_body_read_from_a_urdf_carries_its_models_joint_limits_within_the_robo
         robot = load_robot(name)
         lo, hi = body_spheres(robot).limits
         assert np.array_equal(lo, robot.lower) and np.array_equal(hi, robot.upper)
+    # the widest box a plan may use: the robot's and its model's together (the panda's file, MoveIt's panda)
+    panda = load_robot("panda")
+    body = body_spheres(panda)
+    lo, hi = body.outer_limits
+    np.testing.assert_allclose(hi, [2.9671, 1.8326, 2.9671, 0.0873, 2.9671, 3.8223, 2.9671])
+    np.testing.assert_allclose(lo, [-2.9671, -1.8326, -2.9671, -3.1416, -2.9671, -0.0873, -2.9671])
+    within, band = np.zeros((1, 7)), np.full((1, 7), 0.1)
+    within[0, 3], band[0, 3] = -1.0, -1.0
+    band[0, 6] = 2.93  # beyond the robot's 2.8973
+    assert np.array_equal(body.joint_box(within, within)[1][0], panda.upper)
+    assert np.array_equal(body.joint_box(within, band)[1][0], hi)
+    for name in ("spherized", "gripper"):
+        b = body_spheres(ur5, sphere_set=name)
+        assert np.array_equal(b.outer_limits[0], ur5.lower) and np.array_equal(b.outer_limits[1], ur5.upper)
 
 
 def test_body_limits_that_leave_no_range_and_unreadable_urdf_limits_are_refused():
     """A body's limits must leave every joint a range within the robot's; a sphere URDF's limit must be
-    numbers. ``joint_box``: the body's limits where both ends lie within them, else the robot's."""
+    numbers. ``joint_box``: the body's limits where both ends lie within them, else its outer limits (the
+    ur5's: the robot's)."""
     from kinlearn.collision.body import BodySpheres, urdf_limits
 
     ur5 = load_robot("ur5")

@@ -498,6 +498,54 @@ def test_a_ur5_plan_between_configurations_within_its_tool_models_limits_stays_w
     assert float(np.abs(np.asarray(batch.joints[0])).max()) <= np.pi + 1e-9
 
 
+def test_a_panda_problem_beyond_its_limits_but_within_its_benchmark_models_is_planned_within_them():
+    """The standard benchmarks' panda (MoveIt's, the spherized file the panda's body comes from) turns every
+    joint up to 0.07 rad further than the Franka datasheet limits of kinlearn's panda: a problem among
+    obstacles whose goal lies in that band is planned within the model's limits, with a warning, at batch 1
+    and in a batch alike, and judged the same by obstacle_outcome; beyond the model's limits, and without
+    obstacles (the robot's own planner), it is refused. The ur5 (whose model is narrower) is unchanged."""
+    from kinlearn.collision.body import planning_body
+    from kinlearn.errors import BeyondLimitsWarning, JointLimitError
+    from kinlearn.evaluation.obstacles import obstacle_outcome
+
+    planner = Planner.default("panda")
+    robot = planner.robot
+    lo, hi = planner.body.outer_limits
+    assert np.allclose(hi[[0, 1, 6]], [2.9671, 1.8326, 2.9671]) and hi[3] > 0.08 and (hi >= robot.upper).all()
+    start = np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
+    goal = np.array([0.3, 0.2, 0.0, -1.6, 0.0, 2.2, 2.93])  # joint 7 beyond 2.8973
+    balls = [[0.5, -0.3, 0.9, 0.05]]
+    with pytest.warns(BeyondLimitsWarning, match="panda_joint7") as caught:
+        one = planner.plan(start, goal, obstacles=balls, refine_steps=0)
+    assert caught[0].filename == __file__  # the caller's line
+    assert bool(one.success) and bool(one.collision_free)
+    joints = np.asarray(one.joints)
+    assert (joints >= lo - 1e-9).all() and (joints <= hi + 1e-9).all() and joints[-1, 6] > robot.upper[6]
+    with pytest.warns(BeyondLimitsWarning):
+        two = planner.plan(np.stack([start, start]), np.stack([goal, goal]), obstacles=balls, refine_steps=0)
+    assert bool(two.success.all()) and np.array_equal(np.asarray(two.joints[1]), joints)
+    judged = obstacle_outcome(
+        planning_body(robot),
+        [torch.from_numpy(joints)],
+        (start[None], goal[None], Scene(torch.tensor(balls))),
+    )
+    assert not bool(judged["within_limits"][0]) and not bool(judged["success"][0])  # the robot's own limits
+    judged = obstacle_outcome(
+        planning_body(robot), [torch.from_numpy(joints)], (start[None], goal[None], Scene(torch.tensor(balls))),
+        limits=(lo, hi),
+    )  # fmt: skip
+    assert bool(judged["success"][0])
+    with pytest.raises(JointLimitError, match=r"2\.9671"):
+        planner.plan(start, np.where(np.arange(7) == 6, 3.0, goal), obstacles=balls)
+    with pytest.raises(JointLimitError, match=r"2\.8973"):
+        planner.plan(start, goal)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # within the robot's own limits: no warning
+        assert bool(planner.plan(start, np.where(np.arange(7) == 6, 2.8, goal), obstacles=balls).success)
+    ur5 = Planner.default("ur5")
+    assert ur5._obstacle_robot is ur5.robot
+
+
 def test_the_plan_command_takes_a_sphere_set(tmp_path, capsys):
     """``kinlearn plan --sphere-set``: the ur5's arm alone calls problem 10's plan free, its default body
     (with the gripper) plans around it; an unknown set, or a set without obstacles, is refused."""

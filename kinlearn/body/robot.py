@@ -8,6 +8,7 @@ is what makes it a useful cross-check.
 
 from __future__ import annotations
 
+import copy
 import importlib.metadata
 import math
 import re
@@ -313,6 +314,19 @@ class Robot:
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, dof={self.dof}, ee_frame={self.ee_frame!r})"
+
+    def with_limits(self, lower, upper) -> Robot:
+        """This robot (the same name, chain and URDF) with other position limits ``lower``/``upper``
+        ``(dof,)``: what a planner among obstacles checks and judges its problems with where its planning
+        body's model allows more than the robot (:attr:`~kinlearn.collision.BodySpheres.outer_limits`)."""
+        lo, hi = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
+        if lo.shape != (self.dof,) or hi.shape != (self.dof,) or not (lo < hi).all():
+            raise ConfigError(
+                f"limits must be two arrays of {self.dof} values with lower < upper for {self.name}"
+            )
+        other = copy.copy(self)
+        other.lower, other.upper = lo, hi
+        return other
 
     def limits(self, dtype: torch.dtype = torch.float32, device=None) -> tuple[torch.Tensor, torch.Tensor]:
         """Position limits as tensors ``(lower, upper)``, each of shape ``(dof,)``."""

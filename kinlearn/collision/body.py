@@ -223,12 +223,17 @@ class BodySpheres(nn.Module):
         self.robot = robot
         self.name = name
         lo, hi = robot.lower.astype(np.float64), robot.upper.astype(np.float64)
+        outer = (lo, hi)
         if limits is not None:
-            lo, hi = (
-                np.maximum(lo, np.asarray(limits[0], np.float64)),
-                np.minimum(hi, np.asarray(limits[1], np.float64)),
-            )
-            if lo.shape != (robot.dof,) or not (lo < hi).all():
+            model = np.asarray(limits[0], np.float64), np.asarray(limits[1], np.float64)
+            if model[0].shape != (robot.dof,) or model[1].shape != (robot.dof,):
+                raise RobotDescriptionError(
+                    f"a body's joint limits must be two arrays of {robot.dof} values, got shapes "
+                    f"{model[0].shape} and {model[1].shape}"
+                )
+            lo, hi = np.maximum(lo, model[0]), np.minimum(hi, model[1])
+            outer = np.minimum(robot.lower, model[0]), np.maximum(robot.upper, model[1])
+            if not (lo < hi).all():
                 raise RobotDescriptionError(
                     f"a body's joint limits must leave every joint of {robot.name} a range within its own, got "
                     f"{lo.tolist()} … {hi.tolist()}"
@@ -236,6 +241,12 @@ class BodySpheres(nn.Module):
         #: The joint limits of the model the spheres describe, within the robot's own (lower, upper), float64
         #: numpy: a planner keeps its plans among obstacles inside them (the ur5's tool model: ±π).
         self.limits = (lo, hi)
+        #: The widest joint limits a plan among obstacles with this body may use, float64 numpy: the robot's
+        #: and its model's together. Where the model allows more than the robot (MoveIt's panda, the standard
+        #: benchmarks', turns every joint up to 0.07 rad further than the Franka datasheet limits kinlearn's
+        #: panda has), a problem whose start or goal lies in that band is planned within these
+        #: (:meth:`joint_box`; the planner warns).
+        self.outer_limits = (np.asarray(outer[0], np.float64), np.asarray(outer[1], np.float64))
         self._kin: FastKinematics = kinematics(robot, "fast")  # type: ignore[assignment]
         self.register_buffer("local", torch.as_tensor(spheres[:, 1:4]))
         self.register_buffer("radii", torch.as_tensor(spheres[:, 4]))
@@ -333,14 +344,15 @@ class BodySpheres(nn.Module):
     def joint_box(self, theta0: np.ndarray, thetaT: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each problem's joint box a planner searches, ``(lower, upper)`` each ``(N, dof)`` for starts and
         goals ``(N, dof)``: :attr:`limits` where the problem's start and goal both lie within them (a plan
-        for the benchmarks' UR5 between configurations within its ±π stays within them), else the robot's.
-        (Widening the body's box only on the joints whose ends leave it instead cost the ur5's tuning
-        problems, made within ±2π, 11 points in fixed time and 6 under a deadline of 0.05 s.)"""
+        for the benchmarks' UR5 between configurations within its ±π stays within them; a panda plan within
+        the robot's own), else :attr:`outer_limits` (the robot's for the ur5; the benchmarks' MoveIt model's
+        for the panda). (Widening the body's box only on the joints whose ends leave it instead cost the
+        ur5's tuning problems, made within ±2π, 11 points in fixed time and 6 under a deadline of 0.05 s.)"""
         lo, hi = self.limits
         inside = ((np.minimum(theta0, thetaT) >= lo) & (np.maximum(theta0, thetaT) <= hi)).all(
             axis=1, keepdims=True
         )  # NaN is outside: it propagates through minimum and maximum and compares false
-        return np.where(inside, lo, self.robot.lower), np.where(inside, hi, self.robot.upper)
+        return np.where(inside, lo, self.outer_limits[0]), np.where(inside, hi, self.outer_limits[1])
 
     def forward(self, q: torch.Tensor, validate: bool = True) -> torch.Tensor:
         """World sphere centres ``(..., M, 3)`` for joints ``q (..., dof)``.
@@ -498,10 +510,10 @@ def urdf_spheres(robot: Robot, urdf: str | Path | bytes, drop_links: tuple[str, 
 
 
 def urdf_limits(robot: Robot, urdf: str | Path | bytes) -> tuple[np.ndarray, np.ndarray]:
-    """The position limits a sphere URDF gives ``robot``'s joints (matched by name), each kept within the
-    robot's own: ``(lower, upper)``, float64 ``(dof,)``. A joint the file lacks, or gives no limit, keeps
-    the robot's. (The ur5's file, the standard benchmarks' UR5, limits every joint to ±π; kinlearn's ur5
-    turns ±2π.)"""
+    """The position limits a sphere URDF gives ``robot``'s joints (matched by name): ``(lower, upper)``,
+    float64 ``(dof,)``. A joint the file lacks, or gives no limit, keeps the robot's. (The ur5's file, the
+    standard benchmarks' UR5, limits every joint to ±π, where kinlearn's ur5 turns ±2π; the panda's, MoveIt's
+    panda, is up to 0.07 rad wider than the Franka datasheet's limits of kinlearn's panda.)"""
     from ..body.robot import validate_urdf
 
     data = urdf if isinstance(urdf, bytes) else Path(urdf).read_bytes()
@@ -519,7 +531,7 @@ def urdf_limits(robot: Robot, urdf: str | Path | bytes) -> tuple[np.ndarray, np.
     lo, hi = robot.lower.astype(np.float64).copy(), robot.upper.astype(np.float64).copy()
     for k, j in enumerate(robot.joints):
         if j.name in given:
-            lo[k], hi[k] = max(lo[k], given[j.name][0]), min(hi[k], given[j.name][1])
+            lo[k], hi[k] = given[j.name]
     return lo, hi
 
 

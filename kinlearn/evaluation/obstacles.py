@@ -136,7 +136,9 @@ def obstacle_outcome(
     """Judge ``N`` joint paths against their problems by the success rule (see the module docstring).
     ``limits``: ``(lower, upper)`` joint limits a path must keep within instead of the robot's; by default
     the robot's, or the body's for a :class:`~kinlearn.data.problems.ProblemSet` made within them
-    (``ProblemSet.within == "body"``, ``ProblemConfig(within="body")``).
+    (``ProblemSet.within == "body"``, ``ProblemConfig(within="body")``); the body's
+    :attr:`~kinlearn.collision.BodySpheres.outer_limits` judge problems whose ends lie beyond the robot's own
+    but within its model's (the standard benchmarks' panda), as the planner plans them.
 
     ``body``: :func:`~kinlearn.collision.body_spheres` of the robot (the 12-sphere body with the base).
     ``joints``: a tensor ``(N, T+1, dof)`` or a sequence of ``N`` paths ``(K_i, dof)`` (tensors or
@@ -196,7 +198,20 @@ def obstacle_outcome(
     # whose clearance and self-collision are reported too).
     kin = kinematics(robot, "fast")
     ef0, efT = kin.position(s0, validate=False), kin.position(sT, validate=False)
-    problem = Problem.from_states(robot, torch.cat((s0, ef0), -1), torch.cat((sT, efT), -1), obstacles=sc)
+    # Ends beyond the robot's own limits but within its body's model's (or the given limits) make a problem
+    # (the planner plans them); whether a path keeps within the limits is `within`, above.
+    lo, hi = body.outer_limits
+    if limits is not None:
+        lo, hi = (
+            np.minimum(lo, np.asarray(limits[0], np.float64)),
+            np.maximum(hi, np.asarray(limits[1], np.float64)),
+        )
+    judged = (
+        robot
+        if (np.array_equal(lo, robot.lower) and np.array_equal(hi, robot.upper))
+        else robot.with_limits(lo, hi)
+    )
+    problem = Problem.from_states(judged, torch.cat((s0, ef0), -1), torch.cat((sT, efT), -1), obstacles=sc)
     plan = judge(problem, padded, tolerance=tolerance, max_travel=max_travel, body=body, collision_free=free)
     goal_error, joint_error = plan.goal_error.to(_F64), plan.joint_error.to(_F64)
     goal_reached = (goal_error <= tolerance.position) & (joint_error <= tolerance.joints)

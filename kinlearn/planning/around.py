@@ -22,7 +22,7 @@ import torch
 from ..collision.body import BodySpheres, planning_body
 from ..collision.scene import Scene
 from ..data.problem import LIMIT_TOLERANCE
-from ..errors import CollidingEndWarning, NonFiniteError
+from ..errors import BeyondLimitsWarning, CollidingEndWarning, NonFiniteError
 from ..models.chain import ChainFM
 from .plan import CHECK_TRAVEL
 from .retreat import RetreatVias, retreat_path, sampler_branches
@@ -62,8 +62,8 @@ class ObstacleStages:
 
     It reads what the planner holds: ``robot``, the limits ``_lo_np``/``_hi_np``, the obstacle network
     (``obstacle_tm``, packed for the compiled proposals on first use), the identified ``chain``, the given body
-    (``_body``), ``retreat``, and the caches ``_body64``, ``_np_body_cache``, ``_compiled_cache`` and ``_vias`` its
-    ``__init__`` sets to None.
+    (``_body``), ``retreat``, and the caches ``_body64``, ``_np_body_cache``, ``_compiled_cache``, ``_vias`` and
+    ``_wide_robot`` its ``__init__`` sets to None.
     """
 
     @property
@@ -75,6 +75,38 @@ class ObstacleStages:
             body = planning_body(self.robot) if self._body is None else self._body
             self._body64 = body if body.radii.dtype == torch.float64 else copy.deepcopy(body).double()
         return self._body64
+
+    @property
+    def _obstacle_robot(self):
+        """The robot problems among obstacles are checked and judged with: the planner's, or, where its
+        planning body's model allows more (:attr:`~kinlearn.collision.BodySpheres.outer_limits`: the
+        benchmarks' MoveIt panda), the same robot with those limits (:meth:`~kinlearn.body.robot.Robot.with_limits`;
+        made once)."""
+        if self._wide_robot is None:
+            lo, hi = self.body.outer_limits
+            same = np.array_equal(lo, self.robot.lower) and np.array_equal(hi, self.robot.upper)
+            self._wide_robot = self.robot if same else self.robot.with_limits(lo, hi)
+        return self._wide_robot
+
+    def _warn_beyond(self, q: np.ndarray, stacklevel: int) -> None:
+        """Warn (:class:`~kinlearn.errors.BeyondLimitsWarning`) where starts or goals ``q (..., dof)`` of
+        problems among obstacles (already checked within :attr:`_obstacle_robot`'s limits) leave the
+        robot's own: they are planned within the limits of the model the planning body was read from."""
+        if self._obstacle_robot is self.robot:
+            return
+        r = self.robot
+        out = (q < r.lower - LIMIT_TOLERANCE) | (q > r.upper + LIMIT_TOLERANCE)
+        if out.any():
+            j = int(np.flatnonzero(out.reshape(-1, r.dof).any(0))[0])
+            lo, hi = self._obstacle_robot.lower[j], self._obstacle_robot.upper[j]
+            warnings.warn(
+                f"a start or goal lies outside {r.name}'s joint limits (joint {r.joint_names[j]}: "
+                f"[{r.lower[j]:.6g}, {r.upper[j]:.6g}] rad) but within those of its planning body's model "
+                f"([{lo:.6g}, {hi:.6g}] rad, as the standard benchmarks' {r.name} allows): planned within the "
+                "model's limits, where the robot itself may not go",
+                BeyondLimitsWarning,
+                stacklevel=stacklevel,
+            )
 
     @property
     def _np_body(self):
@@ -321,7 +353,7 @@ class ObstacleStages:
 
         transfer = None
         if self.obstacle_tm is not None:
-            net, chain, limits = self._compiled_tm, k.KernelChain.of(self.robot), self.body.limits
+            net, chain, limits = self._compiled_tm, k.KernelChain.of(self._obstacle_robot), self.body.limits
 
             def transfer(a, b):  # stage 1 between two configurations (:meth:`_learned`'s, in one call)
                 # (a zero move of −1: no pair of vias is refused for lying close, as _learned refuses none)

@@ -222,6 +222,7 @@ class Planner(ObstacleStages):
         self.retreat_share = float(retreat_share)
         self._vias: RetreatVias | bool | None = None  # made on the first retreat (False: not possible)
         self._np_body_cache = None
+        self._wide_robot = None  # the robot obstacle problems are checked with (first use)
         self._warm = False
         self._small, self._large = _Compiled, _Torch
         self._core = self._rollout
@@ -307,7 +308,14 @@ class Planner(ObstacleStages):
                     f"this planner is for {self.robot.name!r}; the problems are for {start.robot.name!r}"
                 )
             return start, torch.float64, torch.device("cpu")
-        problem = Problem.make(self.robot, start, goal, goal_position=goal_position, obstacles=obstacles)
+        robot = (
+            self.robot if obstacles is None else self._obstacle_robot
+        )  # its planning body's model's limits
+        problem = Problem.make(robot, start, goal, goal_position=goal_position, obstacles=obstacles)
+        if robot is not self.robot:
+            self._warn_beyond(problem.start_joints.numpy(), stacklevel=4)
+            if problem.goal_kind == "state":
+                self._warn_beyond(problem.goal_joints.numpy(), stacklevel=4)
         dtype, device = _out_dtype(start)
         other, _ = _out_dtype(goal_position if goal_position is not None else goal)
         return problem, torch.promote_types(dtype, other), device
@@ -462,12 +470,13 @@ class Planner(ObstacleStages):
         except KinlearnError:
             return None
         first = self._compiled_tm.stage_one(
-            q, kernel.KernelChain.of(self.robot), self.body.limits, bool(steps), self._np_body, packed,
+            q, kernel.KernelChain.of(self._obstacle_robot), self.body.limits, bool(steps), self._np_body, packed,
             CHECK_TRAVEL, LIMIT_TOLERANCE, ZERO_MOVE,
         )  # fmt: skip
         if first is None:  # an end outside the limits, or no move: the general path explains or plans it
             return None
         ef, paths, pick, free = first
+        self._warn_beyond(q, stacklevel=4)
         return q, ef, (paths[None], pick, free), packed, torch.promote_types(da, db)
 
     def _batch1_plan(
@@ -480,12 +489,12 @@ class Planner(ObstacleStages):
         output's ``dtype`` (on the CPU, as the batch-1 entry's input)."""
         states = np.concatenate((q, ef), axis=1)
         plan = verdict_small(
-            self.robot, np.ascontiguousarray(path[None]), states[:1], states[1:], True, (),
+            self._obstacle_robot, np.ascontiguousarray(path[None]), states[:1], states[1:], True, (),
             (_FREE if free else _NOT_FREE).copy(), self.tolerance, stage=stage,
         )  # fmt: skip
         if dtype == torch.float64:
             return plan
-        return _as_output(plan, dtype, _CPU, self._lo_np, self._hi_np)
+        return _as_output(plan, dtype, _CPU, self._obstacle_robot.lower, self._obstacle_robot.upper)
 
     def warm_up(self) -> None:
         """Load now what the first plan among obstacles would load (once per planner): the compiled
@@ -597,7 +606,8 @@ class Planner(ObstacleStages):
             plan = dataclasses.replace(
                 plan, goal=torch.from_numpy(goal[0] if lead == () else goal.reshape(*lead, S))
             )
-        return _as_output(plan, dtype, device, self._lo_np, self._hi_np)
+        limits = problem.robot.lower, problem.robot.upper  # the obstacle robot's among obstacles
+        return _as_output(plan, dtype, device, *limits)
 
     # ----------------------------------------------------------------------------------------------
     # Free space
