@@ -61,3 +61,26 @@ def markdown_table(columns: list[str], rows: list[list[object]]) -> str:
     out = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
     return "\n".join(out)
+
+
+def plan_cases(planner, cases, inside: Callable, **kw) -> tuple[int, int, int, list[float]]:
+    """Plan every ``(start, goal, scene)`` of ``cases`` with ``planner.plan(..., **kw)``, one after the other:
+    how many succeed with every knot ``inside(joints)``, how many succeed but leave it, how many the
+    planner refused (:class:`~kinlearn.errors.JointLimitError`), and each call's wall time (s)."""
+    from kinlearn.errors import JointLimitError
+
+    ok = beyond = refused = 0
+    times = []
+    for s, g, sc in cases:
+        t0 = time.perf_counter()
+        try:
+            plan = planner.plan(s, g, obstacles=sc, **kw)
+        except JointLimitError:
+            refused += 1
+            continue
+        finally:
+            times.append(time.perf_counter() - t0)
+        within = bool(inside(plan.joints.detach().cpu().numpy()))
+        ok += bool(plan.success) and within
+        beyond += bool(plan.success) and not within
+    return ok, beyond, refused, times

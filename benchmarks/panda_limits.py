@@ -19,20 +19,18 @@ from __future__ import annotations
 
 import argparse
 import copy
-import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import header, markdown_table, plan_cases
 
 import kinlearn
 from kinlearn.collision import planning_body
 from kinlearn.collision.kernel import KernelBody, KernelScene, clearances
 from kinlearn.collision.scene import as_scene
 from kinlearn.data.problems import ProblemSet
-from kinlearn.errors import JointLimitError
 
 DATA = Path(__file__).parent / "data"
 #: Where each goal's last joint is put: halfway into the band between the two models' limits.
@@ -61,9 +59,8 @@ def main() -> None:
         s, g, sc = problems.problem(i)
         g = g.double().clone()
         g[6] = BAND if float(g[6]) >= 0 else -BAND
-        d, sd = clearances(packed_body, KernelScene.of(as_scene(sc)), np.ascontiguousarray(g.numpy()[None]))[
-            :2
-        ]
+        q = np.ascontiguousarray(g.numpy()[None])
+        d, sd = clearances(packed_body, KernelScene.of(as_scene(sc)), q)[:2]
         if d[0] > 0 and sd[0] > 0:  # the turned hand still free
             cases.append((s, g, sc))
     print(f"{len(cases)} of {len(problems)} problems keep a free goal with the hand turned into the band")
@@ -74,23 +71,16 @@ def main() -> None:
         "the robot's limits only (before)": kinlearn.Planner.default("panda", body=narrow),
     }
     modes = {"fixed time": {"refine_steps": 0}, f"deadline {args.deadline:g} s": {"deadline": args.deadline}}
+
+    def inside(q):  # every knot within the model's limits
+        return ((q >= lo - 1e-9) & (q <= hi + 1e-9)).all()
+
     rows = []
     warnings.simplefilter("ignore")
     for pname, planner in planners.items():
         planner.warm_up()
         for mname, kw in modes.items():
-            ok, refused, times = 0, 0, []
-            for s, g, sc in cases:
-                t0 = time.perf_counter()
-                try:
-                    plan = planner.plan(s, g, obstacles=sc, **kw)
-                except JointLimitError:
-                    refused += 1
-                    continue
-                finally:
-                    times.append(time.perf_counter() - t0)
-                q = np.asarray(plan.joints)
-                ok += bool(plan.success) and bool(((q >= lo - 1e-9) & (q <= hi + 1e-9)).all())
+            ok, _, refused, times = plan_cases(planner, cases, inside, **kw)
             t = np.array(times) * 1e3
             rows.append(
                 [

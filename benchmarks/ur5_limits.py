@@ -18,13 +18,12 @@ from __future__ import annotations
 import argparse
 import copy
 import math
-import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import header, markdown_table, plan_cases
 
 import kinlearn
 from kinlearn.collision import planning_body
@@ -64,14 +63,9 @@ def main() -> None:
         for mname, kw in modes.items():
             s0, g0, sc0 = cases[0]
             planner.plan(s0, g0, obstacles=sc0, **kw)  # warm-up
-            ok, beyond, times = 0, 0, []
-            for s, g, sc in cases:
-                t0 = time.perf_counter()
-                plan = planner.plan(s, g, obstacles=sc, **kw)
-                times.append(time.perf_counter() - t0)
-                inside = bool(np.abs(np.asarray(plan.joints)).max() <= math.pi + 1e-9)
-                ok += bool(plan.success) and inside
-                beyond += bool(plan.success) and not inside
+            ok, beyond, _, times = plan_cases(
+                planner, cases, lambda q: np.abs(q).max() <= math.pi + 1e-9, **kw
+            )
             t = np.array(times) * 1e3
             rows.append(
                 [
