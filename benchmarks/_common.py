@@ -84,3 +84,27 @@ def plan_cases(planner, cases, inside: Callable, **kw) -> tuple[int, int, int, l
         ok += bool(plan.success) and within
         beyond += bool(plan.success) and not within
     return ok, beyond, refused, times
+
+
+def limits_row(
+    planner: str, mode: str, ok: int, n: int, count: int, times: list[float], digits: int = 1
+) -> list:
+    """A row of the limit benchmarks' tables: the planner, the mode, the success rate of ``n``, one count
+    (the plans beyond the box, or the problems refused) and the p50 / p99 wall times (ms)."""
+    t = [1e3 * x for x in times]
+    return [
+        planner,
+        mode,
+        f"{100 * ok / n:.1f}%",
+        str(count),
+        f"{statistics.median(t):.{digits}f}",
+        f"{_p99(t):.{digits}f}",
+    ]
+
+
+def _p99(values: list[float]) -> float:
+    """The 99th percentile, linear between order statistics (NumPy's default)."""
+    v = sorted(values)
+    k = 0.99 * (len(v) - 1)
+    lo = int(k)
+    return v[lo] + (v[min(lo + 1, len(v) - 1)] - v[lo]) * (k - lo)

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, markdown_table, plan_cases
+from _common import header, limits_row, markdown_table, plan_cases
 
 import kinlearn
 from kinlearn.collision import planning_body
@@ -81,17 +81,7 @@ def main() -> None:
         planner.warm_up()
         for mname, kw in modes.items():
             ok, _, refused, times = plan_cases(planner, cases, inside, **kw)
-            t = np.array(times) * 1e3
-            rows.append(
-                [
-                    pname,
-                    mname,
-                    f"{100 * ok / len(cases):.1f}%",
-                    str(refused),
-                    f"{np.median(t):.2f}",
-                    f"{np.quantile(t, 0.99):.2f}",
-                ]
-            )
+            rows.append(limits_row(pname, mname, ok, len(cases), refused, times, digits=2))
     print(markdown_table(["planner", "mode", "success", "refused", "p50 ms", "p99 ms"], rows))
 
 

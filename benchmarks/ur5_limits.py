@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, markdown_table, plan_cases
+from _common import header, limits_row, markdown_table, plan_cases
 
 import kinlearn
 from kinlearn.collision import planning_body
@@ -66,17 +66,7 @@ def main() -> None:
             ok, beyond, _, times = plan_cases(
                 planner, cases, lambda q: np.abs(q).max() <= math.pi + 1e-9, **kw
             )
-            t = np.array(times) * 1e3
-            rows.append(
-                [
-                    pname,
-                    mname,
-                    f"{100 * ok / len(cases):.1f}%",
-                    str(beyond),
-                    f"{np.median(t):.1f}",
-                    f"{np.quantile(t, 0.99):.1f}",
-                ]
-            )
+            rows.append(limits_row(pname, mname, ok, len(cases), beyond, times, digits=1))
     print(markdown_table(["planner", "mode", "success within ±π", "beyond ±π", "p50 ms", "p99 ms"], rows))
 
 
