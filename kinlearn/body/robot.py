@@ -317,13 +317,16 @@ class Robot:
 
     def with_limits(self, lower, upper) -> Robot:
         """This robot (the same name, chain and URDF) with other position limits ``lower``/``upper``
-        ``(dof,)``: what a planner among obstacles checks and judges its problems with where its planning
-        body's model allows more than the robot (:attr:`~kinlearn.collision.BodySpheres.outer_limits`)."""
+        ``(dof,)``, or this very robot where they are its own: what a planner among obstacles checks and
+        judges its problems with where its planning body's model allows more than the robot
+        (:attr:`~kinlearn.collision.BodySpheres.outer_limits`)."""
         lo, hi = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
         if lo.shape != (self.dof,) or hi.shape != (self.dof,) or not (lo < hi).all():
             raise ConfigError(
                 f"limits must be two arrays of {self.dof} values with lower < upper for {self.name}"
             )
+        if np.array_equal(lo, self.lower) and np.array_equal(hi, self.upper):
+            return self
         other = copy.copy(self)
         other.lower, other.upper = lo, hi
         return other

@@ -246,7 +246,7 @@ class BodySpheres(nn.Module):
         #: benchmarks', turns every joint up to 0.07 rad further than the Franka datasheet limits kinlearn's
         #: panda has), a problem whose start or goal lies in that band is planned within these
         #: (:meth:`joint_box`; the planner warns).
-        self.outer_limits = (np.asarray(outer[0], np.float64), np.asarray(outer[1], np.float64))
+        self.outer_limits = outer
         self._kin: FastKinematics = kinematics(robot, "fast")  # type: ignore[assignment]
         self.register_buffer("local", torch.as_tensor(spheres[:, 1:4]))
         self.register_buffer("radii", torch.as_tensor(spheres[:, 4]))

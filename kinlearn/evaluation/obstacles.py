@@ -206,12 +206,9 @@ def obstacle_outcome(
             np.minimum(lo, np.asarray(limits[0], np.float64)),
             np.maximum(hi, np.asarray(limits[1], np.float64)),
         )
-    judged = (
-        robot
-        if (np.array_equal(lo, robot.lower) and np.array_equal(hi, robot.upper))
-        else robot.with_limits(lo, hi)
+    problem = Problem.from_states(
+        robot.with_limits(lo, hi), torch.cat((s0, ef0), -1), torch.cat((sT, efT), -1), obstacles=sc
     )
-    problem = Problem.from_states(judged, torch.cat((s0, ef0), -1), torch.cat((sT, efT), -1), obstacles=sc)
     plan = judge(problem, padded, tolerance=tolerance, max_travel=max_travel, body=body, collision_free=free)
     goal_error, joint_error = plan.goal_error.to(_F64), plan.joint_error.to(_F64)
     goal_reached = (goal_error <= tolerance.position) & (joint_error <= tolerance.joints)

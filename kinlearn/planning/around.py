@@ -83,9 +83,7 @@ class ObstacleStages:
         benchmarks' MoveIt panda), the same robot with those limits (:meth:`~kinlearn.body.robot.Robot.with_limits`;
         made once)."""
         if self._wide_robot is None:
-            lo, hi = self.body.outer_limits
-            same = np.array_equal(lo, self.robot.lower) and np.array_equal(hi, self.robot.upper)
-            self._wide_robot = self.robot if same else self.robot.with_limits(lo, hi)
+            self._wide_robot = self.robot.with_limits(*self.body.outer_limits)
         return self._wide_robot
 
     def _warn_beyond(self, q: np.ndarray, stacklevel: int) -> None:

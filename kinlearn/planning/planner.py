@@ -308,14 +308,14 @@ class Planner(ObstacleStages):
                     f"this planner is for {self.robot.name!r}; the problems are for {start.robot.name!r}"
                 )
             return start, torch.float64, torch.device("cpu")
-        robot = (
-            self.robot if obstacles is None else self._obstacle_robot
-        )  # its planning body's model's limits
+        # Among obstacles, within the limits of the planning body's model where they allow more.
+        robot = self.robot if obstacles is None else self._obstacle_robot
         problem = Problem.make(robot, start, goal, goal_position=goal_position, obstacles=obstacles)
-        if robot is not self.robot:
-            self._warn_beyond(problem.start_joints.numpy(), stacklevel=4)
+        if robot is not self.robot:  # one warning for the starts and goal joints beyond the robot's own
+            ends = [problem.start_joints.numpy().reshape(-1, robot.dof)]
             if problem.goal_kind == "state":
-                self._warn_beyond(problem.goal_joints.numpy(), stacklevel=4)
+                ends.append(problem.goal_joints.numpy().reshape(-1, robot.dof))
+            self._warn_beyond(np.concatenate(ends), stacklevel=4)
         dtype, device = _out_dtype(start)
         other, _ = _out_dtype(goal_position if goal_position is not None else goal)
         return problem, torch.promote_types(dtype, other), device
