@@ -225,6 +225,8 @@ def test_body_limits_that_leave_no_range_and_unreadable_urdf_limits_are_refused(
     lo = ur5.lower.copy()
     with pytest.raises(RobotDescriptionError, match="range within its own"):
         BodySpheres(ur5, spheres, body.pairs.numpy(), limits=(lo, lo))
+    with pytest.raises(RobotDescriptionError, match="two arrays of 6 values"):
+        BodySpheres(ur5, spheres, body.pairs.numpy(), limits=(lo[:5], ur5.upper))
     urdf = b"""<robot name="r"><link name="a"/><link name="b"/>
       <joint name="shoulder_pan_joint" type="revolute"><parent link="a"/><child link="b"/>
       <axis xyz="0 0 1"/><limit lower="low" upper="1.0" effort="1" velocity="1"/></joint></robot>"""

@@ -118,3 +118,22 @@ def test_within_limits_given_narrower_limits():
     q = torch.stack((lo / 4, hi / 2, hi * 0.75))
     assert robot.within_limits(q).tolist() == [True, True, True]
     assert robot.within_limits(q, limits=narrow).tolist() == [True, True, False]
+
+
+def test_a_robot_with_other_limits_keeps_its_chain_and_refuses_bad_limits():
+    """``Robot.with_limits``: the same robot (name, chain) with other position limits, checked by them;
+    its own limits give the robot itself; limits of the wrong shape, or with lower ≥ upper, are a
+    ConfigError."""
+    from kinlearn.errors import ConfigError, JointLimitError
+
+    panda = load_robot("panda")
+    assert panda.with_limits(panda.lower, panda.upper) is panda
+    wide = panda.with_limits(panda.lower - 0.1, panda.upper + 0.1)
+    assert wide is not panda and wide.name == panda.name and wide.joints is panda.joints
+    q = torch.as_tensor(panda.upper + 0.05)
+    wide.check_joints(q)  # within the wider limits
+    with pytest.raises(JointLimitError):
+        panda.check_joints(q)  # the robot keeps its own
+    for lo, hi in ((panda.lower[:6], panda.upper), (panda.upper, panda.lower), (panda.lower, panda.lower)):
+        with pytest.raises(ConfigError, match="lower < upper"):
+            panda.with_limits(lo, hi)
