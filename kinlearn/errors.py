@@ -1,4 +1,16 @@
-"""Typed exceptions. Every public error says what was wrong and what is allowed."""
+"""Every error and warning kinlearn raises or emits on purpose, and when.
+
+Errors derive from :class:`KinlearnError` (and from the built-in exception a caller would expect:
+``ValueError`` for a bad value, ``KeyError`` for an unknown name, ...), so ``except KinlearnError``
+catches all of them. Every error says what was wrong and what is allowed.
+
+Warnings derive from :class:`KinlearnWarning`, so one filter silences or escalates all of them::
+
+    import warnings
+    import kinlearn
+    warnings.simplefilter("error", kinlearn.KinlearnWarning)   # make every kinlearn warning an error
+    warnings.simplefilter("ignore", kinlearn.KinlearnWarning)  # or silence them all
+"""
 
 from __future__ import annotations
 
@@ -99,35 +111,49 @@ class OutputError(KinlearnError, OSError):
     permission, a read-only or full disk. The message names the path and what to do."""
 
 
-class NoObstacleModelWarning(UserWarning):
+class KinlearnWarning(UserWarning):
+    """Base class of every warning kinlearn emits: filter on it to silence or escalate them all."""
+
+
+class KinlearnDeprecationWarning(KinlearnWarning, DeprecationWarning):
+    """A name that moved (``kinlearn.<old>`` → its home module, a baseline's old name): it still resolves,
+    for one release, and the message names where it went. Emitted on each use of the old name."""
+
+
+class DroppedRowsWarning(KinlearnWarning):
+    """A recorded log read with rows holding NaN or infinity: those rows are dropped (the message names
+    how many and which), and the gap they leave is never bridged by a transition."""
+
+
+class NoObstacleModelWarning(KinlearnWarning):
     """Planning around obstacles for an arm whose planner has no obstacle-trained network: the plan comes
     from the straight joint line and bounded refinement alone (its ``collision_free`` says how it went)."""
 
 
-class UnverifiedCheckpointWarning(UserWarning):
+class UnverifiedCheckpointWarning(KinlearnWarning):
     """A checkpoint of format 1, which carries no content hash: it loads, but tampering or corruption of its
     weights cannot be detected. Save it again (it then records its hash), or load with ``strict=True``
     to refuse it."""
 
 
-class ObstaclesIgnoredWarning(UserWarning):
+class ObstaclesIgnoredWarning(KinlearnWarning):
     """A problem with obstacles given to a baseline that plans as in free space (its ``avoids_obstacles``
     is False): the plan does not avoid them; it is checked among them and says whether it collides."""
 
 
-class CollidingEndWarning(UserWarning):
+class CollidingEndWarning(KinlearnWarning):
     """A plan among obstacles that no stage could make collision-free because its start or its goal
     configuration itself collides (with the scene or with the arm itself) before any motion; the message
     names the problems and, where the scene overlaps the robot's fixed base (a surface it stands on given
     as a box), says so."""
 
 
-class BeyondLimitsWarning(UserWarning):
+class BeyondLimitsWarning(KinlearnWarning):
     """A plan among obstacles whose start or goal lies outside the robot's own joint limits but within
     those of the model its planning body was read from (MoveIt's panda, the standard benchmarks', turns up
     to 0.07 rad further than the Franka datasheet limits of kinlearn's panda): it is planned within the
     model's limits, where the robot itself may not go."""
 
 
-class DomainWarning(UserWarning):
+class DomainWarning(KinlearnWarning):
     """A start or goal outside the domain the planner was trained on: its plan may be poor."""

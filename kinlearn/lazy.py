@@ -8,7 +8,8 @@ type checkers, readers and the layer test see every dependency) and ends with::
 
 ``moved`` maps names that left the package's ``__all__`` to where they are now, as a dotted path
 (``"kinlearn.train.train_fm"``, or under a new name ``"kinlearn.baselines.JointLine"``): they still
-resolve, for one release, with a :class:`DeprecationWarning` naming it. Works for a plain module too
+resolve, for one release, with a :class:`~kinlearn.errors.KinlearnDeprecationWarning` (a
+:class:`DeprecationWarning`) naming it. Works for a plain module too
 (``kinlearn.train``).
 """
 
@@ -20,6 +21,8 @@ import sys
 import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
+
+from .errors import KinlearnDeprecationWarning
 
 __all__ = ["lazy_package"]
 
@@ -51,7 +54,7 @@ def lazy_package(
             home, _, attr = moved[name].rpartition(".")
             warnings.warn(
                 f"{package}.{name} moved to {moved[name]}; the old name goes in the next release",
-                DeprecationWarning,
+                KinlearnDeprecationWarning,
                 stacklevel=2,
             )
             return getattr(importlib.import_module(home), attr)  # not cached: it warns on every use

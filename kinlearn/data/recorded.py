@@ -40,7 +40,7 @@ import torch
 
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
-from ..errors import RecordedDataError, ShapeError
+from ..errors import DroppedRowsWarning, RecordedDataError, ShapeError
 from ..io import atomic_write, file_sha256
 from .babbling import Transitions, load_transitions
 
@@ -560,7 +560,9 @@ def load_recorded(
         if dropped == len(finite):
             raise _error(path, f"every one of its {dropped} rows holds NaN or infinity")
         warnings.warn(
-            f"{path}: dropped {dropped} row(s) holding NaN or infinity ({rows.name(bad)})", stacklevel=2
+            f"{path}: dropped {dropped} row(s) holding NaN or infinity ({rows.name(bad)})",
+            DroppedRowsWarning,
+            stacklevel=2,
         )
         gap[1:] = ~finite[:-1]
         theta, ef, gap = theta[finite], ef[finite], gap[finite]

@@ -44,7 +44,13 @@ from ..checks import as_int, as_real, check_finite, check_last_dim
 from ..collision.body import BodySpheres
 from ..collision.ompl import OmplRrtConnect
 from ..data.problem import LIMIT_TOLERANCE, Problem
-from ..errors import ConfigError, ObstaclesIgnoredWarning, PlanningError, ShapeError
+from ..errors import (
+    ConfigError,
+    KinlearnDeprecationWarning,
+    ObstaclesIgnoredWarning,
+    PlanningError,
+    ShapeError,
+)
 from ..polyline import resample
 from .plan import Plan, judge
 
@@ -75,7 +81,7 @@ def __getattr__(name: str):
         warnings.warn(
             f"kinlearn.planning.baselines.{name} is now {new} (kinlearn.baselines.{new}); the old name goes "
             "in the next release",
-            DeprecationWarning,
+            KinlearnDeprecationWarning,
             stacklevel=2,
         )
         return globals()[new]

@@ -68,7 +68,7 @@ from ..collision import (
 )
 from ..collision.ompl import OmplRrtConnect
 from ..data.problem import Problem
-from ..errors import ConfigError, ShapeError, UnknownRobotError
+from ..errors import ConfigError, KinlearnDeprecationWarning, ShapeError, UnknownRobotError
 from . import baselines as _free
 from .baselines import MAX_STEPS, Baseline
 from .plan import Plan, judge
@@ -113,7 +113,7 @@ def __getattr__(name: str):
         home, value = _RENAMED[name]
         warnings.warn(
             f"kinlearn.planning.obstacle_baselines.{name} is now {home}; the old name goes in the next release",
-            DeprecationWarning,
+            KinlearnDeprecationWarning,
             stacklevel=2,
         )
         return globals()[value] if isinstance(value, str) else value
