@@ -1,12 +1,21 @@
-"""Shared helpers of the benchmark scripts: a header naming hardware and versions, timing, tables."""
+"""Shared helpers of the benchmark scripts: the result writer (:func:`write_result`, every benchmark's
+figures as JSON under ``benchmarks/results/``), a header naming hardware and versions, timing, tables."""
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import platform
+import shlex
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from datetime import datetime, timezone
+from pathlib import Path
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
@@ -108,3 +117,158 @@ def _p99(values: list[float]) -> float:
     k = 0.99 * (len(v) - 1)
     lo = int(k)
     return v[lo] + (v[min(lo + 1, len(v) - 1)] - v[lo]) * (k - lo)
+
+
+RESULTS = Path(__file__).resolve().parent / "results"
+#: The version of the result files' layout (below); :mod:`benchmarks.report` refuses another.
+SCHEMA = 1
+
+
+def table(columns: Sequence[str], rows: Sequence[Sequence[object]], *, caption: str | None = None) -> dict:
+    """A table as a result figure: ``{"columns": [...], "rows": [[...], ...]}`` (plus ``"caption"``), every
+    row as long as the header."""
+    columns = [str(c) for c in columns]
+    rows = [list(r) for r in rows]
+    for r in rows:
+        if len(r) != len(columns):
+            raise ValueError(f"a row of {len(r)} cells under {len(columns)} columns: {r}")
+    out: dict = {"columns": columns, "rows": rows}
+    if caption:
+        out["caption"] = caption
+    return out
+
+
+def write_result(
+    name: str,
+    figures: Mapping[str, object],
+    *,
+    command: str | None = None,
+    title: str | None = None,
+    notes: str | None = None,
+    threads: int | None = None,
+    root: Path | None = None,
+) -> Path:
+    """Write one benchmark's figures to ``benchmarks/results/<name>.json`` (atomically: a reader never sees a
+    half-written file) and return its path. :mod:`benchmarks.report` renders ``docs/results.md`` from these
+    files, so a figure reaches the docs only by being measured.
+
+    ``name`` is the file's stem (letters, digits, ``_`` and ``-``); ``figures`` maps a figure's name to its
+    value: a number, a string, a bool, ``None``, a list, or a nested mapping of those (NumPy scalars and
+    arrays are converted; NaN and infinity are refused, as JSON has none). A table is a mapping made by
+    :func:`table`. ``command`` is the command line that regenerates the file (by default the one running,
+    ``OMP_NUM_THREADS=<n> python benchmarks/<script>.py <args>``); ``title`` heads its section in the
+    docs, ``notes`` is a paragraph under it; ``threads`` is the torch thread count (by default torch's).
+
+    The file holds one JSON object (schema 1)::
+
+        {
+          "schema": 1,
+          "name": "kinematics_speed",
+          "title": "Batched forward kinematics",
+          "notes": "..." | null,
+          "command": "OMP_NUM_THREADS=1 python benchmarks/kinematics_speed.py --quick",
+          "commit": "0123456789ab",          # git HEAD when measured ("unknown" outside git)
+          "dirty": false,                    # kinlearn/ or benchmarks/ had uncommitted changes
+          "date": "2026-12-07",              # UTC
+          "machine": {"cpu": "...", "cores": 2, "threads": 1},
+          "versions": {"python": "3.12.3", "kinlearn": "0.1.0", "torch": "...", "numpy": "...", ...},
+          "figures": {
+            "forward kinematics": {"columns": ["batch", "ms"], "rows": [[1, 0.21], [1024, 1.9]]},
+            "dof": 7
+          }
+        }
+    """
+    if not name or not all(c.isalnum() or c in "_-" for c in name):
+        raise ValueError(f"a result name of letters, digits, _ and -: {name!r}")
+    root = RESULTS if root is None else Path(root)
+    if threads is None:
+        threads = torch.get_num_threads()
+    record = {
+        "schema": SCHEMA,
+        "name": name,
+        "title": title or name.replace("_", " ").capitalize(),
+        "notes": notes,
+        "command": command or _command_line(),
+        **_commit(),
+        "date": datetime.now(timezone.utc).strftime("%Y-%m-%d"),
+        "machine": {"cpu": cpu_name(), "cores": os.cpu_count() or 1, "threads": int(threads)},
+        "versions": versions(),
+        "figures": _plain(dict(figures), "figures"),
+    }
+    text = json.dumps(record, indent=1, allow_nan=False, ensure_ascii=False) + "\n"
+    root.mkdir(parents=True, exist_ok=True)
+    path = root / f"{name}.json"
+    fd, tmp = tempfile.mkstemp(dir=root, prefix=f".{name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    print(f"wrote {path}")
+    return path
+
+
+def versions() -> dict[str, str]:
+    """The versions of Python and of the packages the figures depend on (those installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for dist in ("kinlearn", "torch", "numpy", "numba", "pytorch-kinematics", "pin", "coal"):
+        try:
+            out[dist] = version(dist)
+        except PackageNotFoundError:
+            pass
+    return out
+
+
+def _command_line() -> str:
+    script = Path(sys.argv[0]).resolve()
+    try:
+        script = script.relative_to(Path(__file__).resolve().parents[1])
+    except ValueError:
+        pass
+    threads = os.environ.get("OMP_NUM_THREADS")
+    prefix = f"OMP_NUM_THREADS={threads} " if threads else ""
+    return prefix + shlex.join(["python", str(script), *sys.argv[1:]])
+
+
+def _commit() -> dict:
+    root = Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "--short=12", "HEAD"], cwd=root, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        changed = subprocess.run(
+            ["git", "status", "--porcelain", "--", "kinlearn", "benchmarks/*.py"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return {"commit": "unknown", "dirty": False}
+    return {"commit": head, "dirty": bool(changed)}
+
+
+def _plain(value: object, where: str) -> object:
+    """``value`` as plain JSON values (NumPy scalars and arrays converted), or a ValueError naming where."""
+    if value is None or isinstance(value, (bool, str, int)):
+        return value
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ValueError(f"{where}: {value} (JSON holds no NaN or infinity; write None or a string)")
+        return value
+    if hasattr(value, "tolist") and callable(value.tolist):  # NumPy/torch scalars and arrays
+        return _plain(value.tolist(), where)
+    if isinstance(value, Mapping):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise ValueError(f"{where}: a key {k!r} that is not a string")
+            out[k] = _plain(v, f"{where}.{k}")
+        return out
+    if isinstance(value, (list, tuple)):
+        return [_plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    raise ValueError(f"{where}: a {type(value).__name__}, not a number, string, list or mapping")
