@@ -120,6 +120,8 @@ def _p99(values: list[float]) -> float:
 
 
 RESULTS = Path(__file__).resolve().parent / "results"
+#: Where benchmarks put what is not a result (per-problem details, figures): not committed.
+RUNS = Path(__file__).resolve().parents[1] / "runs" / "benchmarks"
 #: The version of the result files' layout (below); :mod:`benchmarks.report` refuses another.
 SCHEMA = 1
 
@@ -136,6 +138,28 @@ def table(columns: Sequence[str], rows: Sequence[Sequence[object]], *, caption: 
     if caption:
         out["caption"] = caption
     return out
+
+
+def from_markdown(text: str, *, caption: str | None = None) -> dict:
+    """A markdown table (``| a | b |`` lines: a header, a rule, rows) as a result figure (:func:`table`)."""
+    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip().startswith("|")]
+    cells = [[c.strip() for c in ln.strip("|").split("|")] for ln in lines]
+    if len(cells) < 2 or not all(set(c) <= set(":-") for c in cells[1]):
+        raise ValueError(f"not a markdown table: {text[:200]!r}")
+    return table(cells[0], cells[2:], caption=caption)
+
+
+def show(
+    figures: dict,
+    key: str,
+    columns: Sequence[str],
+    rows: Sequence[Sequence[object]],
+    *,
+    caption: str | None = None,
+) -> None:
+    """Print a table in markdown and keep it in ``figures[key]`` (:func:`table`) for :func:`write_result`."""
+    print(markdown_table(list(columns), [list(r) for r in rows]))
+    figures[key] = table(columns, rows, caption=caption)
 
 
 def write_result(

@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 
 import torch
-from _common import header, markdown_table, time_call
+from _common import header, show, time_call, write_result
 
 from kinlearn import kinematics, load_robot
 from kinlearn.body.state import StateLayout
@@ -97,22 +97,27 @@ def main() -> None:
         for name, n, rate in rates
     ]
     print()
-    print(
-        markdown_table(
-            [
-                "method",
-                "transitions timed",
-                "M transitions/s",
-                f"s per {cfg.transitions / 1e6:g} M",
-                "vs slowest",
-                "babble() is faster by",
-            ],
-            rows,
-        )
+    figures: dict = {}
+    show(
+        figures,
+        "throughput",
+        [
+            "method",
+            "transitions timed",
+            "M transitions/s",
+            f"s per {cfg.transitions / 1e6:g} M",
+            "vs slowest",
+            "babble() is faster by",
+        ],
+        rows,
+        caption=f"{cfg.walkers} walkers × {cfg.steps} steps, float32.",
     )
-    print(
-        f"\n{cfg.walkers} walkers × {cfg.steps} steps; goal ≥ 1 M transitions in ≤ 1 s: "
-        f"{'met' if cfg.transitions / ours <= 1.0 else 'missed'} ({cfg.transitions / ours:.2f} s)"
+    print(f"\n{cfg.walkers} walkers × {cfg.steps} steps: {cfg.transitions / ours:.2f} s")
+    write_result(
+        "babbling_speed",
+        figures,
+        title=f"Motor babbling throughput ({robot.name})",
+        threads=args.threads,
     )
 
 

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import RUNS, header, markdown_table, table, write_result
 
 import kinlearn
 from kinlearn import Scene
@@ -92,7 +92,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     warnings.simplefilter("ignore", kinlearn.DomainWarning)
-    out = args.out or Path(__file__).parent / "results" / f"balls_{args.robot}"
+    out = args.out or RUNS / f"balls_{args.robot}"
     out.mkdir(parents=True, exist_ok=True)
     print(header(f"Balls across the straight path ({args.robot})", args.threads))
     folder = DEFAULT_CHECKPOINTS / args.robot
@@ -114,7 +114,7 @@ def main() -> None:
         TMConfig(robot=planner.robot.name, dof=planner.robot.dof, normalize=False)
     ).eval()
     tm_state = torch.zeros(1, planner.robot.dof + 3)
-    table, summary = [], {}
+    table_rows, summary = [], {}
     for name, fn in rows.items():
         s0, g0, b0 = problems[0]
         fn(s0, g0, b0)  # warm-up
@@ -153,18 +153,30 @@ def main() -> None:
             if stages
             else ["", "", ""]  # the joint line: nothing planned
         )
-        table.append([name, f"{100 * np.mean(ok):.1f}%", *times, str(counts) if counts else "", str(flagged)])
+        table_rows.append(
+            [name, f"{100 * np.mean(ok):.1f}%", *times, str(counts) if counts else "", str(flagged)]
+        )
         print(
             f"  {name}: {100 * np.mean(ok):.1f}%, stages {counts}, flagged free but colliding: {flagged}",
             flush=True,
         )
     text = markdown_table(
-        ["method", "success", "p50 ms", "p99 ms", "p50 over the TM", "stages", "flagged"], table
+        ["method", "success", "p50 ms", "p99 ms", "p50 over the TM", "stages", "flagged"], table_rows
     )
     print("\n" + text)
     (out / "table.md").write_text(text + "\n")
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     print(f"wrote {out}/summary.json, table.md")
+    caption = (
+        f"{len(problems)} problems (seed {args.seed}, {'a floor at z = 0' if args.floor else 'no floor'})."
+    )
+    columns = ["method", "success", "p50 ms", "p99 ms", "p50 over the TM", "stages", "flagged"]
+    write_result(
+        f"ball_problems_{args.robot}" + ("_floor" if args.floor else ""),
+        {"balls": table(columns, table_rows, caption=caption)},
+        title=f"One or two balls across the straight path ({args.robot})",
+        threads=args.threads,
+    )
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import header, show, write_result
 
 from kinlearn.collision import kernel
 from kinlearn.collision.ompl import OmplRrtConnect
@@ -94,8 +94,16 @@ def main() -> None:
         w50, w99 = _pct(1e6 * wall[name])
         c50, c99 = _pct(1e6 * cpu[name])
         table.append([name, f"{w50:.1f}", f"{w99:.1f}", f"{c50:.1f}", f"{c99:.1f}"])
-    print(f"\n{len(problems)} held-out problems (every {step}th), each row once per problem, in turn\n")
-    print(markdown_table(["batch 1", "p50 (µs)", "p99 (µs)", "CPU p50 (µs)", "CPU p99 (µs)"], table))
+    caption = f"{len(problems)} held-out problems (every {step}th), each row once per problem, in turn."
+    print(f"\n{caption}\n")
+    figures: dict = {}
+    show(
+        figures,
+        "batch 1",
+        ["batch 1", "p50 (µs)", "p99 (µs)", "CPU p50 (µs)", "CPU p99 (µs)"],
+        table,
+        caption=caption,
+    )
 
     names = list(rows)
     tm_name, obs, free, ompl = names
@@ -138,6 +146,14 @@ def main() -> None:
     for name, ts in parts.items():
         print(f"  {name}: {1e6 * np.median(ts):.1f}")
     print(f"\n1-minute load average at the end {os.getloadavg()[0]:.1f} (on {os.cpu_count()} logical cores)")
+    figures["parts of an obstacle plan"] = {
+        "columns": ["part", "median (µs)"],
+        "rows": [[name, f"{1e6 * np.median(ts):.1f}"] for name, ts in parts.items()],
+        "caption": f"Each timed alone, on the {n} plans stage 1 cleared.",
+    }
+    write_result(
+        "batch1_speed", figures, title="Batch-1 planning speed among obstacles (iiwa14)", threads=args.threads
+    )
 
 
 if __name__ == "__main__":

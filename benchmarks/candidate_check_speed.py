@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import header, show, write_result
 
 import kinlearn
 from kinlearn.collision import kernel as K
@@ -129,11 +129,25 @@ def main() -> None:
         ]
         for name, t in best.items()
     ]
-    print(
+    caption = (
         f"{n_prob} problems, {sum(len(o) for _, o in cands)} candidates, "
-        f"{sum(p >= 0 for p in first)} problems with a free one; the same picks every way"
+        f"{sum(p >= 0 for p in first)} problems with a free one; the same picks every way."
     )
-    print(markdown_table(["check", "mean ms", "p50 ms", "p99 ms", "mean / p99 against the walk alone"], rows))
+    print(caption)
+    figures: dict = {}
+    show(
+        figures,
+        "candidate check",
+        ["check", "mean ms", "p50 ms", "p99 ms", "mean / p99 against the walk alone"],
+        rows,
+        caption=caption,
+    )
+    write_result(
+        f"candidate_check_speed_{args.robot}",
+        figures,
+        title=f"The fixed-time stage's candidate check ({args.robot})",
+        threads=args.threads,
+    )
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # NumPy's matrix products on
 
 import numpy as np
 import torch
-from _common import header, markdown_table, time_call
+from _common import header, show, time_call, write_result
 
 from kinlearn import load_robot
 from kinlearn.collision import (
@@ -48,12 +48,16 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     print(header("collision speed (iiwa14)", args.threads))
     robot = load_robot("iiwa14")
+    figures: dict = {}
     if not args.batch1_only:
-        large_batches(robot, args)
-    batch_one(robot, args.problems)
+        large_batches(robot, args, figures)
+    batch_one(robot, args.problems, figures)
+    write_result(
+        "collision_speed", figures, title="The collision layer's speed (iiwa14)", threads=args.threads
+    )
 
 
-def large_batches(robot, args) -> None:
+def large_batches(robot, args, figures: dict) -> None:
     gen = torch.Generator().manual_seed(0)
     scene = Scene(
         torch.rand(5, 4, generator=gen) * 0.3 + torch.tensor([0.3, 0.0, 0.3, 0.05]),
@@ -85,19 +89,19 @@ def large_batches(robot, args) -> None:
                 f"{args.batch / total / 1e6:.2f}",
             ]
         )
-    print(
-        markdown_table(
-            [
-                "body",
-                "configurations",
-                "centres (ms)",
-                "body–scene (ms)",
-                "self (ms)",
-                "all (ms)",
-                "M configs/s",
-            ],
-            rows,
-        )
+    show(
+        figures,
+        "large batches",
+        [
+            "body",
+            "configurations",
+            "centres (ms)",
+            "body–scene (ms)",
+            "self (ms)",
+            "all (ms)",
+            "M configs/s",
+        ],
+        rows,
     )
     body = body_spheres(robot).float()
     q1 = q[:1]
@@ -140,7 +144,7 @@ def _time_problem(body, nbody, paths: np.ndarray, scene: Scene) -> tuple[float, 
     )
 
 
-def batch_one(robot, n_problems: int) -> None:
+def batch_one(robot, n_problems: int, figures: dict) -> None:
     """Batch 1 as a planner sees it: one scene, 1 or 8 candidate 11-knot paths; the kernel vs torch."""
     body = body_spheres(robot).double()
     nbody = KernelBody(body)
@@ -180,24 +184,26 @@ def batch_one(robot, n_problems: int) -> None:
                 target[name],
             ]
         )
-    print(
-        f"\nCompiled path check at batch 1: {n_problems} held-out problems (every {step}th), float64, each a "
+    caption = (
+        f"Compiled path check at batch 1: {n_problems} held-out problems (every {step}th), float64, each a "
         f"straight 11-knot joint line and 7 bent copies; torch check_path on the same paths (median "
         f"{med(checked)} checked configurations per straight line). Median over problems of each one's "
         f"median wall time; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores."
     )
-    print(
-        markdown_table(
-            [
-                "call",
-                "kernel median (µs)",
-                "kernel worst (µs)",
-                "torch check_path (µs)",
-                "speed-up",
-                "target (µs)",
-            ],
-            rows,
-        )
+    print("\n" + caption)
+    show(
+        figures,
+        "batch 1",
+        [
+            "call",
+            "kernel median (µs)",
+            "kernel worst (µs)",
+            "torch check_path (µs)",
+            "speed-up",
+            "target (µs)",
+        ],
+        rows,
+        caption=caption,
     )
     print(f"KernelScene from a Scene: {1e6 * med(scene_build):.1f} µs")
 

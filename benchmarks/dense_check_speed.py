@@ -29,7 +29,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import _numpy_check as numpy_check
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import header, show, write_result
 
 from kinlearn import load_robot
 from kinlearn.collision import Scene, body_spheres
@@ -143,14 +143,25 @@ def main() -> None:
         ],
         ["verdict + clearance (check_paths)", "mixed", "—", f"{1e6 * t_kme:.1f}", "—"],
     ]
-    print(
-        f"\n{len(P)} paths of 12 knots, {body.num_spheres} spheres, {len(body.pairs)} self pairs, floor; "
-        f"collision-free: {100 * free_share['aligned']:.0f}% (aligned scene), {100 * free_share['mixed']:.0f}% (mixed)\n"
+    caption = (
+        f"{len(P)} paths of 12 knots, {body.num_spheres} spheres, {len(body.pairs)} self pairs, floor; "
+        f"collision-free: {100 * free_share['aligned']:.0f}% (aligned scene), {100 * free_share['mixed']:.0f}% (mixed); "
+        "median per path."
     )
-    print(markdown_table(["check", "scene", "NumPy (µs)", "kernel (µs)", "NumPy / kernel"], rows))
-    print(
-        f"\nkernel verdict, mixed scene: {1e6 * t_km:.1f} µs median per path (goal ≤ 20 µs); "
-        f"kernel / NumPy = {t_kv / t_nv:.3f} on the aligned scene"
+    print(f"\n{caption}\n")
+    figures: dict = {}
+    show(
+        figures,
+        "dense check",
+        ["check", "scene", "NumPy (µs)", "kernel (µs)", "NumPy / kernel"],
+        rows,
+        caption=caption,
+    )
+    write_result(
+        "dense_check_speed",
+        figures,
+        title=f"The batch-1 dense path check: compiled kernel against NumPy ({robot.name})",
+        threads=args.threads,
     )
 
 

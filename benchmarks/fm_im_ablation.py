@@ -16,7 +16,7 @@ import argparse
 import warnings
 
 import torch
-from _common import header
+from _common import from_markdown, header, write_result
 
 from kinlearn.body.robot import load_robot
 from kinlearn.errors import DomainWarning
@@ -43,8 +43,15 @@ def main() -> None:
         "analytic": AnalyticFM(robot),
     }
     results = fm_im_ablation(robot, fms, shipped.im, heldout_pairs(robot, args.n))
-    print(f"\n{args.n:,} held-out goals within ±90% of the joint ranges; cells: ≤ 1 cm (median)\n")
+    caption = f"{args.n:,} held-out goals within ±90% of the joint ranges; cells: ≤ 1 cm (median)."
+    print(f"\n{caption}\n")
     print(fm_im_table(results))
+    write_result(
+        "fm_im_ablation",
+        {"position goals": from_markdown(fm_im_table(results), caption=caption)},
+        title=f"Which FM, which IM: position goals ({robot.name})",
+        threads=args.threads,
+    )
 
 
 if __name__ == "__main__":

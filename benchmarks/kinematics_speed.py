@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 
 import torch
-from _common import header, markdown_table, time_call
+from _common import header, show, time_call, write_result
 
 from kinlearn import kinematics, load_robot
 
@@ -65,21 +65,30 @@ def main() -> None:
             + [f"{r['fast'] / r['pk']:.1f}×", f"{r['fast'] / r['pinocchio']:.1f}×"]
         )
     print()
-    print("Throughput in million configurations per second (higher is better).")
-    print(
-        markdown_table(
-            [
-                "what",
-                "dtype",
-                "batch",
-                "fast",
-                "pytorch-kinematics",
-                "pinocchio loop",
-                "fast / pk",
-                "fast / pinocchio",
-            ],
-            rows,
-        )
+    caption = "Throughput in million configurations per second (higher is better)."
+    print(caption)
+    figures: dict = {}
+    show(
+        figures,
+        "throughput",
+        [
+            "what",
+            "dtype",
+            "batch",
+            "fast",
+            "pytorch-kinematics",
+            "pinocchio loop",
+            "fast / pk",
+            "fast / pinocchio",
+        ],
+        rows,
+        caption=caption,
+    )
+    write_result(
+        "kinematics_speed",
+        figures,
+        title=f"Forward kinematics and Jacobians: three backends ({robot.name})",
+        threads=args.threads,
     )
 
 

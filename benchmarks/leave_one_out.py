@@ -2,7 +2,7 @@
 
     python benchmarks/leave_one_out.py --robot iiwa14 [--families bookcase cubby …] [--iterations 3000]
         [--candidates C] [--problems-per-family 200] [--solvable-only] [--base all] [--run-root runs/loo/iiwa14] [--problems-dir DIR]
-        [--problems benchmarks/data/scene_problems_iiwa14.npz] [--out benchmarks/results/loo_iiwa14]
+        [--problems benchmarks/data/scene_problems_iiwa14.npz] [--out runs/benchmarks/loo_iiwa14]
 
 For each family F of ``--families`` (default: the seven scene families) a network is trained with
 ``kinlearn train-obstacle-planner --families BASE --leave-out F`` (the same problems, seeds, iterations,
@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import RUNS, from_markdown, header, markdown_table, write_result
 
 import kinlearn
 from kinlearn.data.problems import FAMILIES, ProblemSet, select_families
@@ -128,7 +128,7 @@ def main() -> None:
     torch.set_num_threads(1)
     args.run_root = args.run_root or Path("runs") / "loo" / args.robot
     args.problems_dir = args.problems_dir or args.run_root / "problems"
-    out = args.out or Path(__file__).parent / "results" / f"loo_{args.robot}"
+    out = args.out or RUNS / f"loo_{args.robot}"
     out.mkdir(parents=True, exist_ok=True)
     print(header(f"Leave one family out ({args.robot})", 1))
     problems = ProblemSet.load(args.problems or DATA / f"scene_problems_{args.robot}.npz", robot=args.robot)
@@ -223,6 +223,17 @@ def main() -> None:
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     (out / "table.md").write_text(table + "\n")
     print(f"wrote {out}/summary.json, table.md")
+    write_result(
+        f"leave_one_out_{args.robot}",
+        {
+            "left out": from_markdown(
+                table, caption=f"{args.candidates}-candidate networks, {args.iterations} iterations each."
+            ),
+            "mean over the left-out families": {k: round(v, 4) for k, v in mean.items()},
+        },
+        title=f"A family left out of the obstacle network's training ({args.robot})",
+        threads=1,
+    )
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 and success against a time budget, for kinlearn and the baselines on the same problems and checker.
 
     python benchmarks/obstacle_families.py --robot panda [--problems benchmarks/data/scene_problems_panda.npz]
-        [--planner DIR] [--kinlearn-only] [--no-floor] [--n 140] [--threads 1] [--out benchmarks/results/families_panda]
+        [--planner DIR] [--kinlearn-only] [--no-floor] [--n 140] [--threads 1] [--out runs/benchmarks/families_panda]
 
 Problems: a held-out set of ``benchmarks/make_obstacle_problems.py --families scenes`` (seeds 1004–1010,
 verified solvable by OMPL RRT-Connect within 5 s); a set made with ``--within body`` (the ur5's within the
@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import RUNS, from_markdown, header, markdown_table, write_result
 
 import kinlearn
 from kinlearn import Scene, load_robot
@@ -139,7 +139,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     path = args.problems or DATA / f"scene_problems_{args.robot}.npz"
-    out = args.out or Path(__file__).parent / "results" / f"families_{args.robot}"
+    out = args.out or RUNS / f"families_{args.robot}"
     out.mkdir(parents=True, exist_ok=True)
     print(header(f"Planning among the scene families ({args.robot}, held-out problems)", args.threads))
     problems = ProblemSet.load(path, robot=args.robot)
@@ -247,6 +247,29 @@ def main() -> None:
     (out / "table.md").write_text(table + "\n")
     _figure(summary, out / "success_budget.png", args.robot, len(problems))
     print(f"\nwrote {out}/summary.json, table.md, success_budget.png")
+    caption = (
+        f"{len(problems)} held-out problems from {path.name}"
+        + (", planned and judged without their floor" if args.no_floor else "")
+        + f"; hard (straight joint line collides): {int(problems.hard.sum())}"
+        + (f"; left out of the network's training, marked *: {', '.join(left_out)}" if left_out else "")
+        + "."
+    )
+    suffix = "".join(
+        s
+        for s, on in (
+            (f"_{path.stem}", args.problems is not None),
+            ("_no_floor", args.no_floor),
+            ("_kinlearn", args.kinlearn_only),
+            ("_planner", args.planner is not None),
+        )
+        if on
+    )
+    write_result(
+        f"obstacle_families_{args.robot}{suffix}",
+        {"success and time": from_markdown(table, caption=caption)},
+        title=f"Planning among the seven scene families ({args.robot}{', ' + suffix[1:].replace('_', ' ') if suffix else ''})",
+        threads=args.threads,
+    )
 
 
 def _figure(summary: dict, path: Path, robot: str, n: int) -> None:

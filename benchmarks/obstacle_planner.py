@@ -37,7 +37,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import torch
-from _common import header
+from _common import from_markdown, header, write_result
 
 from kinlearn.data.problems import FAMILIES, ProblemSet
 from kinlearn.errors import KinlearnError, MissingDependencyError
@@ -356,6 +356,15 @@ def main() -> None:
             "",
         ]
     atomic_write(out / "obstacle_benchmark.md", lambda p: p.write_text("\n".join(md)))
+    write_result(
+        "obstacle_planner",
+        {"every method": from_markdown(table, caption=f"{len(problems)} problems: {n_fam}.")},
+        title="Planning around obstacles: every method (iiwa14, tabletop, shelf and barrier)",
+        notes="Batch 1, one torch thread, wall time per problem after one untimed warm-up call. Success: starts "
+        "at the start; ends within 0.05 rad (every joint) and 1 cm (end effector) of the goal; within the "
+        "joint limits; collision-free under the dense check. Hard: the straight joint line collides.",
+        threads=1,
+    )
     print("\n" + table, flush=True)
     print(
         f"\nwrote {out}/obstacle_benchmark.{{json,md}}, success_latency.png, obstacle_plans.png; {wall:.0f} s"

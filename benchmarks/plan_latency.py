@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import header, show, table, write_result
 
 from kinlearn import load_robot
 from kinlearn.baselines import joint_line, rrt_connect_timed
@@ -115,11 +115,13 @@ def main() -> None:
     except MissingDependencyError as exc:
         print(f"RRT-Connect skipped: {exc}")
     print()
-    print(
-        markdown_table(
-            ["batch 1", "p50 (µs)", "p95 (µs)", "p99 (µs)"],
-            [[name, f"{r['p50']:.1f}", f"{r['p95']:.1f}", f"{r['p99']:.1f}"] for name, r in rows.items()],
-        )
+    figures: dict = {}
+    show(
+        figures,
+        "batch 1",
+        ["batch 1", "p50 (µs)", "p95 (µs)", "p99 (µs)"],
+        [[name, f"{r['p50']:.1f}", f"{r['p95']:.1f}", f"{r['p99']:.1f}"] for name, r in rows.items()],
+        caption=f"{args.calls:,} calls each on held-out workspace pairs.",
     )
 
     sb, gb = start[: args.batch], goal[: args.batch]
@@ -130,9 +132,20 @@ def main() -> None:
     if rrt_rate:
         print(f"RRT-Connect one query after another: {rrt_rate:,.0f} plans/s")
 
+    through = [["kinlearn.plan", f"{rate:,.0f}"]]
+    if rrt_rate:
+        through.append(["RRT-Connect, one query after another (OMPL)", f"{rrt_rate:,.0f}"])
+    figures["throughput"] = table(
+        ["planner", "plans/s"], through, caption=f"kinlearn.plan at batch {args.batch:,}."
+    )
+
     print("\nbreakdown of a batch-1 plan (median µs):")
-    for name, us in breakdown(planner, start[0], goal[0], min(args.calls, 1000)):
+    parts = breakdown(planner, start[0], goal[0], min(args.calls, 1000))
+    for name, us in parts:
         print(f"  {name}: {us:.1f}")
+    figures["breakdown"] = table(
+        ["part of a batch-1 plan", "median (µs)"], [[name, f"{us:.1f}"] for name, us in parts]
+    )
 
     plan50 = rows["kinlearn.plan (whole call)"]["p50"]
     tm50 = rows["paper-size TM forward alone (eager)"]["p50"]
@@ -142,6 +155,12 @@ def main() -> None:
         rrt50 = rows["RRT-Connect, no obstacles (OMPL, per query)"]["p50"]
         print(f"  whole plan / RRT-Connect, p50: {plan50 / rrt50:.2f} (≤ 1)")
         print(f"  throughput at batch {args.batch} / RRT-Connect's: {rate / rrt_rate:.1f}× (≥ 10×)")
+    write_result(
+        "plan_latency",
+        figures,
+        title=f"Plan latency at batch 1 and throughput ({robot.name}, free space)",
+        threads=args.threads,
+    )
 
 
 def _timed(fn) -> float:

@@ -19,7 +19,7 @@ import time
 import warnings
 
 import torch
-from _common import header
+from _common import header, table, write_result
 
 from kinlearn.body.kinematics import kinematics
 from kinlearn.body.robot import load_robot
@@ -39,13 +39,16 @@ def main() -> None:
     warnings.simplefilter("ignore", DomainWarning)
     print(header("Position goals through the learned models alone", args.threads))
     print(f"{args.n:,} held-out pairs per arm within ±90% of the joint ranges\n")
-    print("| arm | ≤ 1 cm | median (mm) | p99 (mm) | limit violations | batch-1 position / joint plan "
-          "| IM through the chain, executed (mm, mean) |")  # fmt: skip
+    columns = ["arm", "≤ 1 cm", "median (mm)", "p99 (mm)", "limit violations",
+               "batch-1 position / joint plan", "IM through the chain, executed (mm, mean)"]  # fmt: skip
+    print("| " + " | ".join(columns) + " |")
     print("|:--|--:|--:|--:|--:|--:|--:|")
+    rows = []
     for name in args.robots:
         robot = load_robot(name)
         planner = Planner.default(name)
         if planner.chain is None:
+            rows.append([name, "no chain.pt shipped", "", "", "", "", ""])
             print(f"| {name} | no chain.pt shipped | | | | | |")
             continue
         pairs = heldout_pairs(robot, args.n)
@@ -77,12 +80,27 @@ def main() -> None:
         with torch.no_grad():
             act = im(im.layout.join(q, fk.position(q)), target)
         im_err = float((fk.position(q + act) - target).norm(dim=-1).mean()) * 1e3
-        print(
-            f"| {name} | {float((err <= 10).double().mean()):.1%} | {err.median():.3f} | "
-            f"{err.quantile(0.99):.3f} | {violations} | {ratio:.2f}× ({statistics.median(t_pos) * 1e6:.0f} / "
-            f"{statistics.median(t_joint) * 1e6:.0f} µs) | {im_err:.3f} |",
-            flush=True,
-        )
+        row = [
+            name,
+            f"{float((err <= 10).double().mean()):.1%}",
+            f"{err.median():.3f}",
+            f"{err.quantile(0.99):.3f}",
+            violations,
+            f"{ratio:.2f}× ({statistics.median(t_pos) * 1e6:.0f} / {statistics.median(t_joint) * 1e6:.0f} µs)",
+            f"{im_err:.3f}",
+        ]
+        rows.append(row)
+        print("| " + " | ".join(str(c) for c in row) + " |", flush=True)
+    write_result(
+        "position_goals",
+        {
+            "position goals": table(
+                columns, rows, caption=f"{args.n:,} held-out pairs per arm within ±90% of the joint ranges."
+            )
+        },
+        title="End-effector position goals through the learned models alone",
+        threads=args.threads,
+    )
 
 
 if __name__ == "__main__":

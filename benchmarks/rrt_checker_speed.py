@@ -20,7 +20,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import header, show, write_result
 
 from kinlearn import load_robot
 from kinlearn.collision import body_spheres
@@ -73,10 +73,22 @@ def main() -> None:
                 f"{checks / busy:,.0f}",
             ]
         )
-    print(
-        f"\n{len(picks)} held-out problems (every {step}th), time limit {args.time_limit} s, seed = problem index\n"
+    caption = f"{len(picks)} held-out problems (every {step}th), time limit {args.time_limit} s, seed = problem index."
+    print(f"\n{caption}\n")
+    figures: dict = {}
+    show(
+        figures,
+        "checkers",
+        ["checker", "solved", "median (ms)", "p99 (ms)", "checks / s"],
+        rows,
+        caption=caption,
     )
-    print(markdown_table(["checker", "solved", "median (ms)", "p99 (ms)", "checks / s"], rows))
+    write_result(
+        "rrt_checker_speed",
+        figures,
+        title="OMPL RRT-Connect: compiled against torch validity checks (iiwa14)",
+        threads=args.threads,
+    )
 
 
 if __name__ == "__main__":

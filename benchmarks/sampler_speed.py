@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import header, show, write_result
 
 from kinlearn import load_robot
 from kinlearn.collision import kernel as K
@@ -109,19 +109,28 @@ def main() -> None:
         if args.compare == "pairs"
         else ""
     )
-    print(f"\n{len(scenes)} held-out problems × {args.seeds} seeds{proven}; the same paths both ways\n")
-    print(
-        markdown_table(
-            [
-                "sampler",
-                "p50 ms",
-                "mean ms (both solved)",
-                "p90 ms",
-                "within 10 / 50 ms",
-                f"time / {first}'s (median)",
-            ],
-            rows,
-        )
+    caption = f"{len(scenes)} held-out problems × {args.seeds} seeds{proven}; the same paths both ways."
+    print(f"\n{caption}\n")
+    figures: dict = {}
+    show(
+        figures,
+        what,
+        [
+            "sampler",
+            "p50 ms",
+            "mean ms (both solved)",
+            "p90 ms",
+            "within 10 / 50 ms",
+            f"time / {first}'s (median)",
+        ],
+        rows,
+        caption=caption,
+    )
+    write_result(
+        f"sampler_speed_{args.compare}_{args.robot}",
+        figures,
+        title=f"Compiled RRT-Connect: {what} ({args.robot})",
+        threads=args.threads,
     )
 
 

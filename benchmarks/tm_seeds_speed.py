@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import torch
-from _common import header, markdown_table
+from _common import header, show, write_result
 
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
 from kinlearn.models.forward_inverse import LearnedFM, LearnedIM, fm_config, im_config, save_model
@@ -75,19 +75,25 @@ def main() -> None:
                     f"{one * args.seeds / lock:.2f}×",
                 ]
             )
-    print(
-        f"{args.epochs} epoch(s) of {args.pairs} pairs at batch 64 per seed, {args.seeds} seeds\n\n"
-        + markdown_table(
-            [
-                "FM/IM",
-                "one seed alone (s)",
-                f"{args.seeds} seeds one by one (s)",
-                f"{args.seeds} seeds in lockstep (s)",
-                "lockstep per seed (s)",
-                "speed-up",
-            ],
-            rows,
-        )
+    caption = f"{args.epochs} epoch(s) of {args.pairs} pairs at batch 64 per seed, {args.seeds} seeds."
+    print(caption + "\n")
+    figures: dict = {}
+    show(
+        figures,
+        "seed sweep",
+        [
+            "FM/IM",
+            "one seed alone (s)",
+            f"{args.seeds} seeds one by one (s)",
+            f"{args.seeds} seeds in lockstep (s)",
+            "lockstep per seed (s)",
+            "speed-up",
+        ],
+        rows,
+        caption=caption,
+    )
+    write_result(
+        "tm_seeds_speed", figures, title="A seed sweep's TM training: seeds in lockstep", threads=args.threads
     )
 
 

@@ -23,7 +23,7 @@ import tempfile
 import time
 
 import torch
-from _common import header, markdown_table
+from _common import header, show, write_result
 
 from kinlearn import load_robot
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
@@ -181,16 +181,25 @@ def main() -> None:
         )
 
     print()
-    print(
+    caption = (
         f"Time per training sample (forward, rectification, loss, backward, optimiser step), per epoch of "
         f"{args.pairs:,} pairs and per {args.epochs}-epoch run; speed-up = per-sample loop time / row time, "
-        "measured in this run."
+        f"measured in the same run. FM/IM: {kind}."
     )
-    print(
-        markdown_table(
-            ["method", "µs per sample", "per epoch", f"per {args.epochs} epochs", "speed-up vs per-sample"],
-            rows,
-        )
+    print(caption)
+    figures: dict = {}
+    show(
+        figures,
+        "training speed",
+        ["method", "µs per sample", "per epoch", f"per {args.epochs} epochs", "speed-up vs per-sample"],
+        rows,
+        caption=caption,
+    )
+    write_result(
+        "tm_training_speed" + ("_analytic" if args.analytic else ""),
+        figures,
+        title=f"TM training time: batched rectification against a per-sample loop ({kind} FM/IM)",
+        threads=args.threads,
     )
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, markdown_table
+from _common import header, show, write_result
 
 import kinlearn
 from kinlearn.collision import body_spheres, kernel, planning_body
@@ -49,10 +49,11 @@ def main() -> None:
         d, own = kernel.clearances(kt, kernel.KernelScene(scene.to(torch.float64)), ends)
         if (np.minimum(d, own) > 0).all():
             keep.append(i)
-    print(
+    caption = (
         f"{tool.num_spheres} spheres with the tool, {arm.num_spheres} without; {len(keep)} of "
-        f"{len(problems)} problems have their start and goal free for the arm with the tool"
+        f"{len(problems)} held-out problems have their start and goal free for the arm with the tool."
     )
+    print(caption)
     arm_planner = kinlearn.Planner.default("ur5", body=arm)
     planner = kinlearn.Planner.default("ur5")
     rows = {
@@ -90,17 +91,22 @@ def main() -> None:
         )
         print(f"  {name}: {table[-1][1]}, flagged free but colliding with the tool {flagged}", flush=True)
     print()
-    print(
-        markdown_table(
-            [
-                "planner",
-                "success (judged with the tool)",
-                "flagged free but colliding with the tool",
-                "p50 ms",
-                "p99 ms",
-            ],
-            table,
-        )
+    figures: dict = {}
+    show(
+        figures,
+        "the ur5 judged with its tool",
+        [
+            "planner",
+            "success (judged with the tool)",
+            "flagged free but colliding with the tool",
+            "p50 ms",
+            "p99 ms",
+        ],
+        table,
+        caption=caption,
+    )
+    write_result(
+        "ur5_gripper", figures, title="The ur5 with the standard benchmarks' tool", threads=args.threads
     )
 
 

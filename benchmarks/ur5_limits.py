@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, limits_row, markdown_table, plan_cases
+from _common import header, limits_row, plan_cases, show, write_result
 
 import kinlearn
 from kinlearn.collision import planning_body
@@ -54,7 +54,7 @@ def main() -> None:
     wide.limits = (robot.lower.astype(np.float64), robot.upper.astype(np.float64))
     planners = {
         "shipped (the body's limits, ±π)": kinlearn.Planner.default("ur5"),
-        "the robot's limits (±2π; before)": kinlearn.Planner.default("ur5", body=wide),
+        "the robot's limits (±2π)": kinlearn.Planner.default("ur5", body=wide),
     }
     modes = {"fixed time": {"refine_steps": 0}, f"deadline {args.deadline:g} s": {"deadline": args.deadline}}
     rows = []
@@ -67,7 +67,17 @@ def main() -> None:
                 planner, cases, lambda q: np.abs(q).max() <= math.pi + 1e-9, **kw
             )
             rows.append(limits_row(pname, mname, ok, len(cases), beyond, times, digits=1))
-    print(markdown_table(["planner", "mode", "success within ±π", "beyond ±π", "p50 ms", "p99 ms"], rows))
+    figures: dict = {}
+    show(
+        figures,
+        "within ±π",
+        ["planner", "mode", "success within ±π", "beyond ±π", "p50 ms", "p99 ms"],
+        rows,
+        caption=f"{len(cases)} held-out scene problems with their ends wrapped into ±π.",
+    )
+    write_result(
+        "ur5_limits", figures, title="The ur5 within the benchmarks' UR5 limits (±π)", threads=args.threads
+    )
 
 
 if __name__ == "__main__":

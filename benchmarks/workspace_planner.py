@@ -18,7 +18,7 @@ import inspect
 import time
 
 import torch
-from _common import header
+from _common import from_markdown, header, write_result
 
 from kinlearn import baselines, load_robot
 from kinlearn.data.endpoints import EndpointConfig, make_endpoints
@@ -56,8 +56,11 @@ def main() -> None:
             joint[row] = evaluate_workspace(robot, sub, {row: search})[row]
         except MissingDependencyError as exc:
             print(f"{label} skipped: {exc}")
-    print(f"\n## Joint goals: {len(pairs)} held-out workspace pairs (±90% of the joint range)\n")
+    figures: dict = {}
+    title = f"Joint goals: {len(pairs)} held-out workspace pairs (±90% of the joint range)"
+    print(f"\n## {title}\n")
     print(workspace_table(joint))
+    figures["joint goals"] = from_markdown(workspace_table(joint), caption=title)
     if planner.fm is not None and planner.im is not None:
         pos = evaluate_workspace(
             robot,
@@ -65,12 +68,22 @@ def main() -> None:
             {"kinlearn (position goals)": planner},
             goal_kind="position",
         )
-        print("\n## End-effector position goals (same pairs; any configuration)\n")
+        title = "End-effector position goals (same pairs; any configuration)"
+        print(f"\n## {title}\n")
         print(workspace_table(pos, POSITION_COLUMNS))
+        figures["position goals"] = from_markdown(workspace_table(pos, POSITION_COLUMNS), caption=title)
     paper = make_endpoints(EndpointConfig(robot=robot.name, n=args.n, seed=777))
     task = evaluate_workspace(robot, paper, {"kinlearn (joint goals)": planner})
-    print(f"\n## The paper's task: {len(paper)} held-out pairs\n")
+    title = f"The paper's task: {len(paper)} held-out pairs"
+    print(f"\n## {title}\n")
     print(workspace_table(task))
+    figures["paper task"] = from_markdown(workspace_table(task), caption=title)
+    write_result(
+        "workspace_planner",
+        figures,
+        title=f"The workspace planner on held-out pairs ({robot.name})",
+        threads=args.threads,
+    )
     print(f"\ntook {time.perf_counter() - t0:.0f} s")
 
 

@@ -10,7 +10,8 @@ other:
   1: a plan that missed its goal, as tiny models do); ``python - <<'EOF'`` runs its text as Python. What
   takes minutes or would change the installation (:data:`PARSE_ONLY`: ``kinlearn reproduce``,
   ``kinlearn model-error``, ``kinlearn export --to-package``, every ``python benchmarks/*.py``) is parsed
-  by its own argument parser instead, so a renamed option or script still fails; a synopsis
+  by its own argument parser instead, so a renamed option or script still fails (``VAR=value`` before a
+  command is dropped: ``OMP_NUM_THREADS=1 python benchmarks/…``); a synopsis
   (``[--option VALUE]``) must name only options its parser has. Set-up commands are checked: ``pip
   install -e '.[extra]'`` against pyproject.toml's extras, the test command against ``.ci/run``.
   Any other command fails: say here how to run it.
@@ -105,7 +106,7 @@ PARSE_ONLY = {
 }
 
 #: Per file: commands run before its blocks (outputs of runs the file reads).
-PREREQUISITES = {"docs/results.md": ["make-endpoints --n 16 --heldout 16 --run-dir runs/default/endpoints"]}
+PREREQUISITES: dict[str, list[str]] = {}
 
 #: Per file: names a block leaves to the reader (their own arrays), defined before the file's blocks.
 READER_NAMES = {
@@ -289,6 +290,8 @@ class DocRun:
                 tokens = tokens[cut + 1 :]
 
     def command(self, tokens: list[str]) -> None:
+        while tokens and re.fullmatch(r"[A-Z_][A-Z0-9_]*=\S*", tokens[0]):  # VAR=value before a command
+            tokens = tokens[1:]
         program, args = tokens[0], tokens[1:]
         if program == "kinlearn":
             self.kinlearn(args)
