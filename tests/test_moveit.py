@@ -204,7 +204,10 @@ def test_poses_written_as_lists_read_as_their_mappings(tmp_path):
             assert torch.equal(getattr(a, t), getattr(b, t))
     bad = _as_lists(data)
     bad["world"]["collision_objects"][1]["primitive_poses"][0]["orientation"] = [0.0, 0.0, 1.0]
-    with pytest.raises(SceneFormatError, match=r"'old_style_box' primitive 0 pose\.orientation must be"):
+    with pytest.raises(
+        SceneFormatError,
+        match=r"collision_objects\[1\]\.primitive_poses\[0\]\.orientation \(object 'old_style_box'\) must be",
+    ):
         Scene.from_moveit(bad)
     bad["world"]["collision_objects"][1]["primitive_poses"][0]["orientation"] = "up"
     with pytest.raises(SceneFormatError, match="orientation must be a mapping"):

@@ -155,6 +155,12 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
     if args.obstacles is not None:
         from ..collision.scene import Scene
 
+        with open(args.obstacles, "rb") as fh:  # an .npz is a zip archive; a MoveIt scene is YAML text
+            if fh.read(4) != b"PK\x03\x04":
+                raise ConfigError(
+                    f"--obstacles takes a kinlearn scene (.npz, written by Scene.save); {args.obstacles} is "
+                    "not one: give a MoveIt planning scene (.yaml) as --scene"
+                )
         obstacles = Scene.load(args.obstacles)
     elif args.scene is not None:
         from ..collision.scene import Scene

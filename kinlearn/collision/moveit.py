@@ -10,6 +10,18 @@ CYLINDER = 3 ([height, radius], axis along its local z), CONE = 4. Meshes, plane
 refused with a :class:`~kinlearn.errors.SceneFormatError` naming the object (approximating them
 silently would plan against something else than the scene), as is a sensed scene's octomap.
 
+One validating reader: every field kinlearn reads is checked for its type and shape, and a field that
+is wrong is a :class:`~kinlearn.errors.SceneFormatError` naming its key path
+(``world.collision_objects[3].pose.position.x (object 'shelf')``), never a plain Python error. Files
+are read with libyaml's safe loader where it is installed (PyYAML's pure-Python safe loader
+otherwise), never constructing Python objects from tags, and within a stated budget checked on the
+composed document before anything is built from it: at most :data:`MAX_YAML_BYTES` bytes,
+:data:`MAX_YAML_NODES` values counting each use of an alias (a "billion laughs" alias bomb is refused
+at once), nesting :data:`MAX_YAML_DEPTH` deep, and :data:`MAX_PRIMITIVES` primitives in a scene.
+Positions and sizes must lie within ±:data:`MAX_METRES` m; a pose's quaternion must have a norm
+within [:data:`QUATERNION_NORM`] (it is normalised within it; a norm far from 1 is a garbled pose,
+refused rather than normalised).
+
 :func:`primitives_from_moveit` returns the primitives in the robot's base frame, given the base's pose
 in the scene's frame, and :func:`primitives_to_moveit` writes them back; ``Scene.from_moveit`` and
 ``Scene.to_moveit`` are the same for a :class:`~kinlearn.collision.Scene`. A ``MotionPlanRequest``'s
@@ -18,7 +30,9 @@ start state and joint goal become joint vectors in the robot's order (:func:`req
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +55,12 @@ __all__ = [
     "CONE",
     "CYLINDER",
     "FLOOR_SLAB",
+    "MAX_METRES",
+    "MAX_PRIMITIVES",
+    "MAX_YAML_BYTES",
+    "MAX_YAML_DEPTH",
+    "MAX_YAML_NODES",
+    "QUATERNION_NORM",
     "SPHERE",
     "pose_matrix",
     "primitives_from_moveit",
@@ -53,89 +73,312 @@ __all__ = [
 BOX, SPHERE, CYLINDER, CONE = 1, 2, 3, 4
 #: Full side lengths (m) of the box a scene's floor is written as by :func:`primitives_to_moveit`.
 FLOOR_SLAB = (10.0, 10.0, 1.0)
+#: The largest YAML file read (bytes); a larger one is refused before it is read.
+MAX_YAML_BYTES = 256 * 2**20
+#: The most values (scalars, lists and mappings; an alias counts as many as it stands for) a YAML
+#: document may hold: enough for a scene of 10⁵ objects.
+MAX_YAML_NODES = 5_000_000
+#: The deepest nesting of lists and mappings a YAML document may hold (a scene needs 7).
+MAX_YAML_DEPTH = 64
+#: The most primitives a scene may hold.
+MAX_PRIMITIVES = 100_000
+#: Positions and sizes (m) beyond this magnitude are refused (no workcell is 1,000 km across).
+MAX_METRES = 1e6
+#: The norms a pose's orientation quaternion may have (it is normalised); others are refused.
+QUATERNION_NORM = (0.5, 2.0)
 _NAMES = {"box": BOX, "sphere": SPHERE, "cylinder": CYLINDER, "cone": CONE}
+_OPERATIONS = {"add": 0, "remove": 1, "append": 2, "move": 3}
 
 
-def read_yaml(source: str | Path | Mapping, what: str) -> Mapping:
-    """A YAML file (path) or an already-read mapping, as a mapping."""
-    if isinstance(source, Mapping):
-        return source
-    if not isinstance(source, (str, Path)):
-        raise SceneFormatError(f"{what} must be a YAML file path or a dict, got {type(source).__name__}")
+@dataclass(frozen=True)
+class _At:
+    """Where a value lies in the document: its key path and the collision object it belongs to."""
+
+    path: str
+    label: str = ""
+
+    def __truediv__(self, key: str | int) -> _At:
+        if isinstance(key, int):
+            return _At(f"{self.path}[{key}]", self.label)
+        return _At(f"{self.path}.{key}" if self.path else key, self.label)
+
+    def __str__(self) -> str:
+        where = self.path or "the document"
+        return f"{where} (object {self.label!r})" if self.label else where
+
+
+def _describe(value) -> str:
+    text = repr(value)
+    return f"{type(value).__name__} {text if len(text) <= 60 else text[:57] + '...'}"
+
+
+# --------------------------------------------------------------------------------------------------
+# Reading YAML within a budget
+# --------------------------------------------------------------------------------------------------
+
+
+def _check_nodes(root, path) -> None:
+    """Refuse a composed YAML document (node graph, aliases shared) that would build more than
+    :data:`MAX_YAML_NODES` values, nest deeper than :data:`MAX_YAML_DEPTH` or refer to itself; counted on
+    the graph, before any value is built, so an alias bomb costs the size of its text."""
+    import yaml
+
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    open_: set[int] = set()  # the collections being counted: the current one's ancestors
+    scalar = yaml.ScalarNode
+
+    def children(node):
+        if isinstance(node, yaml.MappingNode):
+            return [n for pair in node.value for n in pair]
+        return node.value
+
+    def refuse(node, what: str) -> SceneFormatError:
+        return SceneFormatError(f"{path} {what} (near line {node.start_mark.line + 1})")
+
+    if isinstance(root, scalar):
+        return
+    stack = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        if done:
+            s, d = 1, 1
+            for k in children(node):
+                if isinstance(k, scalar):
+                    s += 1
+                    d = max(d, 2)
+                else:
+                    s += size[id(k)]
+                    d = max(d, 1 + depth[id(k)])
+            if s > MAX_YAML_NODES:
+                raise refuse(
+                    node,
+                    f"would hold more than {MAX_YAML_NODES:,} values, its aliases expanded; a scene or "
+                    "request is refused past that budget",
+                )
+            if d > MAX_YAML_DEPTH:
+                raise refuse(
+                    node,
+                    f"nests lists and mappings more than {MAX_YAML_DEPTH} deep; a scene or request needs "
+                    "fewer than 10",
+                )
+            size[key], depth[key] = s, d
+            open_.discard(key)
+            continue
+        if key in size:
+            continue
+        open_.add(key)
+        stack.append((node, True))
+        for k in children(node):
+            if isinstance(k, scalar):
+                continue
+            if id(k) in open_:
+                raise refuse(k, "holds an alias to a value that holds it (a structure that contains itself)")
+            if id(k) not in size:
+                stack.append((k, False))
+
+
+def _parse_yaml(text: str, path) -> object:
+    """``text`` as plain data (mappings, lists, scalars) through the safe loader, within the budget."""
     try:
         import yaml
     except ImportError as exc:  # pragma: no cover - pyyaml is a dependency
         raise MissingDependencyError("reading MoveIt YAML needs PyYAML: `pip install pyyaml`") from exc
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _check_nodes(node, path)
+        return loader.construct_document(node)
+    except yaml.YAMLError as exc:
+        raise SceneFormatError(f"{path} is not valid YAML: {exc}") from None
+    except RecursionError:
+        raise SceneFormatError(
+            f"{path} nests lists and mappings more than {MAX_YAML_DEPTH} deep; a scene or request needs "
+            "fewer than 10"
+        ) from None
+    except (ValueError, TypeError, OverflowError) as exc:  # a tagged scalar that is not what its tag says
+        raise SceneFormatError(f"{path} is not valid YAML: {type(exc).__name__}: {exc}") from None
+    finally:
+        loader.dispose()
+
+
+def read_yaml(source: str | Path | Mapping, what: str) -> Mapping:
+    """A YAML file (path) or an already-read mapping, as a mapping: the file read as UTF-8 text, parsed by
+    the safe loader within the budget (:data:`MAX_YAML_BYTES`, :data:`MAX_YAML_NODES`,
+    :data:`MAX_YAML_DEPTH`); :class:`~kinlearn.errors.SceneFormatError` for anything else."""
+    if isinstance(source, Mapping):
+        return source
+    if not isinstance(source, (str, Path)):
+        raise SceneFormatError(f"{what} must be a YAML file path or a dict, got {type(source).__name__}")
     path = Path(source)
     try:
-        text = path.read_text()
+        size = path.stat().st_size
+        if size > MAX_YAML_BYTES:
+            raise SceneFormatError(
+                f"{path} holds {size / 2**20:.0f} MiB; {what} is read up to {MAX_YAML_BYTES // 2**20} MiB"
+            )
+        raw = path.read_bytes()
     except OSError as exc:
         raise SceneFormatError(f"cannot read {what} {path}: {exc.strerror or exc}") from exc
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise SceneFormatError(f"{path} is not valid YAML: {exc}") from exc
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise SceneFormatError(
+            f"{path} is not UTF-8 text ({exc.reason} at byte {exc.start}); {what} is a YAML file"
+        ) from None
+    data = _parse_yaml(text, path)
     if not isinstance(data, Mapping):
         raise SceneFormatError(f"{path} must hold a YAML mapping ({what}), got {type(data).__name__}")
     return data
 
 
-def _number(value, where: str) -> float:
+# --------------------------------------------------------------------------------------------------
+# Fields
+# --------------------------------------------------------------------------------------------------
+
+
+def _number(value, at: _At, *, metres: bool = False) -> float:
+    """A real number (Python, NumPy, a 0-d tensor, or a string holding one, as YAML may quote it), finite,
+    within ±:data:`MAX_METRES` when it is a length or position."""
+    if isinstance(value, torch.Tensor) and value.ndim == 0 and not value.is_complex():
+        value = value.item()
+    elif isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+        value, (int, float, str, np.integer, np.floating)
+    ):
+        raise SceneFormatError(f"{at} must be a number, got {_describe(value)}")
     try:
         v = float(value)
-    except (TypeError, ValueError) as exc:
-        raise SceneFormatError(f"{where} must be a number, got {value!r}") from exc
-    if not np.isfinite(v):
-        raise SceneFormatError(f"{where} must be finite, got {value!r}")
+    except (ValueError, OverflowError):
+        raise SceneFormatError(f"{at} must be a number, got {_describe(value)}") from None
+    if not math.isfinite(v):
+        raise SceneFormatError(f"{at} must be finite, got {value!r}")
+    if metres and abs(v) > MAX_METRES:
+        raise SceneFormatError(
+            f"{at} is {v:g} m; positions and sizes must lie within ±{MAX_METRES:g} m (metres, not millimetres?)"
+        )
     return v
 
 
-def _components(value, names: str, where: str) -> list[float]:
+def _list(value, at: _At, what: str, *, optional: bool = True) -> list:
+    """A list (or tuple, 1-d array or tensor) as a list; ``None`` as [] where the field is optional."""
+    if value is None and optional:
+        return []
+    if isinstance(value, (list, tuple)):
+        return list(value)
+    if isinstance(value, (np.ndarray, torch.Tensor)) and value.ndim >= 1:
+        return list(value)
+    raise SceneFormatError(f"{at} must be a list of {what}, got {_describe(value)}")
+
+
+def _mapping(value, at: _At, what: str, *, optional: bool = True) -> Mapping:
+    if value is None and optional:
+        return {}
+    if not isinstance(value, Mapping):
+        raise SceneFormatError(f"{at} must be a mapping ({what}), got {_describe(value)}")
+    return value
+
+
+def _name(value, at: _At) -> str:
+    """A name (a string; an integer, as YAML reads ``id: 5``, is its digits)."""
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        return str(value)
+    raise SceneFormatError(f"{at} must be a name (a string), got {_describe(value)}")
+
+
+def _components(value, names: str, at: _At, *, metres: bool) -> list[float]:
     """A point (``names`` "xyz") or a quaternion ("xyzw") of a pose: a mapping by name (ROS messages as
     YAML; a missing name is 0, a missing w 1) or a list in that order (as robowflex, and so
     MotionBenchMaker's scene files, write them). ``None``: the origin, or the identity rotation."""
     if value is None:
         value = {}
     if isinstance(value, Mapping):
-        return [_number(value.get(k, 1.0 if k == "w" else 0.0), f"{where}.{k}") for k in names]
-    if isinstance(value, Sequence) and not isinstance(value, str) and len(value) == len(names):
-        return [_number(v, f"{where}.{k}") for k, v in zip(names, value, strict=True)]
+        return [_number(value.get(k, 1.0 if k == "w" else 0.0), at / k, metres=metres) for k in names]
+    if not isinstance(value, (str, bytes, Mapping)):
+        try:
+            items = _list(value, at, "numbers", optional=False)
+        except SceneFormatError:
+            items = None
+        if items is not None and len(items) == len(names):
+            return [_number(v, at / k, metres=metres) for k, v in zip(names, items, strict=True)]
     raise SceneFormatError(
-        f"{where} must be a mapping ({', '.join(names)}) or a list [{', '.join(names)}], got {value!r}"
+        f"{at} must be a mapping ({', '.join(names)}) or a list [{', '.join(names)}], got {_describe(value)}"
     )
+
+
+def _rotation(q: list[float], at: _At) -> np.ndarray:
+    scale = max(abs(v) for v in q)
+    norm = 0.0 if scale == 0 else scale * math.sqrt(sum((v / scale) ** 2 for v in q))
+    if norm == 0:
+        raise SceneFormatError(f"{at}: the orientation quaternion is zero")
+    low, high = QUATERNION_NORM
+    if not low <= norm <= high:
+        raise SceneFormatError(
+            f"{at}: the orientation quaternion has norm {norm:.6g}; a rotation's has norm 1 (norms within "
+            f"[{low:g}, {high:g}] are normalised; one this far is a garbled pose, not normalised silently)"
+        )
+    return rotation_from_quaternion(q)
+
+
+def _matrix(value, at: _At) -> np.ndarray | None:
+    """``value`` as a float64 array when it is an array, tensor or nested list of numbers; None otherwise."""
+    if isinstance(value, torch.Tensor):
+        if value.dtype == torch.bool or value.is_complex():
+            return None
+        return value.detach().cpu().double().numpy()
+    try:
+        a = np.asarray(value)
+    except (ValueError, TypeError):
+        return None
+    if a.dtype.kind not in "fiu":
+        return None
+    return a.astype(np.float64)
 
 
 def pose_matrix(pose, where: str = "pose") -> np.ndarray:
     """A 4 × 4 transform from a MoveIt pose mapping (``position`` x, y, z; ``orientation`` x, y, z, w; each
     a mapping by name or a list in that order), a sequence ``[x, y, z, qx, qy, qz, qw]``, or a 4 × 4
-    matrix. ``None`` is the identity."""
+    matrix (a list, an array or a tensor). ``None`` is the identity. A malformed pose is a
+    :class:`~kinlearn.errors.SceneFormatError` naming ``where``."""
+    return _pose(pose, where if isinstance(where, _At) else _At(str(where)))
+
+
+def _pose(pose, at: _At) -> np.ndarray:
     T = np.eye(4)
     if pose is None:
         return T
     if isinstance(pose, Mapping):
-        p = _components(pose.get("position"), "xyz", f"{where}.position")
-        q = _components(pose.get("orientation"), "xyzw", f"{where}.orientation")
+        p = _components(pose.get("position"), "xyz", at / "position", metres=True)
+        q = _components(pose.get("orientation"), "xyzw", at / "orientation", metres=False)
     else:
-        a = (
-            np.asarray(pose, dtype=np.float64)
-            if not isinstance(pose, torch.Tensor)
-            else pose.double().numpy()
-        )
-        if a.shape == (4, 4):
+        a = None if isinstance(pose, (str, bytes)) else _matrix(pose, at)
+        if a is not None and a.shape == (4, 4):
             if not np.isfinite(a).all() or not np.allclose(a[3], [0, 0, 0, 1]):
-                raise SceneFormatError(f"{where}: a 4 × 4 pose must be finite with last row [0, 0, 0, 1]")
+                raise SceneFormatError(f"{at}: a 4 × 4 pose must be finite with last row [0, 0, 0, 1]")
+            if np.abs(a[:3, 3]).max() > MAX_METRES:
+                raise SceneFormatError(f"{at}: its position must lie within ±{MAX_METRES:g} m")
             R = a[:3, :3]
             if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or abs(np.linalg.det(R) - 1) > 1e-6:
-                raise SceneFormatError(f"{where}: the 4 × 4 pose's rotation is not a rotation")
+                raise SceneFormatError(f"{at}: the 4 × 4 pose's rotation is not a rotation")
             return a.copy()
-        if a.shape != (7,) or not np.isfinite(a).all():
+        if a is None or a.shape != (7,):
+            shape = f"shape {a.shape}" if a is not None else _describe(pose)
             raise SceneFormatError(
-                f"{where} must be a 4 × 4 matrix or [x, y, z, qx, qy, qz, qw], got shape {a.shape}"
+                f"{at} must be a mapping (position, orientation), [x, y, z, qx, qy, qz, qw] or a 4 × 4 "
+                f"matrix, got {shape}"
             )
-        p, q = a[:3].tolist(), a[3:].tolist()
-    if np.linalg.norm(q) < 1e-9:
-        raise SceneFormatError(f"{where}: the orientation quaternion is zero")
-    T[:3, :3] = rotation_from_quaternion(q)
+        p = [_number(v, at / k, metres=True) for k, v in zip("xyz", a[:3].tolist(), strict=True)]
+        q = [
+            _number(v, at / k, metres=False)
+            for k, v in zip(("qx", "qy", "qz", "qw"), a[3:].tolist(), strict=True)
+        ]
+    T[:3, :3] = _rotation(q, at / "orientation" if isinstance(pose, Mapping) else at)
     T[:3, 3] = p
     return T
 
@@ -148,23 +391,30 @@ def _pose_dict(T: np.ndarray) -> dict:
     }
 
 
-def _primitive(prim, T: np.ndarray, where: str) -> Primitive:
-    if not isinstance(prim, Mapping):
-        raise SceneFormatError(f"{where} must be a mapping with type and dimensions")
-    kind = prim.get("type")
-    if isinstance(kind, str):
-        kind = _NAMES.get(kind.strip().lower(), kind)
-    dims = prim.get("dimensions")
-    if not isinstance(dims, Sequence) or isinstance(dims, str):
-        raise SceneFormatError(f"{where}: dimensions must be a list of numbers, got {dims!r}")
-    dims = [_number(d, f"{where}.dimensions") for d in dims]
+def _primitive(prim, T: np.ndarray, at: _At) -> Primitive:
+    prim = _mapping(prim, at, "type and dimensions", optional=False)
+    raw = prim.get("type")
+    kind = raw
+    if isinstance(raw, str):
+        kind = _NAMES.get(raw.strip().lower())
+    elif isinstance(raw, (bool, np.bool_)) or not isinstance(raw, (int, np.integer)):
+        kind = None
+    if kind not in (BOX, SPHERE, CYLINDER, CONE):
+        raise SceneFormatError(
+            f"{at / 'type'}: unknown primitive type {_describe(raw)} (box 1, sphere 2, cylinder 3)"
+        )
+    dims_at = at / "dimensions"
+    dims = [
+        _number(d, dims_at / k, metres=True)
+        for k, d in enumerate(_list(prim.get("dimensions"), dims_at, "numbers", optional=False))
+    ]
     R, c = T[:3, :3], T[:3, 3]
 
     def need(n: int, layout: str) -> None:
         if len(dims) < n:
-            raise SceneFormatError(f"{where}: a {layout} needs {n} dimension(s), got {dims}")
+            raise SceneFormatError(f"{dims_at}: a {layout} needs {n} dimension(s), got {dims}")
         if any(d <= 0 for d in dims[:n]):
-            raise SceneFormatError(f"{where}: dimensions must be > 0 (metres), got {dims}")
+            raise SceneFormatError(f"{dims_at}: dimensions must be > 0 (metres), got {dims}")
 
     if kind == BOX:
         need(3, "box [x, y, z] (full side lengths)")
@@ -175,24 +425,45 @@ def _primitive(prim, T: np.ndarray, where: str) -> Primitive:
     if kind == CYLINDER:
         need(2, "cylinder [height, radius]")
         return Cylinder(c, dims[1], dims[0] / 2, R)
-    if kind == CONE:
-        raise SceneFormatError(f"{where} is a cone; kinlearn's scenes take boxes, spheres and cylinders")
+    raise SceneFormatError(f"{at} is a cone; kinlearn's scenes take boxes, spheres and cylinders")
+
+
+def _frame_id(obj: Mapping, at: _At) -> str:
+    """An object's ``header.frame_id`` ('' where it gives none: it is in the scene's frame)."""
+    header = _mapping(obj.get("header"), at / "header", "frame_id")
+    frame = header.get("frame_id")
+    if frame is None or frame == "":
+        return ""
+    if not isinstance(frame, str):
+        raise SceneFormatError(f"{at / 'header.frame_id'} must be a frame name, got {_describe(frame)}")
+    return frame.strip().lstrip("/")  # ROS 1 wrote a leading slash: '/world' is 'world'
+
+
+def _operation(value, at: _At) -> int:
+    if value is None:
+        return 0
+    if isinstance(value, str) and value.strip().lower() in _OPERATIONS:
+        return _OPERATIONS[value.strip().lower()]
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) and 0 <= value <= 3:
+        return int(value)
     raise SceneFormatError(
-        f"{where}: unknown primitive type {prim.get('type')!r} (box 1, sphere 2, cylinder 3)"
+        f"{at} must be an operation: 0 ADD, 1 REMOVE, 2 APPEND or 3 MOVE, got {_describe(value)}"
     )
 
 
-def _frame_id(obj: Mapping, where: str) -> str:
-    """An object's ``header.frame_id`` ('' where it gives none: it is in the scene's frame)."""
-    header = obj.get("header")
-    if header is None:
-        return ""
-    if not isinstance(header, Mapping):
-        raise SceneFormatError(f"{where}: header must be a mapping (frame_id), got {header!r}")
-    frame = header.get("frame_id") or ""
-    if not isinstance(frame, str):
-        raise SceneFormatError(f"{where}: header.frame_id must be a frame name, got {frame!r}")
-    return frame.strip().lstrip("/")  # ROS 1 wrote a leading slash: '/world' is 'world'
+def _check_octomap(world: Mapping, at: _At) -> None:
+    octomap = _mapping(world.get("octomap"), at / "octomap", "header, origin, octomap")
+    inner = _mapping(octomap.get("octomap"), at / "octomap.octomap", "binary, id, resolution, data")
+    data = inner.get("data")
+    if data is not None and not isinstance(data, (str, bytes, list, tuple, np.ndarray)):
+        raise SceneFormatError(
+            f"{at / 'octomap.octomap.data'} must be the octree's bytes, got {_describe(data)}"
+        )
+    if data is not None and len(data):
+        raise SceneFormatError(
+            "the planning scene holds an octomap (a sensed scene); kinlearn's scenes take boxes, spheres and "
+            "cylinders: give the scene's collision objects instead"
+        )
 
 
 def primitives_from_moveit(source: str | Path | Mapping, base_pose=None) -> list[Primitive]:
@@ -205,59 +476,61 @@ def primitives_from_moveit(source: str | Path | Mapping, base_pose=None) -> list
     :class:`~kinlearn.errors.SceneFormatError` naming both (kinlearn holds no transform tree to relate
     them). The scene may be the whole message or its ``world`` part; objects whose ``operation`` is
     REMOVE (1) are skipped. Raises
-    :class:`~kinlearn.errors.SceneFormatError` for a malformed file or an object holding meshes, planes
-    or cones (named by its id).
+    :class:`~kinlearn.errors.SceneFormatError` naming the key path of a malformed field, or the object
+    holding meshes, planes or cones; and for a scene past the budget (:data:`MAX_PRIMITIVES`, and for a
+    file :data:`MAX_YAML_BYTES`, :data:`MAX_YAML_NODES`, :data:`MAX_YAML_DEPTH`).
     """
     data = read_yaml(source, "a MoveIt planning scene")
-    world = data.get("world", data)
-    if not isinstance(world, Mapping):
-        raise SceneFormatError("the planning scene's world must be a mapping holding collision_objects")
-    octomap = world.get("octomap")
-    if isinstance(octomap, Mapping) and (octomap.get("octomap") or {}).get("data"):
-        raise SceneFormatError(
-            "the planning scene holds an octomap (a sensed scene); kinlearn's scenes take boxes, spheres and "
-            "cylinders: give the scene's collision objects instead"
-        )
-    objects = world.get("collision_objects") or []
-    if not isinstance(objects, Sequence) or isinstance(objects, str):
-        raise SceneFormatError("world.collision_objects must be a list of collision objects")
-    to_base = np.linalg.inv(pose_matrix(base_pose, "base_pose"))
+    root = _At("world") if "world" in data else _At("")
+    world = _mapping(data.get("world", data), root, "collision_objects", optional=False)
+    _check_octomap(world, root)
+    objects_at = root / "collision_objects"
+    objects = _list(world.get("collision_objects"), objects_at, "collision objects")
+    to_base = np.linalg.inv(_pose(base_pose, _At("base_pose")))
     prims: list[Primitive] = []
-    frame: tuple[str, str] | None = None  # the scene's frame, and the object that named it first
+    frame: tuple[str, _At] | None = None  # the scene's frame, and the object that named it first
     for i, obj in enumerate(objects):
-        if not isinstance(obj, Mapping):
-            raise SceneFormatError(f"collision object {i} must be a mapping")
-        name = obj.get("id", f"#{i}")
-        where = f"collision object {name!r}"
-        if obj.get("operation", 0) in (1, "REMOVE", "remove"):
+        at = objects_at / i
+        obj = _mapping(obj, at, "id, pose, primitives, primitive_poses", optional=False)
+        if obj.get("id") is not None:
+            at = _At(at.path, _name(obj["id"], at / "id"))
+        if _operation(obj.get("operation"), at / "operation") == 1:
             continue
-        given = _frame_id(obj, where)
+        given = _frame_id(obj, at)
         if given:
             if frame is None:
-                frame = (given, where)
+                frame = (given, at)
             elif given != frame[0]:
                 raise SceneFormatError(
-                    f"{where} is given in frame {given!r}, {frame[1]} in {frame[0]!r}: kinlearn reads a scene "
+                    f"{at} is given in frame {given!r}, {frame[1]} in {frame[0]!r}: kinlearn reads a scene "
                     "in one frame (base_pose places the robot's base in it); express every object in that "
                     "frame first"
                 )
         for field in ("meshes", "planes"):
-            if obj.get(field):
+            value = obj.get(field)
+            if value is not None and not isinstance(value, (list, tuple)):
+                raise SceneFormatError(f"{at / field} must be a list, got {_describe(value)}")
+            if value:
                 raise SceneFormatError(
-                    f"{where} holds {field}; kinlearn's scenes take boxes, spheres and cylinders "
+                    f"{at} holds {field}; kinlearn's scenes take boxes, spheres and cylinders "
                     f"(replace its {field} by primitives)"
                 )
-        shapes = obj.get("primitives") or []
-        poses = obj.get("primitive_poses") or []
+        shapes = _list(obj.get("primitives"), at / "primitives", "primitives (type, dimensions)")
+        poses = _list(obj.get("primitive_poses"), at / "primitive_poses", "poses")
         if len(shapes) != len(poses):
             raise SceneFormatError(
-                f"{where} has {len(shapes)} primitives and {len(poses)} primitive_poses; give one pose each"
+                f"{at} has {len(shapes)} primitives and {len(poses)} primitive_poses; give one pose each"
             )
-        T_obj = to_base @ pose_matrix(obj.get("pose"), f"{where}.pose")
+        if len(prims) + len(shapes) > MAX_PRIMITIVES:
+            raise SceneFormatError(
+                f"the scene holds more than {MAX_PRIMITIVES:,} primitives (at {at}); kinlearn reads scenes of "
+                f"up to {MAX_PRIMITIVES:,}"
+            )
+        T_obj = to_base @ _pose(obj.get("pose"), at / "pose")
         for k, (prim, pose) in enumerate(zip(shapes, poses, strict=True)):
-            sub = f"{where} primitive {k}"
-            prims.append(_primitive(prim, T_obj @ pose_matrix(pose, f"{sub} pose"), sub))
-        if str(name).startswith("floor") and len(shapes) == 1:
+            T = T_obj @ _pose(pose, at / "primitive_poses" / k)
+            prims.append(_primitive(prim, T, at / "primitives" / k))
+        if str(at.label).startswith("floor") and len(shapes) == 1:
             prims[-1] = _as_floor(prims[-1])
     return prims
 
@@ -315,12 +588,15 @@ def primitives_to_moveit(
     return {"name": name, "is_diff": True, "world": {"collision_objects": objects}}
 
 
-def _joint_map(names, positions, where: str) -> dict[str, float]:
-    if not isinstance(names, Sequence) or not isinstance(positions, Sequence) or isinstance(names, str):
-        raise SceneFormatError(f"{where}: name and position must be lists")
+def _joint_map(state: Mapping, at: _At) -> dict[str, float]:
+    names = _list(state.get("name"), at / "name", "joint names", optional=False)
+    positions = _list(state.get("position"), at / "position", "numbers (rad or m)", optional=False)
     if len(names) != len(positions):
-        raise SceneFormatError(f"{where}: {len(names)} names but {len(positions)} positions")
-    return {str(n): _number(p, f"{where} position of {n!r}") for n, p in zip(names, positions, strict=True)}
+        raise SceneFormatError(f"{at}: {len(names)} names but {len(positions)} positions")
+    out = {}
+    for k, (n, p) in enumerate(zip(names, positions, strict=True)):
+        out[_name(n, at / "name" / k)] = _number(p, at / "position" / k)
+    return out
 
 
 def _in_order(values: dict[str, float], robot: Robot, where: str) -> torch.Tensor:
@@ -335,34 +611,46 @@ def _in_order(values: dict[str, float], robot: Robot, where: str) -> torch.Tenso
 
 def request_joints(source: str | Path | Mapping, robot: Robot) -> tuple[torch.Tensor, torch.Tensor]:
     """Start and goal joints ``(dof,)`` (float64, the robot's joint order) of a MoveIt ``MotionPlanRequest``
-    (YAML file or dict): ``start_state.joint_state`` (name, position) and the first
-    ``goal_constraints[]`` entry whose ``joint_constraints`` name every joint of the robot. Joints the
-    robot does not have (fingers, …) are ignored; a missing one is a
-    :class:`~kinlearn.errors.SceneFormatError` naming it."""
+    (YAML file or dict; the request itself or a mapping holding it as ``motion_plan_request``):
+    ``start_state.joint_state`` (name, position) and the first ``goal_constraints[]`` entry whose
+    ``joint_constraints`` name every joint of the robot. Joints the robot does not have (fingers, …) are
+    ignored; a missing one is a :class:`~kinlearn.errors.SceneFormatError` naming it, as is a malformed
+    field (named by its key path)."""
+    if not isinstance(robot, Robot):
+        raise SceneFormatError(
+            f"request_joints needs the kinlearn Robot to plan for, got {type(robot).__name__}"
+        )
     data = read_yaml(source, "a MoveIt motion plan request")
-    data = data.get("motion_plan_request", data)
-    state = (data.get("start_state") or {}).get("joint_state")
-    if not isinstance(state, Mapping):
-        raise SceneFormatError("the request has no start_state.joint_state (name, position)")
-    start = _in_order(
-        _joint_map(state.get("name"), state.get("position"), "start_state"), robot, "start_state"
+    root = _At("motion_plan_request") if "motion_plan_request" in data else _At("")
+    req = _mapping(
+        data.get("motion_plan_request", data), root, "start_state, goal_constraints", optional=False
     )
-    goals = data.get("goal_constraints") or []
-    if not isinstance(goals, Sequence) or not goals:
-        raise SceneFormatError("the request has no goal_constraints with joint_constraints")
+    start_at = root / "start_state"
+    state_at = start_at / "joint_state"
+    start_state = _mapping(req.get("start_state"), start_at, "joint_state")
+    if start_state.get("joint_state") is None:
+        raise SceneFormatError(f"the request has no {state_at} (name, position)")
+    state = _mapping(start_state.get("joint_state"), state_at, "name, position", optional=False)
+    start = _in_order(_joint_map(state, state_at), robot, str(start_at))
+    goals_at = root / "goal_constraints"
+    goals = _list(req.get("goal_constraints"), goals_at, "constraints (joint_constraints)")
+    if not goals:
+        raise SceneFormatError(f"the request has no {goals_at} with joint_constraints")
     last = None
     for g, goal in enumerate(goals):
-        cons = (goal or {}).get("joint_constraints") or []
+        at = goals_at / g
+        goal = _mapping(goal, at, "joint_constraints")
+        values = {}
+        cons_at = at / "joint_constraints"
+        for c, con in enumerate(_list(goal.get("joint_constraints"), cons_at, "joint constraints")):
+            con = _mapping(con, cons_at / c, "joint_name, position", optional=False)
+            if "joint_name" not in con or "position" not in con:
+                raise SceneFormatError(f"{cons_at / c}: each joint constraint needs joint_name and position")
+            values[_name(con["joint_name"], cons_at / c / "joint_name")] = _number(
+                con["position"], cons_at / c / "position"
+            )
         try:
-            values = {
-                str(c["joint_name"]): _number(c["position"], f"goal {g} {c['joint_name']!r}") for c in cons
-            }
-        except (KeyError, TypeError) as exc:
-            raise SceneFormatError(
-                f"goal_constraints[{g}]: each joint constraint needs joint_name and position"
-            ) from exc
-        try:
-            return start, _in_order(values, robot, f"goal_constraints[{g}]")
+            return start, _in_order(values, robot, str(at))
         except SceneFormatError as exc:
             last = exc
     raise last  # type: ignore[misc]
