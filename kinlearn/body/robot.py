@@ -70,6 +70,24 @@ ROBOTS: dict[str, RobotSpec] = {
 BUILTIN_ROBOTS = frozenset(ROBOTS)
 
 
+def _check_sphere_radii(urdf: bytes, path: Path) -> None:
+    """A spherized URDF's ``<sphere radius>``: each a finite number of metres > 0, else
+    :class:`RobotDescriptionError` naming the link (said at registration, not when the body is built)."""
+    root = validate_urdf(urdf, f"the sphere URDF {path}")
+    for link in root.iter("link"):
+        for sphere in link.iterfind("collision/geometry/sphere"):
+            text = sphere.get("radius")
+            try:
+                r = float(text)
+            except (TypeError, ValueError):
+                r = math.nan
+            if not (math.isfinite(r) and 0 < r < 1e3):
+                raise RobotDescriptionError(
+                    f"{path}: a collision sphere of link {link.get('name')!r} has radius {text!r}; a radius "
+                    "is a finite number of metres > 0"
+                )
+
+
 def register_robot(
     name: str,
     urdf: str | Path,
@@ -114,6 +132,10 @@ def register_robot(
         sphere_path = Path(spheres).resolve()
         if not sphere_path.is_file():
             raise UnknownRobotError(f"no sphere URDF file at {sphere_path}")
+        if (
+            sphere_path.suffix.lower() != ".json"
+        ):  # a spherized URDF (a .json sphere model is checked where read)
+            _check_sphere_radii(sphere_path.read_bytes(), sphere_path)
         robot.sphere_urdf = sphere_path
     if home is not None:
         h = real_array(home, "home").astype(float)

@@ -480,7 +480,15 @@ def urdf_spheres(robot: Robot, urdf: str | Path | bytes, drop_links: tuple[str, 
             sphere = col.find("geometry/sphere")
             if sphere is None:
                 continue
-            r = float(sphere.get("radius"))
+            try:
+                r = float(sphere.get("radius"))
+            except (TypeError, ValueError):
+                r = math.nan
+            if not (math.isfinite(r) and r > 0):
+                raise RobotDescriptionError(
+                    f"a collision sphere of link {name!r} has radius {sphere.get('radius')!r}; a radius is a "
+                    "finite number of metres > 0"
+                )
             T = _origin(col.find("origin"), f"a collision sphere of {name}")
             cur, k = name, None
             while True:

@@ -101,6 +101,10 @@ def _check_mask(mask: torch.Tensor | None, table: torch.Tensor, what: str) -> to
     return mask.to(table.device)
 
 
+#: Obstacles' positions and sizes (m) are refused beyond this magnitude.
+MAX_METRES = 1e6
+
+
 def _check_values(table: torch.Tensor, mask: torch.Tensor | None, kind: type[Primitive]) -> None:
     live = table if mask is None else table[torch.broadcast_to(mask, table.shape[:-1])]
     if live.numel() == 0:
@@ -109,6 +113,13 @@ def _check_values(table: torch.Tensor, mask: torch.Tensor | None, kind: type[Pri
     bad = ~torch.isfinite(live)
     if bool(bad.any()):
         raise ObstacleError(f"{what} hold {int(bad.sum())} NaN/inf value(s); all values must be finite")
+    far = live.abs().amax(dim=-1) > MAX_METRES  # beyond it, squared distances overflow in float32
+    if bool(far.any()):
+        worst = float(live.abs().max())
+        raise ObstacleError(
+            f"{what} hold a position or {kind.size_name} of {worst:.6g} m; an obstacle must lie within "
+            f"±{MAX_METRES:g} m of the base (metres, not millimetres?)"
+        )
     small = live[..., kind.sizes] <= 0
     if bool(small.any()):
         worst = float(live[..., kind.sizes].min())

@@ -30,6 +30,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..checks import as_real
 from ..errors import ConfigError
 
 __all__ = ["RETREAT_SHARE", "RETREAT_SHARES", "STAGES", "Deadline", "densify", "retreat_share"]
@@ -67,14 +68,9 @@ class Deadline:
     that run under the deadline read the same clock."""
 
     def __init__(self, seconds: float | None, clock: Callable[[], float] | None = None):
-        if seconds is not None and (
-            isinstance(seconds, bool)
-            or not isinstance(seconds, (int, float))
-            or not math.isfinite(seconds)
-            or seconds <= 0
-        ):
-            raise ConfigError(f"deadline must be a number of seconds > 0 (or None), got {seconds!r}")
-        self.seconds = None if seconds is None else float(seconds)
+        # a Python, NumPy or 0-d torch number: np.float32(0.05) and torch.tensor(0.05) are deadlines too
+        what = "deadline (a number of seconds, or None)"
+        self.seconds = None if seconds is None else as_real(seconds, what, minimum=0.0, open_minimum=True)
         self.clock = time.perf_counter if clock is None else clock
         self._start = self.clock()
 
