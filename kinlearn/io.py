@@ -150,8 +150,8 @@ def _is_write_failure(exc: BaseException, targets: tuple[Path, ...]) -> bool:
             exc.filename is None or Path(exc.filename) in targets or Path(exc.filename) == targets[0].parent
         )
     # torch.save's C++ writer reports a failed write (a full disk) as a RuntimeError of its own
-    return isinstance(exc, RuntimeError) and (
-        "inline_container" in str(exc) or "PytorchStreamWriter" in str(exc)
+    return isinstance(exc, RuntimeError) and any(
+        m in str(exc) for m in ("inline_container", "PytorchStreamWriter", "basic_ios", "file write failed")
     )
 
 

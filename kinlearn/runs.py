@@ -3,19 +3,26 @@
 A run directory holds ``config.json`` (the command and its resolved configuration) beside the
 command's outputs. :func:`open_run` decides, before anything is written, what may happen to it:
 
-- it does not exist, or holds neither ``config.json`` nor any of the command's outputs: a new run;
+- it does not exist, or holds neither ``config.json`` nor any of the command's outputs (or a
+  ``config.json`` of the same command beside none of its outputs: a run that failed before it wrote
+  any, a full disk say, which blocks nothing): a new run;
 - it holds a run and ``resume=True``: the run continues, if ``config.json`` records the same command
   with the same configuration (else :class:`~kinlearn.errors.RunDirectoryError` lists what differs);
 - it holds a run and ``overwrite=True``: the run's ``config.json`` and outputs are deleted and it
   starts afresh (refused when the folder holds another command's run);
 - otherwise: refused with :class:`~kinlearn.errors.RunDirectoryError`, a finished run or not.
 
-While a command writes a run directory it holds its lock (``.kinlearn.lock``: the writer's process
-id, host, command and start): a second writer gets a :class:`~kinlearn.errors.RunDirectoryError`
-naming the holder; a lock whose process is gone (a killed run) is cleared by the next writer.
+The decision is taken under the run directory's lock (``.kinlearn.lock``: the writer's process id,
+host, command and start), which :func:`open_run` takes first (creating the folder for it) and the
+command holds to its end (:func:`release_locks`; a folder it made and left empty is removed): a
+second writer into the folder, started at the same moment or later, gets a
+:class:`~kinlearn.errors.RunDirectoryError` naming the holder, so two runs never both decide that the
+folder is new. A lock whose process is gone (a killed run) is cleared by the next writer. A lock that
+cannot be written (no space, a read-only file system, no permission) is an
+:class:`~kinlearn.errors.OutputError` saying what to do.
 
-:meth:`Run.begin` then creates the folder, deletes what ``--overwrite`` replaces and temporary
-files of killed writes, and writes ``config.json``; commands call it once all their checks passed.
+:meth:`Run.begin` then deletes what ``--overwrite`` replaces and temporary files of killed writes,
+and writes ``config.json``; commands call it once all their checks passed.
 """
 
 from __future__ import annotations
@@ -42,6 +49,7 @@ __all__ = [
     "LOCK_FILE",
     "META_KEYS",
     "Run",
+    "acquire_lock",
     "die_with_parent",
     "diff_configs",
     "open_run",
@@ -50,13 +58,13 @@ __all__ = [
 
 #: The lock a writing command holds in its run directory.
 LOCK_FILE = ".kinlearn.lock"
-_HELD: set[Path] = set()  # locks this process holds
+_HELD: dict[Path, Path | None] = {}  # locks this process holds → the folder it made for one (or None)
 
 
-def _live_holder(path: Path) -> dict | None:
+def _live_holder(path: Path, lock: Path | None = None) -> dict | None:
     """The record of the live process (other than this one) that holds ``path``'s lock, or None; a lock
     left by a process that is gone is deleted."""
-    lock = path / LOCK_FILE
+    lock = path / LOCK_FILE if lock is None else lock
     try:
         holder = json.loads(lock.read_text())
         pid, host = int(holder["pid"]), str(holder["host"])
@@ -74,44 +82,100 @@ def _live_holder(path: Path) -> dict | None:
     return holder  # alive here, or on another host (cannot tell: kept)
 
 
-def _refuse_held(path: Path, holder: dict) -> RunDirectoryError:
+def _refuse_held(path: Path, holder: dict, lock: Path | None = None) -> RunDirectoryError:
     since = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(float(holder.get("since", 0))))
     return RunDirectoryError(
         f"{path} is being written by another command: {holder.get('command')} (process {holder['pid']} on "
         f"{holder['host']}, since {since}); wait for it to end or stop it (if no such process runs, delete "
-        f"{path / LOCK_FILE})"
+        f"{path / LOCK_FILE if lock is None else lock})"
     )
 
 
-def _acquire(path: Path, command: str) -> None:
-    lock = path / LOCK_FILE
+def _acquire(path: Path, command: str, made: Path | None = None, lock: Path | None = None) -> bool:
+    """Take the lock of folder ``path`` (``lock``: its file, default ``path/.kinlearn.lock``); False if this
+    process holds it already. ``made``: the folder made for it, removed at release when left empty."""
+    lock = path / LOCK_FILE if lock is None else lock
     if lock in _HELD:
-        return
+        return False
     record = {"pid": os.getpid(), "host": socket.gethostname(), "command": command, "since": time.time()}
     for _ in range(3):
         try:
             fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
         except FileExistsError:
-            holder = _live_holder(path)
+            holder = _live_holder(path, lock)
             if holder is not None:
-                raise _refuse_held(path, holder) from None
+                raise _refuse_held(path, holder, lock) from None
             continue  # a stale lock, cleared: try again
-        with os.fdopen(fd, "w") as fh:
-            json.dump(record, fh)
-        _HELD.add(lock)
-        return
+        except OSError as exc:  # no space, read-only, no permission: typed, with what to do
+            raise _output_error(lock, exc) from exc
+        try:
+            with os.fdopen(fd, "w") as fh:
+                json.dump(record, fh)
+        except OSError as exc:
+            lock.unlink(missing_ok=True)
+            raise _output_error(lock, exc) from exc
+        _HELD[lock] = made
+        return True
     raise RunDirectoryError(f"could not lock {path} ({lock} keeps reappearing)")
 
 
-def release_locks() -> None:
-    """Release the run-directory locks this process holds (at the end of a command, and at exit)."""
-    for lock in list(_HELD):
+def acquire_lock(path: str | Path, command: str, lock: str | Path | None = None) -> None:
+    """Hold the lock of folder ``path`` (made if missing) for ``command`` until :func:`release_locks`: a
+    second writer gets a :class:`~kinlearn.errors.RunDirectoryError` naming this one. ``lock``: the lock
+    file (default ``path/.kinlearn.lock``; a command writing one file locks that file alone)."""
+    path = Path(path)
+    made = _make_folder(path, path / LOCK_FILE if lock is None else Path(lock))
+    try:
+        _acquire(path, command, made, None if lock is None else Path(lock))
+    except BaseException:
+        _remove_made(made)
+        raise
+
+
+def _make_folder(path: Path, target: Path) -> Path | None:
+    """Create folder ``path`` (and its parents); the topmost folder made (None if it existed)."""
+    if path.is_dir():
+        return None
+    top = path
+    while not top.parent.exists() and top.parent != top:
+        top = top.parent
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _output_error(target, exc) from exc
+    return top
+
+
+def _remove_made(made: Path | None) -> None:
+    """Remove the folders made for a lock (from the deepest up) where they are empty."""
+    if made is None:
+        return
+    for folder in sorted((p for p in made.rglob("*") if p.is_dir()), key=lambda p: -len(p.parts)):
         try:
-            if json.loads(lock.read_text()).get("pid") == os.getpid():
-                lock.unlink()
-        except (OSError, ValueError):
-            pass
-        _HELD.discard(lock)
+            folder.rmdir()
+        except OSError:
+            return
+    try:
+        made.rmdir()
+    except OSError:
+        pass
+
+
+def _release(lock: Path) -> None:
+    made = _HELD.pop(lock, None)
+    try:
+        if json.loads(lock.read_text()).get("pid") == os.getpid():
+            lock.unlink()
+    except (OSError, ValueError):
+        pass
+    _remove_made(made)
+
+
+def release_locks() -> None:
+    """Release the run-directory locks this process holds (at the end of a command, and at exit); a folder
+    made for a lock and left empty (a command refused or failed before it wrote) is removed."""
+    for lock in list(_HELD):
+        _release(lock)
 
 
 atexit.register(release_locks)
@@ -213,11 +277,8 @@ class Run:
     def begin(self) -> Path:
         """Create the folder, delete what ``overwrite`` replaces and stale temporary files, write
         ``config.json`` (unless the command keeps none); returns the folder."""
-        try:
-            self.path.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise _output_error(self.path / CONFIG_FILE, exc) from exc
-        _acquire(self.path, self.command)  # before anything is written
+        made = _make_folder(self.path, self.path / CONFIG_FILE)
+        _acquire(self.path, self.command, made)  # held since open_run; taken again if released since
         if self.mode == "overwrite":
             # config.json first: a folder never holds a config.json beside another run's outputs
             (self.path / CONFIG_FILE).unlink(missing_ok=True)
@@ -265,7 +326,9 @@ def open_run(
     ignore: Iterable[str] = IGNORED_KEYS,
     option: str = "--run-dir",
 ) -> Run:
-    """Check run directory ``path`` for ``command`` (see the module docstring); writes nothing.
+    """Check run directory ``path`` for ``command`` (see the module docstring) under its lock, which it
+    takes first (making the folder for it) and the command then holds until :func:`release_locks`;
+    writes nothing else (a refusal releases the lock and removes a folder it made).
 
     ``config``: the resolved configuration, compared on ``resume`` (keys in ``ignore`` skipped at any
     depth); ``outputs``: the names of the files and folders the command writes there; ``resumable``:
@@ -285,11 +348,33 @@ def open_run(
     if path.is_dir() and (holder := _live_holder(path)) is not None:
         raise _refuse_held(path, holder)
     check_output(path / CONFIG_FILE)  # a file in the way, no permission: said now, before any work
+    made = _make_folder(path, path / CONFIG_FILE)
+    try:
+        took = _acquire(path, command, made)
+    except BaseException:
+        _remove_made(made)
+        raise
+    try:
+        return _decide(
+            path, command, config, outputs, resume, overwrite, resumable, meta, write_config, ignore, option
+        )
+    except BaseException:
+        if took:
+            _release(path / LOCK_FILE)
+        raise
+
+
+def _decide(
+    path, command, config, outputs, resume, overwrite, resumable, meta, write_config, ignore, option
+) -> Run:
+    """:func:`open_run`'s decision, taken under the folder's lock."""
     outputs = tuple(outputs)
     record = {"command": command, **_plain(dict(config)), **_plain(dict(meta or {}))}
     record = record if write_config else None
     held = [n for n in ((CONFIG_FILE,) if write_config else ()) + outputs if (path / n).exists()]
     stored, stored_command = _recorded_command(path)
+    if held == [CONFIG_FILE] and stored_command == command and not resume:
+        held = []  # a run of this command that failed before writing any output: nothing to keep
     if stored_command is not None and stored_command != command and not held:
         # another kind of run, none of whose files this command would touch: still not this command's
         raise RunDirectoryError(

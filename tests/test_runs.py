@@ -6,7 +6,7 @@ import os
 import pytest
 
 from kinlearn.errors import ConfigError, RunDirectoryError
-from kinlearn.runs import diff_configs, open_run
+from kinlearn.runs import LOCK_FILE, diff_configs, open_run, release_locks
 
 OUTPUTS = ("model.pt", "metrics.jsonl", "stage")
 CONFIG = {"train": {"lr": 0.001, "epochs": 3, "progress": True}, "data": {"path": "a.npz", "sha256": "ab"}}
@@ -25,7 +25,11 @@ def test_a_new_folder_is_checked_without_writing_anything(tmp_path):
     path = tmp_path / "run"
     run = open_run(path, command="train-x", config=CONFIG, outputs=OUTPUTS)
     assert run.mode == "new" and not run.resumed
-    assert not path.exists()  # nothing is written before begin()
+    # nothing is written before begin() but the lock the decision was taken under, held to the end
+    assert [p.name for p in path.iterdir()] == [LOCK_FILE]
+    release_locks()  # a command refused or failed before begin(): its folder is gone again
+    assert not path.exists()
+    run = open_run(path, command="train-x", config=CONFIG, outputs=OUTPUTS)
     run.begin()
     record = json.loads((path / "config.json").read_text())
     assert record["command"] == "train-x" and record["train"]["lr"] == 0.001

@@ -14,9 +14,10 @@ import numpy as np
 import torch
 
 from ..body.kinematics import kinematics
-from ..body.robot import load_robot
-from ..errors import CheckpointError, ConfigError
-from ..io import atomic_write, write_json
+from ..body.robot import Robot, load_robot
+from ..errors import CheckpointError, ConfigError, KinlearnError, RobotDescriptionError, RunDirectoryError
+from ..io import atomic_write, check_output, write_json
+from ..runs import acquire_lock
 from ..training.identify import Identification, IdentifyConfig, identify
 from .common import (
     POSITIVE_INT,
@@ -80,7 +81,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         sub,
         "export-urdf",
         "Write an identified chain (a run of `kinlearn identify`, or its chain.pt) as a URDF whose forward "
-        "kinematics equal the chain's; checked through Pinocchio before it is written.",
+        "kinematics equal the chain's: written to a temporary file, checked through Pinocchio, then renamed "
+        "onto --out (never replaced without --overwrite).",
         _run_export_urdf,
         seed=False,
         run_dir=False,
@@ -88,6 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("source", type=Path, help="an identify run directory or a chain.pt")
     e.add_argument("--out", type=Path, required=True, help="the URDF file to write")
     e.add_argument("--name", default=None, help="the robot name in the URDF (default: the chain's)")
+    e.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
 
 
 def _run_identify(args: argparse.Namespace) -> int:
@@ -159,21 +162,45 @@ def _chain_path(source: Path) -> Path:
 def _run_export_urdf(args: argparse.Namespace) -> int:
     if args.out.suffix.lower() != ".urdf":
         raise ConfigError(f"--out must name a .urdf file, got {args.out}")
-    result = Identification.load(_chain_path(args.source))
+    source = _chain_path(args.source)
+    out = check_output(args.out)
+    # held to the end: a second export to the same file is refused naming this one
+    acquire_lock(out.parent, "export-urdf", lock=out.parent / f".{out.name}.kinlearn.lock")
+    if out.exists() and not args.overwrite:
+        raise RunDirectoryError(f"{out} exists; pass --overwrite to replace it, or choose another --out")
+    result = Identification.load(source)
     model = result.model
     text = result.urdf(args.name)
     if model.residual is not None:
         print("note: the chain's residual MLP is not part of a URDF; the file holds the rigid chain")
-    atomic_write(args.out, lambda p: p.write_text(text))
-    # Check what was written: its forward kinematics through Pinocchio against the chain's.
-    robot = load_robot(args.out, result.ee_frame)
-    q = torch.from_numpy(np.random.default_rng(0).uniform(robot.lower, robot.upper, size=(1000, robot.dof)))
-    with torch.no_grad():
-        diff = float(
-            (kinematics(robot, "pinocchio").position(q) - model.rigid_position(q)).norm(dim=-1).max()
-        )
+    checked: list[float] = []
+
+    def write_checked(tmp: Path) -> None:
+        """Write the URDF to ``tmp`` and check it through Pinocchio: its forward kinematics against the
+        chain's. Only a file that passes is renamed onto --out."""
+        tmp.write_text(text)
+        try:
+            robot = Robot(model.robot_name, tmp.read_bytes(), result.ee_frame, tmp)
+        except KinlearnError as exc:
+            raise RobotDescriptionError(
+                f"the URDF made from {source} does not load, so nothing was written: {exc}"
+            ) from exc
+        gen = np.random.default_rng(0)
+        q = torch.from_numpy(gen.uniform(robot.lower, robot.upper, size=(1000, robot.dof)))
+        with torch.no_grad():
+            diff = float(
+                (kinematics(robot, "pinocchio").position(q) - model.rigid_position(q)).norm(dim=-1).max()
+            )
+        if not diff <= 1e-6:
+            raise RobotDescriptionError(
+                f"the URDF made from {source} does not reproduce the chain (Pinocchio FK off by up to {diff:.3g} m), "
+                "so nothing was written"
+            )
+        checked.append(diff)
+
+    atomic_write(out, write_checked)
     print(
-        f"wrote {args.out}: {model.dof} revolute joints from {result.base_link!r} to the end-effector link "
-        f"{result.ee_frame!r}; Pinocchio FK against the chain: max {diff:.2e} m over 1,000 configurations"
+        f"wrote {out}: {model.dof} revolute joints from {result.base_link!r} to the end-effector link "
+        f"{result.ee_frame!r}; Pinocchio FK against the chain: max {checked[0]:.2e} m over 1,000 configurations"
     )
     return 0

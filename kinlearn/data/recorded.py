@@ -40,7 +40,8 @@ import torch
 
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
-from ..errors import DroppedRowsWarning, RecordedDataError, ShapeError
+from ..checks import as_int
+from ..errors import ConfigError, DroppedRowsWarning, RecordedDataError, ShapeError
 from ..io import atomic_write, file_sha256
 from .babbling import Transitions, load_transitions
 
@@ -49,6 +50,7 @@ __all__ = [
     "EF_BOUND",
     "REACH_FACTOR",
     "Observations",
+    "check_observation_units",
     "load_data",
     "load_observations",
     "load_recorded",
@@ -465,6 +467,13 @@ def _check_units(path: Path, rows: _Rows, theta: np.ndarray, ef: np.ndarray, rob
     )
 
 
+def check_observation_units(theta: np.ndarray, ef: np.ndarray, robot: Robot | None, what: str) -> None:
+    """The unit and limit checks a log file gets, for observations in memory (``what`` names them):
+    :class:`~kinlearn.errors.RecordedDataError` for end effectors that look like millimetres, joints that
+    look like degrees, or joints outside ``robot``'s limits (rows named from 0)."""
+    _check_units(what, _Rows(Path(what), None, theta.shape[0]), theta, ef, robot)
+
+
 def _episodes(path: Path, rows: _Rows, episode: np.ndarray | None, n: int) -> np.ndarray:
     """The file's episode labels checked (integers, each episode's rows consecutive), as given (int64)."""
     if episode is None:
@@ -527,8 +536,11 @@ def load_recorded(
         raise _error(path, "is not a file")
     if path.stat().st_size == 0:
         raise _error(path, "is empty")
-    if dof is not None and (not isinstance(dof, int) or dof < 1):
-        raise RecordedDataError(f"dof must be an integer ≥ 1, got {dof!r}")
+    if dof is not None:
+        try:
+            dof = as_int(dof, "dof (the joint count)", minimum=1)
+        except ConfigError as exc:
+            raise RecordedDataError(str(exc)) from None
     robot = load_robot(robot) if isinstance(robot, str) else robot
     if robot is not None and not isinstance(robot, Robot):
         raise RecordedDataError(f"robot must be a robot name or a kinlearn Robot, got {type(robot).__name__}")

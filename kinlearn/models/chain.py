@@ -30,6 +30,7 @@ import itertools
 import math
 from dataclasses import dataclass
 from typing import Literal
+from xml.sax.saxutils import escape
 
 import numpy as np
 import torch
@@ -584,6 +585,20 @@ def chain_urdf(
         raise ConfigError(f"joint_names needs {n} names, got {len(joint_names)}")
     vel = np.full(n, math.pi) if velocity is None else np.asarray(velocity, dtype=float)
     lower, upper = model.lower.double().numpy(), model.upper.double().numpy()
+    # The links between the joints are named link1 … unless a given name is one: then link1_ … (never a
+    # collision with the prior's base, end-effector or joint names, say an end effector called link2).
+    given = {base_link, ee_frame, f"{ee_frame}_joint", *joint_names}
+    stem = "link"
+    while any(f"{stem}{i + 1}" in given for i in range(n)):
+        stem += "_"
+    if f"{ee_frame}_joint" in (base_link, ee_frame, *joint_names):
+        raise ConfigError(f"the end-effector joint's name {ee_frame}_joint is taken by another name")
+
+    def x(text: str) -> str:  # a name as an XML attribute value
+        return escape(str(text), {'"': "&quot;"})
+
+    name, base_link, ee_frame = x(name), x(base_link), x(ee_frame)
+    joint_names = tuple(x(j) for j in joint_names)
     lines = [
         '<?xml version="1.0"?>',
         f'<robot name="{name}">',
@@ -601,7 +616,7 @@ def chain_urdf(
         T[:3, 3] = origin
         rel = np.linalg.inv(T_prev) @ T
         r, p, y = _rpy(rel[:3, :3])
-        child = f"link{i + 1}"
+        child = f"{stem}{i + 1}"
         lines += [
             f'  <link name="{child}"/>',
             f'  <joint name="{joint_names[i]}" type="revolute">',

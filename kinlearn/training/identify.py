@@ -40,6 +40,7 @@ import dataclasses
 import itertools
 import math
 import time
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -49,10 +50,16 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from ..body.robot import Robot, load_robot
-from ..checks import check_finite
+from ..checks import as_int, as_real, check_finite
 from ..data.babbling import Transitions
-from ..data.recorded import Observations, load_observations
-from ..errors import CheckpointError, ConfigError, DatasetError
+from ..data.recorded import Observations, check_observation_units, load_observations
+from ..errors import (
+    CheckpointError,
+    ConfigError,
+    DatasetError,
+    PoorExcitationWarning,
+    UnidentifiableError,
+)
 from ..io import load_checkpoint
 from ..models.chain import ChainConfig, ChainFM, chain_parameter_jacobian, chain_position, chain_urdf
 from ..models.forward_inverse import load_fm, save_model
@@ -75,7 +82,11 @@ class IdentifyConfig:
             end-effector point is reported as undetermined in direction.
         residual, residual_steps: widths and Adam steps of the optional residual MLP (empty: none).
         max_samples: at most this many samples are used (a seeded random subset of more): the fit's
-            time grows with them, its accuracy hardly past 10⁵ (the error falls as 1/√N).
+            time grows with them, its accuracy hardly past 10⁵ (the error falls as 1/√N). What remains
+            must still be the chain's minimum (20 per parameter), else the fit is refused.
+        min_joint_range: a joint whose observed values span less than this (rad) never moved: the data
+            cannot identify its axis, and the fit is refused naming it; one that spans less than 10 times
+            this is fitted with a :class:`~kinlearn.errors.PoorExcitationWarning` naming it.
     """
 
     holdout: float = 0.1
@@ -89,18 +100,29 @@ class IdentifyConfig:
     residual: tuple[int, ...] = ()
     residual_steps: int = 2000
     max_samples: int = 200_000
+    min_joint_range: float = 0.01
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.holdout < 0.5:
+        def put(name: str, value) -> None:
+            object.__setattr__(self, name, value)
+
+        put("holdout", as_real(self.holdout, "holdout", minimum=0.0, maximum=0.5))
+        if self.holdout >= 0.5:
             raise ConfigError(f"holdout must lie in [0, 0.5), got {self.holdout}")
+        put("seed", as_int(self.seed, "seed", minimum=0))
         for name in ("iterations", "mlp_steps", "references", "residual_steps", "max_samples"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ConfigError(f"{name} must be an integer ≥ 1, got {v!r}")
-        if not self.outlier_sigma > 1.0:
-            raise ConfigError(f"outlier_sigma must be > 1, got {self.outlier_sigma}")
-        if not self.unobservable_distance >= 0.0:
-            raise ConfigError(f"unobservable_distance must be ≥ 0 m, got {self.unobservable_distance}")
+            put(name, as_int(getattr(self, name), name, minimum=1))
+        put("outlier_sigma", as_real(self.outlier_sigma, "outlier_sigma", minimum=1.0, open_minimum=True))
+        put(
+            "unobservable_distance",
+            as_real(self.unobservable_distance, "unobservable_distance (m)", minimum=0.0),
+        )
+        put("min_joint_range", as_real(self.min_joint_range, "min_joint_range (rad)", minimum=0.0))
+        for name in ("mlp_hidden", "residual"):
+            widths = getattr(self, name)
+            if isinstance(widths, (str, bytes)) or not hasattr(widths, "__iter__"):
+                raise ConfigError(f"{name} must be a sequence of layer widths, got {widths!r}")
+            put(name, tuple(as_int(w, f"{name} width", minimum=1) for w in widths))
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -153,7 +175,10 @@ class Identification:
         )
 
     def urdf(self, name: str | None = None) -> str:
-        """The chain as a URDF document (see :func:`~kinlearn.models.chain.chain_urdf`)."""
+        """The chain as a URDF document (see :func:`~kinlearn.models.chain.chain_urdf`); names are written
+        XML-escaped, so any robot name gives a well-formed document."""
+        if name is not None and not isinstance(name, str):
+            raise ConfigError(f"name must be a string, got {type(name).__name__}")
         return chain_urdf(
             self.model,
             name=name or self.model.robot_name,
@@ -313,8 +338,17 @@ def _chain_from(axes, points, tip, reference, robot_name: str, lo, hi) -> ChainF
 
 
 def _check_observations(theta, ef) -> tuple[torch.Tensor, torch.Tensor]:
-    theta = torch.as_tensor(theta).detach().double().cpu()
-    ef = torch.as_tensor(ef).detach().double().cpu()
+    out = []
+    for what, t in (("theta", theta), ("ef", ef)):
+        if not isinstance(t, torch.Tensor):
+            try:
+                t = torch.as_tensor(np.asarray(t))
+            except (TypeError, ValueError, RuntimeError) as exc:
+                raise DatasetError(f"{what} must be an array of numbers, got {type(t).__name__}") from exc
+        if t.dtype == torch.bool or t.is_complex():
+            raise DatasetError(f"{what} must hold real numbers, got a {t.dtype} tensor")
+        out.append(t.detach().double().cpu())
+    theta, ef = out
     if theta.ndim != 2 or ef.ndim != 2 or ef.shape[-1] != 3 or theta.shape[0] != ef.shape[0]:
         raise DatasetError(
             f"identification needs theta (N, dof) and ef (N, 3) of one length; got {tuple(theta.shape)} "
@@ -346,12 +380,21 @@ def identify(
     ``prior``: ``True`` (the robot's URDF, if a robot is given), ``False`` (no URDF: only the joint
     count), or another :class:`~kinlearn.Robot` whose model starts the fit (a user's rough URDF:
     ``load_robot(path, ee_frame)``).
-    ``dof``: the joint count when no robot is given. Returns the chain and a report (held-out residual
-    in metres, the noise's robust σ, outliers dropped, undetermined joint directions, seconds); its
+    ``dof``: the joint count when no robot is given. Data in memory get the checks a file gets (metres,
+    radians, the robot's limits). Exact repeats of a row count once (``duplicates_dropped``). Returns the
+    chain and a report (held-out residual in metres, the noise's robust σ, outliers dropped, undetermined
+    joint directions, ``excitation``: each joint's range and the parameter Jacobian's rank and condition
+    number, seconds). Data that cannot identify the chain are refused with
+    :class:`~kinlearn.errors.UnidentifiableError` (a joint that never moves, named; fewer distinct samples,
+    or fewer left by ``max_samples``, than the chain needs); data that determine it poorly give a
+    :class:`~kinlearn.errors.PoorExcitationWarning` naming the joints. Its
     URDF names the joints, the root link and the end-effector link as the robot (or prior) does, else
     ``joint1`` …, ``base`` and ``ee``.
     """
     rob = load_robot(robot) if isinstance(robot, str) else robot
+    if rob is not None and not isinstance(rob, Robot):
+        raise ConfigError(f"robot must be a robot name or a kinlearn Robot, got {type(rob).__name__}")
+    dof = None if dof is None else as_int(dof, "dof (the joint count)", minimum=1)
     if isinstance(prior, bool):
         prior_robot = rob if prior else None
     elif isinstance(prior, Robot):
@@ -391,18 +434,25 @@ def _observations(data, robot: Robot | None, dof: int | None, drop_nan: bool):
     if isinstance(data, (str, Path)):
         obs = load_observations(data, robot=robot, dof=dof, drop_nan=drop_nan)
         return obs.theta, obs.ef, {"path": str(data), "sha256": obs.sha256, "rows": len(obs)}
+    # In memory: the checks a file gets (shape, finite, metres, radians, the robot's limits) before the fit.
     if isinstance(data, Transitions):
         obs = Observations.from_transitions(data)
-        return obs.theta, obs.ef, {"transitions": len(data)}
-    if isinstance(data, Observations):
-        return data.theta, data.ef, data.record()
-    if isinstance(data, (tuple, list)) and len(data) == 2:  # checked with the rest by _identify
-        theta, ef = data
-        return theta, ef, {"rows": len(theta)}
-    raise ConfigError(
-        "data must be a file path, Observations, Transitions or a pair (theta, ef); "
-        f"got {type(data).__name__}"
-    )
+        theta, ef, record = obs.theta, obs.ef, {"transitions": len(data)}
+    elif isinstance(data, Observations):
+        theta, ef, record = data.theta, data.ef, data.record()
+    elif isinstance(data, (tuple, list)) and len(data) == 2:
+        theta, ef = _check_observations(*data)
+        record = {"rows": len(theta)}
+    else:
+        raise ConfigError(
+            "data must be a file path, Observations, Transitions or a pair (theta, ef); "
+            f"got {type(data).__name__}"
+        )
+    theta, ef = _check_observations(theta, ef)
+    if robot is not None and theta.shape[1] != robot.dof:
+        raise DatasetError(f"the data hold {theta.shape[1]} joints, robot {robot.name} has {robot.dof}")
+    check_observation_units(theta.numpy(), ef.numpy(), robot, "the observations (theta, ef)")
+    return theta, ef, record
 
 
 def _identify(
@@ -425,9 +475,25 @@ def _identify(
         raise DatasetError(f"the data hold {n_joints} joints, dof={dof} was asked for")
     if prior is not None and prior.dof != n_joints:
         raise DatasetError(f"the data hold {n_joints} joints, the prior {prior.name} has {prior.dof}")
-    needed = 20 * (6 * n_joints + 3)
+    needed = _needed_samples(n_joints)
     if n < needed:
         raise DatasetError(f"identifying a {n_joints}-joint chain needs at least {needed} samples, got {n}")
+    theta, ef, duplicates = _distinct_rows(theta, ef)
+    n = theta.shape[0]
+    if n < needed:
+        raise UnidentifiableError(
+            f"the data hold {n + duplicates} rows but only {n} distinct samples (θ, ef) — the rest repeat "
+            f"them; identifying a {n_joints}-joint chain needs at least {needed} distinct samples"
+        )
+    joint_range = (theta.max(0).values - theta.min(0).values).tolist()
+    still = [i for i, r in enumerate(joint_range) if r < cfg.min_joint_range]
+    if still:
+        shown = ", ".join(f"{i + 1} ({joint_range[i]:.2g} rad)" for i in still)
+        raise UnidentifiableError(
+            f"joint(s) {shown} never move in the data (their values span less than min_joint_range = "
+            f"{cfg.min_joint_range:g} rad): the data cannot identify their axes, and a chain fitted to them "
+            "would be off wherever they move. Record motion of every joint"
+        )
     if limits is not None:
         lo, hi = (torch.as_tensor(v, dtype=torch.float64) for v in limits)
     elif prior is not None:
@@ -435,12 +501,17 @@ def _identify(
     else:
         lo, hi = theta.min(0).values, theta.max(0).values
     gen = torch.Generator().manual_seed(int(cfg.seed))
-    report_extra = {}
+    report_extra: dict = {"duplicates_dropped": duplicates}
     if n > cfg.max_samples:  # a bounded amount of work: a seeded subset
         keep_rows = torch.randperm(n, generator=gen)[: cfg.max_samples]
         theta, ef = theta[keep_rows], ef[keep_rows]
         report_extra["subsampled_from"] = n
         n = cfg.max_samples
+        if n < needed:
+            raise UnidentifiableError(
+                f"max_samples = {cfg.max_samples} leaves {n} samples; identifying a {n_joints}-joint chain "
+                f"needs at least {needed}: raise max_samples"
+            )
     perm = torch.randperm(n, generator=gen)
     n_val = round(n * cfg.holdout)
     val, fit = perm[:n_val], perm[n_val:]
@@ -514,6 +585,29 @@ def _identify(
             break
         unobservable.append(i)
     report["undetermined_axis_directions"] = sorted(unobservable)
+    report["excitation"] = _excitation(model, th_fit[keep], joint_range, gen)
+    ex = report["excitation"]
+    poor = [i for i in ex["poorly_determined_joints"] if i not in unobservable]
+    weak = [i for i, r in enumerate(joint_range) if r < 10 * cfg.min_joint_range]
+    if poor or weak:
+        parts = []
+        if poor:
+            parts.append(
+                f"the parameter Jacobian has rank {ex['parameter_rank']} of {ex['expected_rank']}, the directions "
+                f"it loses on joint(s) {', '.join(str(i + 1) for i in poor)} (they moved only together with others)"
+            )
+        if weak:
+            parts.append(
+                "joint(s) "
+                + ", ".join(f"{i + 1} ({joint_range[i]:.2g} rad)" for i in weak)
+                + f" moved less than {10 * cfg.min_joint_range:g} rad"
+            )
+        warnings.warn(
+            f"the data determine part of the chain poorly: {'; '.join(parts)}. The chain matches the data "
+            "where they were taken and may be far off elsewhere; record wider, independent motion of those joints",
+            PoorExcitationWarning,
+            stacklevel=3,
+        )
     if cfg.residual:
         fit_residual(model, th_fit[keep], ef_fit[keep], cfg, gen)
     with torch.no_grad():
@@ -525,6 +619,68 @@ def _identify(
     report["stage_seconds"] = stages
     model.eval()
     return Identification(model, report)
+
+
+def _needed_samples(dof: int) -> int:
+    """The fewest samples a ``dof``-joint chain is identified from: 20 per parameter (6 per joint, 3 tip)."""
+    return 20 * (6 * dof + 3)
+
+
+def _distinct_rows(theta: torch.Tensor, ef: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, int]:
+    """The rows (θ, ef) with exact repeats left out (the first of each kept, in order), and how many went:
+    a repeated row adds no information, and left in it would sit on both sides of the held-out split."""
+    rows = torch.cat((theta, ef), dim=1)
+    _, inverse = torch.unique(rows, dim=0, return_inverse=True)
+    first = torch.full((int(inverse.max()) + 1,), rows.shape[0], dtype=torch.int64)
+    first.scatter_reduce_(0, inverse, torch.arange(rows.shape[0]), reduce="amin")
+    keep = first.sort().values
+    return theta[keep], ef[keep], rows.shape[0] - keep.numel()
+
+
+def _excitation(model: ChainFM, theta: torch.Tensor, joint_range: list[float], gen, rows: int = 4000) -> dict:
+    """How well the data determine the chain: each joint's range (rad), and the rank and condition number
+    of the residuals' Jacobian in the chain's parameters (at most ``rows`` samples), with the directions
+    every chain leaves free (an axis's length, its point's slide along it) taken out: a chain of n joints
+    has 4n + 3 parameters the data can fix. Joints that carry the directions the data leave free beyond
+    those are ``poorly_determined_joints`` (0-based)."""
+    n = model.dof
+    pick = torch.randperm(theta.shape[0], generator=gen)[:rows]
+    w_raw, q, tip = model.axis.detach(), model.point.detach(), model.tip.detach()
+    with torch.no_grad():
+        _, J = chain_parameter_jacobian(w_raw, q, tip, theta[pick] - model.reference.detach())
+    P = 6 * n + 3
+    J = J.reshape(-1, P)
+    w = w_raw / w_raw.norm(dim=-1, keepdim=True)
+    G = torch.zeros(P, 2 * n, dtype=J.dtype)  # the free directions: axis length, point along the axis
+    for i in range(n):
+        G[3 * i : 3 * i + 3, 2 * i] = w[i]
+        G[3 * n + 3 * i : 3 * n + 3 * i + 3, 2 * i + 1] = w[i]
+    Q, _ = torch.linalg.qr(G)
+    Jp = J - (J @ Q) @ Q.T
+    _, S, Vh = torch.linalg.svd(Jp, full_matrices=False)
+    expected = 4 * n + 3
+    rank = int((S > S[0] * 1e-8).sum()) if float(S[0]) > 0 else 0
+    poor: list[int] = []
+    if rank < expected:
+        N = Vh[rank:]  # the null space: the free directions and those the data leave free
+        N = N - (N @ Q) @ Q.T
+        mass = [
+            float(
+                N[:, 3 * i : 3 * i + 3].square().sum()
+                + N[:, 3 * n + 3 * i : 3 * n + 3 * i + 3].square().sum()
+            )
+            for i in range(n)
+        ]
+        poor = [i for i in range(n) if mass[i] >= 0.25]
+        if not poor:
+            poor = [int(np.argmax(mass))]
+    return {
+        "joint_range": [float(r) for r in joint_range],
+        "parameter_rank": rank,
+        "expected_rank": expected,
+        "condition": float(S[0] / S[expected - 1]) if rank >= expected else None,
+        "poorly_determined_joints": poor,
+    }
 
 
 def fit_residual(model: ChainFM, theta, ef, cfg: IdentifyConfig, gen: torch.Generator) -> None:
