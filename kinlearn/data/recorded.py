@@ -227,39 +227,21 @@ def _error(path: Path, message: str) -> RecordedDataError:
     return RecordedDataError(f"{path}: {message}")
 
 
-def _read_csv(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """The header, the cells as float64 ``(N, columns)`` (empty cells NaN), each row's file line."""
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise _error(path, f"cannot be read as UTF-8 text ({type(exc).__name__}: {exc})") from exc
-    lines = text.splitlines()
-    if not lines or not lines[0].strip():
-        raise _error(path, "the first line must be the header naming the columns, " + _csv_columns_hint())
-    header = [name.strip() for name in next(csv.reader([lines[0]]))]
-    if all(_is_number(name) for name in header):
-        raise _error(
-            path,
-            "the first line holds numbers; it must be the header naming the columns, " + _csv_columns_hint(),
-        )
-    body = lines[1:]
-    while body and not body[-1].strip():
-        body.pop()
-    if not body:
-        raise _error(path, "holds a header but no data rows")
-    if all(line.strip() for line in body):  # the fast path: plain numbers, one row per line
-        try:
-            values = np.loadtxt(body, delimiter=",", dtype=np.float64, ndmin=2, comments=None)
-        except ValueError:
-            values = None
-        if values is not None and values.shape == (len(body), len(header)):
-            return header, values, np.arange(2, len(body) + 2)
-    rows, numbers = [], []
-    reader = csv.reader(lines[1:])
-    for row in reader:
-        line = reader.line_num + 1
-        if not row or not any(cell.strip() for cell in row):
-            continue
+#: Data rows of a CSV log parsed at a time: a log is read in chunks of this many, never whole.
+CSV_CHUNK_ROWS = 65_536
+
+
+def _parse_rows(path: Path, header: list[str], body: list[str], lines: list[int]) -> np.ndarray:
+    """The cells of CSV data rows ``body`` (non-blank, at file ``lines``) as float64 ``(m, columns)``, empty
+    cells NaN; a row of the wrong length or a cell that is no number is refused naming its line."""
+    try:  # the fast path: plain numbers, one row per line
+        values = np.loadtxt(body, delimiter=",", dtype=np.float64, ndmin=2, comments=None)
+    except ValueError:
+        values = None
+    if values is not None and values.shape == (len(body), len(header)):
+        return values
+    numbers = []
+    for row, line in zip(csv.reader(body), lines, strict=False):
         if len(row) != len(header):
             raise _error(path, f"line {line} has {len(row)} cells; the header names {len(header)} columns")
         values_row = []
@@ -275,9 +257,47 @@ def _read_csv(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
                     path,
                     f"line {line}, column {name!r}: {cell!r} is not a number; every cell must be a number",
                 ) from None
-        rows.append(line)
         numbers.append(values_row)
-    return header, np.asarray(numbers, dtype=np.float64).reshape(len(numbers), len(header)), np.asarray(rows)
+    return np.asarray(numbers, dtype=np.float64).reshape(len(numbers), len(header))
+
+
+def _csv_chunks(path: Path, chunk_rows: int | None = None):
+    """The header of a CSV log, then its data rows in chunks: ``(cells (m, columns) float64, file lines
+    (m,))``, blank lines skipped. Reads the file line by line: memory is one chunk, not the file."""
+    try:
+        fh = open(path, encoding="utf-8-sig", newline="")
+    except OSError as exc:
+        raise _error(path, f"cannot be read ({type(exc).__name__}: {exc})") from exc
+    chunk_rows = CSV_CHUNK_ROWS if chunk_rows is None else chunk_rows
+    with fh:
+        try:
+            first = fh.readline()
+            if not first.strip():
+                raise _error(
+                    path, "the first line must be the header naming the columns, " + _csv_columns_hint()
+                )
+            header = [name.strip() for name in next(csv.reader([first]))]
+            if all(_is_number(name) for name in header):
+                raise _error(
+                    path,
+                    "the first line holds numbers; it must be the header naming the columns, "
+                    + _csv_columns_hint(),
+                )
+            yield header
+            body: list[str] = []
+            lines: list[int] = []
+            for number, text in enumerate(fh, start=2):
+                if not text.strip():
+                    continue
+                body.append(text)
+                lines.append(number)
+                if len(body) == chunk_rows:
+                    yield _parse_rows(path, header, body, lines), np.asarray(lines)
+                    body, lines = [], []
+            if body:
+                yield _parse_rows(path, header, body, lines), np.asarray(lines)
+        except UnicodeDecodeError as exc:
+            raise _error(path, f"cannot be read as UTF-8 text ({type(exc).__name__}: {exc})") from exc
 
 
 def _is_number(text: str) -> bool:
@@ -511,7 +531,13 @@ def _check_time(path: Path, rows: _Rows, time: np.ndarray, labels: np.ndarray) -
 
 
 def load_recorded(
-    path: str | Path, *, robot: str | Robot | None = None, dof: int | None = None, drop_nan: bool = False
+    path: str | Path,
+    *,
+    robot: str | Robot | None = None,
+    dof: int | None = None,
+    drop_nan: bool = False,
+    max_rows: int | None = None,
+    seed: int = 0,
 ) -> Observations:
     """Load and check a recorded log (``.npz`` or ``.csv``, see the module docstring).
 
@@ -523,6 +549,14 @@ def load_recorded(
     if given, must be the joint count. Rows holding NaN/inf are refused, or with ``drop_nan=True``
     dropped with a warning (``Observations.dropped`` counts them; a dropped row ends its episode's
     run, so no transition spans it). Episodes are renumbered 0, 1, … in file order.
+
+    A CSV log is read in chunks of :data:`CSV_CHUNK_ROWS` rows, every row checked, never the whole file
+    in memory. ``max_rows``: keep a seeded (``seed``) uniform sample of at most this many of the rows
+    (reservoir sampling in one pass) instead of all of them: memory is then bounded by ``max_rows`` rows
+    (``max_rows × (dof + 3) × 8`` bytes) plus one chunk, whatever the file's size, which is how
+    :func:`~kinlearn.training.identify.identify` reads a log (its ``max_samples``). Such a sample has no
+    time and each row is its own episode (it holds no transitions); ``sampled_from`` counts the rows it
+    was drawn from.
 
     Raises :class:`~kinlearn.errors.RecordedDataError` naming what to fix.
     """
@@ -544,60 +578,188 @@ def load_recorded(
     robot = load_robot(robot) if isinstance(robot, str) else robot
     if robot is not None and not isinstance(robot, Robot):
         raise RecordedDataError(f"robot must be a robot name or a kinlearn Robot, got {type(robot).__name__}")
+    if max_rows is not None:
+        max_rows = as_int(max_rows, "max_rows", minimum=1)
+    reader = _Reader(path, robot, drop_nan, max_rows, as_int(seed, "seed", minimum=0))
     if suffix == ".csv":
-        header, values, lines = _read_csv(path)
-        theta, ef, episode, time, names = _split_csv(path, header, values)
+        chunks = _csv_chunks(path)
+        header = next(chunks)
+        names = _split_csv(path, header, np.empty((0, len(header))))[4]
+        order, joint_names = _match_joints(
+            path, np.arange(len(names), dtype=np.float64)[None], names, robot, dof
+        )
+        order = order[0].astype(np.int64)
+        for values, lines in chunks:
+            theta, ef, episode, time, _ = _split_csv(path, header, values)
+            reader.add(theta[:, order], ef, episode, time, lines)
+        if reader.rows == 0:
+            raise _error(path, "holds a header but no data rows")
     else:
         theta, ef, episode, time, names = _read_npz(path)
-        lines = None
-    if theta.shape[0] == 0:
-        raise _error(path, "holds no data rows")
-    theta, joint_names = _match_joints(path, theta, names, robot, dof)
-    rows = _Rows(path, lines, theta.shape[0])
+        if theta.shape[0] == 0:
+            raise _error(path, "holds no data rows")
+        theta, joint_names = _match_joints(path, theta, names, robot, dof)
+        reader.add(theta, ef, episode, time, None)
+    return reader.observations(joint_names)
 
-    finite = np.isfinite(theta).all(axis=1) & np.isfinite(ef).all(axis=1)
-    for column in (episode, time):
-        if column is not None:
-            finite &= np.isfinite(column)
-    dropped = int((~finite).sum())
-    gap = np.zeros(theta.shape[0], dtype=bool)  # a row kept after dropped ones starts a new run
-    if dropped:
-        bad = np.nonzero(~finite)[0]
-        if not drop_nan:
-            raise _error(
-                path,
-                f"{dropped} row(s) hold NaN or infinity ({rows.name(bad)}); fix them, or drop them with "
-                "drop_nan=True (--drop-nan)",
+
+class _Reader:
+    """The checks of a log's rows, block by block (a CSV log's chunks, or an ``.npz`` log whole), with what
+    carries from one block to the next (a dropped row's gap, the episodes seen, the last time), and the
+    rows kept: all of them, or a seeded reservoir sample of ``max_rows`` (memory: that many rows)."""
+
+    def __init__(self, path: Path, robot: Robot | None, drop_nan: bool, max_rows: int | None, seed: int):
+        self.path, self.robot, self.drop_nan, self.max_rows = path, robot, drop_nan, max_rows
+        self.rng = np.random.default_rng(seed)
+        self.rows = 0  # rows read
+        self.kept = 0  # rows that passed (NaN rows dropped)
+        self.dropped = 0
+        self.dropped_lines: list[str] = []
+        self.prev_dropped = False
+        self.seen: set[int] = set()  # the episode labels whose runs have begun
+        self.last_label: int | None = None
+        self.last_time: float | None = None
+        self.next_id = 0
+        self.parts: list[tuple] = []  # all rows: (theta, ef, episode ids, time)
+        self.sample: tuple[np.ndarray, np.ndarray] | None = None  # the reservoir: (theta, ef)
+
+    def add(self, theta, ef, episode, time, lines) -> None:
+        path, n = self.path, theta.shape[0]
+        rows = _Rows(path, lines, n)
+        if lines is None:
+            rows.index = rows.index + self.rows
+        self.rows += n
+        finite = np.isfinite(theta).all(axis=1) & np.isfinite(ef).all(axis=1)
+        for column in (episode, time):
+            if column is not None:
+                finite &= np.isfinite(column)
+        dropped = int((~finite).sum())
+        gap = np.zeros(n, dtype=bool)  # a row kept after dropped ones starts a new run
+        gap[0] = self.prev_dropped
+        if dropped:
+            bad = np.nonzero(~finite)[0]
+            if not self.drop_nan:
+                raise _error(
+                    path,
+                    f"{dropped} row(s) hold NaN or infinity ({rows.name(bad)}); fix them, or drop them with "
+                    "drop_nan=True (--drop-nan)",
+                )
+            self.dropped += dropped
+            if len(self.dropped_lines) < SHOWN_ROWS:
+                shown = rows.index[bad[:SHOWN_ROWS]] if lines is None else lines[bad[:SHOWN_ROWS]]
+                self.dropped_lines += [str(int(v)) for v in shown][: SHOWN_ROWS - len(self.dropped_lines)]
+            gap[1:] |= ~finite[:-1]
+            theta, ef, gap = theta[finite], ef[finite], gap[finite]
+            episode = None if episode is None else episode[finite]
+            time = None if time is None else time[finite]
+            rows.keep(finite)
+        self.prev_dropped = not bool(finite[-1])
+        m = theta.shape[0]
+        if m == 0:
+            return
+        labels = _episodes(path, rows, episode, m)
+        if episode is not None:
+            starts = np.concatenate(([0], np.nonzero(labels[1:] != labels[:-1])[0] + 1))
+            for k, start in enumerate(starts):
+                label = int(labels[start])
+                if k == 0 and label == self.last_label:
+                    continue  # the episode of the last block goes on
+                if label in self.seen:
+                    raise _error(
+                        path,
+                        f"the rows of episode {label} are not consecutive (it starts again at "
+                        f"{rows.name(np.array([start]))} after other episodes). Sort the rows by episode (and "
+                        "time), or give each run of rows its own label",
+                    )
+                self.seen.add(label)
+        _check_units(path, rows, theta, ef, self.robot)
+        if time is not None:
+            _check_time(path, rows, time, labels)
+            if self.last_time is not None and labels[0] == self.last_label and time[0] <= self.last_time:
+                raise _error(
+                    path,
+                    f"time does not increase within an episode at 1 row(s) ({rows.name(np.array([0]))}); sort "
+                    "each episode's rows by time, and remove repeated samples",
+                )
+            self.last_time = float(time[-1])
+        new_run = np.ones(m, dtype=bool)
+        new_run[1:] = (labels[1:] != labels[:-1]) | gap[1:]
+        new_run[0] = self.kept == 0 or int(labels[0]) != self.last_label or bool(gap[0])
+        ids = self.next_id + np.cumsum(new_run) - 1
+        self.next_id = int(ids[-1]) + 1
+        self.last_label = int(labels[-1])
+        if self.max_rows is None:
+            self.parts.append((theta, ef, ids, time))
+        else:
+            self._reservoir(theta, ef)
+        self.kept += m
+
+    def _reservoir(self, theta: np.ndarray, ef: np.ndarray) -> None:
+        """Algorithm R over the rows in file order: after ``i`` rows each is in the sample with
+        probability ``max_rows / i``; seeded, so the same file gives the same sample."""
+        k, seen, m = self.max_rows, self.kept, theta.shape[0]
+        fill = min(max(k - seen, 0), m)
+        if self.sample is None:
+            self.sample = (np.empty((k, theta.shape[1])), np.empty((k, 3)))
+        self.sample[0][seen : seen + fill] = theta[:fill]
+        self.sample[1][seen : seen + fill] = ef[:fill]
+        if fill == m:
+            return
+        position = np.arange(seen + fill, seen + m)  # 0-based index of each remaining row in the file
+        slot = self.rng.integers(0, position + 1)
+        take = np.nonzero(slot < k)[0]
+        if len(take):
+            slots, last = np.unique(
+                slot[take][::-1], return_index=True
+            )  # the last row to land in a slot wins
+            src = fill + take[::-1][last]
+            self.sample[0][slots] = theta[src]
+            self.sample[1][slots] = ef[src]
+
+    def observations(self, joint_names) -> Observations:
+        path = self.path
+        if self.dropped:
+            if self.kept == 0:
+                raise _error(path, f"every one of its {self.dropped} rows holds NaN or infinity")
+            if path.suffix.lower() == ".csv":
+                head = "line" if self.dropped == 1 else "lines"
+            else:
+                head = "row" if self.dropped == 1 else "rows (from 0)"
+            more = ", …" if self.dropped > SHOWN_ROWS else ""
+            warnings.warn(
+                f"{path}: dropped {self.dropped} row(s) holding NaN or infinity ({head} "
+                f"{', '.join(self.dropped_lines)}{more})",
+                DroppedRowsWarning,
+                stacklevel=3,
             )
-        if dropped == len(finite):
-            raise _error(path, f"every one of its {dropped} rows holds NaN or infinity")
-        warnings.warn(
-            f"{path}: dropped {dropped} row(s) holding NaN or infinity ({rows.name(bad)})",
-            DroppedRowsWarning,
-            stacklevel=2,
+        if self.max_rows is not None:
+            k = min(self.kept, self.max_rows)
+            theta, ef = self.sample[0][:k], self.sample[1][:k]
+            obs = Observations(
+                torch.from_numpy(np.ascontiguousarray(theta)),
+                torch.from_numpy(np.ascontiguousarray(ef)),
+                torch.arange(k),  # a sample of rows: each its own episode (no transitions between them)
+                None,
+                joint_names,
+                path,
+                file_sha256(path),
+                self.dropped,
+            )
+            obs.sampled_from = self.kept
+            return obs
+        theta, ef, ids, time = (
+            np.concatenate(x) if x[0] is not None else None for x in zip(*self.parts, strict=True)
         )
-        gap[1:] = ~finite[:-1]
-        theta, ef, gap = theta[finite], ef[finite], gap[finite]
-        episode = None if episode is None else episode[finite]
-        time = None if time is None else time[finite]
-        rows.keep(finite)
-
-    labels = _episodes(path, rows, episode, theta.shape[0])
-    _check_units(path, rows, theta, ef, robot)
-    if time is not None:
-        _check_time(path, rows, time, labels)
-    new_run = np.ones(len(labels), dtype=bool)
-    new_run[1:] = (labels[1:] != labels[:-1]) | gap[1:]
-    return Observations(
-        torch.from_numpy(np.ascontiguousarray(theta)),
-        torch.from_numpy(np.ascontiguousarray(ef)),
-        torch.from_numpy(np.cumsum(new_run) - 1),
-        None if time is None else torch.from_numpy(np.ascontiguousarray(time)),
-        joint_names,
-        path,
-        file_sha256(path),
-        dropped,
-    )
+        return Observations(
+            torch.from_numpy(np.ascontiguousarray(theta)),
+            torch.from_numpy(np.ascontiguousarray(ef)),
+            torch.from_numpy(ids),
+            None if time is None else torch.from_numpy(np.ascontiguousarray(time)),
+            joint_names,
+            path,
+            file_sha256(path),
+            self.dropped,
+        )
 
 
 def load_data(path: str | Path, robot: str | Robot | None = None, *, drop_nan: bool = False) -> Transitions:
@@ -615,7 +777,13 @@ def load_data(path: str | Path, robot: str | Robot | None = None, *, drop_nan: b
 
 
 def load_observations(
-    path: str | Path, robot: str | Robot | None = None, *, dof: int | None = None, drop_nan: bool = False
+    path: str | Path,
+    robot: str | Robot | None = None,
+    *,
+    dof: int | None = None,
+    drop_nan: bool = False,
+    max_rows: int | None = None,
+    seed: int = 0,
 ) -> Observations:
     """Observations (θ, ef) from a kinlearn babbling ``.npz`` (its states,
     :meth:`Observations.from_transitions`) or a recorded log (:func:`load_recorded`): what
@@ -630,7 +798,7 @@ def load_observations(
         )
         obs.path, obs.sha256 = path, file_sha256(path)
         return obs
-    return load_recorded(path, robot=robot, dof=dof, drop_nan=drop_nan)
+    return load_recorded(path, robot=robot, dof=dof, drop_nan=drop_nan, max_rows=max_rows, seed=seed)
 
 
 def _is_kinlearn_npz(path: Path) -> bool:

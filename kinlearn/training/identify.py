@@ -403,7 +403,8 @@ def identify(
         raise ConfigError(
             f"prior must be True, False or a Robot (load_robot(path, ee_frame) for a URDF file), got {prior!r}"
         )
-    theta, ef, source = _observations(data, rob, dof, drop_nan)
+    cfg = config or IdentifyConfig()
+    theta, ef, source = _observations(data, rob, dof, drop_nan, cfg)
     limits = (torch.from_numpy(rob.lower), torch.from_numpy(rob.upper)) if rob is not None else None
     name = rob.name if rob is not None else (prior_robot.name if prior_robot is not None else "chain")
     result = _identify(
@@ -429,11 +430,17 @@ def identify(
     return result
 
 
-def _observations(data, robot: Robot | None, dof: int | None, drop_nan: bool):
-    """(θ, ef) float64 tensors and a record of where they came from."""
+def _observations(data, robot: Robot | None, dof: int | None, drop_nan: bool, cfg: IdentifyConfig):
+    """(θ, ef) float64 tensors and a record of where they came from. A recorded log is read as a seeded
+    sample of at most ``cfg.max_samples`` rows (memory bounded by them, not by the file)."""
     if isinstance(data, (str, Path)):
-        obs = load_observations(data, robot=robot, dof=dof, drop_nan=drop_nan)
-        return obs.theta, obs.ef, {"path": str(data), "sha256": obs.sha256, "rows": len(obs)}
+        obs = load_observations(
+            data, robot=robot, dof=dof, drop_nan=drop_nan, max_rows=cfg.max_samples, seed=cfg.seed
+        )
+        record = {"path": str(data), "sha256": obs.sha256, "rows": len(obs)}
+        if getattr(obs, "sampled_from", len(obs)) > len(obs):
+            record["sampled_from"] = obs.sampled_from
+        return obs.theta, obs.ef, record
     # In memory: the checks a file gets (shape, finite, metres, radians, the robot's limits) before the fit.
     if isinstance(data, Transitions):
         obs = Observations.from_transitions(data)
