@@ -97,6 +97,17 @@ class SceneFormatError(ObstacleError):
     field, or geometry it does not take (meshes, planes, cones), named by its object."""
 
 
+class PointCloudError(ObstacleError):
+    """A point cloud that cannot be planned among: not ``(N, 3)``, rows of NaN or infinity (unless dropped on
+    request), no point, values that look like millimetres, a bad camera pose or cleaning option, or an
+    extent too large for its grid (crop it)."""
+
+
+class PointCloudFileError(PointCloudError, DatasetError):
+    """A point-cloud file (``.npy``, ``.ply``, ``.pcd``) that cannot be read: missing, another suffix, a
+    malformed header or body, no x, y, z fields, or fewer data than its header announces."""
+
+
 class DomainError(KinlearnError, ValueError):
     """A start or goal outside the domain the planner was trained on (raised with ``strict=True``)."""
 
@@ -157,15 +168,3 @@ class BeyondLimitsWarning(KinlearnWarning):
 
 class DomainWarning(KinlearnWarning):
     """A start or goal outside the domain the planner was trained on: its plan may be poor."""
-
-
-class UnidentifiableError(DatasetError):
-    """Observations that cannot identify a chain: a joint that never moves (named), fewer distinct samples
-    than the chain's parameters need (duplicate rows count once), or a sample budget that leaves too few.
-    Record motion of every joint, or give more distinct samples."""
-
-
-class PoorExcitationWarning(KinlearnWarning):
-    """An identification whose data determine some of the chain's parameters poorly or not at all (the
-    parameter Jacobian loses rank along them): the joints named moved too little or only together, so the
-    chain is right where the data were taken and may be far off elsewhere. Record wider motion of them."""

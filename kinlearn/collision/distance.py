@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import torch
 
-from .geometry import KINDS, Box, Cylinder, Sphere, safe_sqrt
+from .geometry import KINDS, SCENE_KINDS, Box, Cylinder, Sphere, safe_sqrt
 from .scene import _FIELDS, Scene, _axis_aligned
 
 __all__ = [
@@ -104,7 +104,7 @@ def _slice(t: torch.Tensor | None, tail: int, lo: int, hi: int):
 def _per_sphere_core(c, r, fields: dict, floor_mask) -> torch.Tensor:
     p = c.unsqueeze(-2)  # (..., M, 1, 3)
     out = None
-    for kind in (Sphere, Box, Cylinder):
+    for kind in SCENE_KINDS:
         rows = fields[kind.table]
         if rows.shape[-2]:
             d = _nearest(kind.point_distance(p, rows.unsqueeze(-3)), fields[f"{kind.kind}_mask"])
@@ -120,7 +120,17 @@ def _per_sphere_core(c, r, fields: dict, floor_mask) -> torch.Tensor:
 
 
 def _per_sphere(centres: torch.Tensor, radii: torch.Tensor, scene: Scene, floor_mask) -> torch.Tensor:
-    """``(..., M)``: each body sphere's smallest signed distance to the scene (+inf for an empty scene)."""
+    """``(..., M)``: each body sphere's smallest signed distance to the scene (+inf for an empty scene); a
+    point cloud's is its grid's lower bound (:meth:`~kinlearn.collision.cloud.PointCloud.distance_torch`)."""
+    per = _per_sphere_primitives(centres, radii, scene, floor_mask)
+    if scene.cloud is not None:
+        per = torch.minimum(per, scene.cloud.distance_torch(centres) - radii)
+    return per
+
+
+def _per_sphere_primitives(
+    centres: torch.Tensor, radii: torch.Tensor, scene: Scene, floor_mask
+) -> torch.Tensor:
     if floor_mask is not None:
         floor_mask = floor_mask.to(centres.device)
     batch = torch.broadcast_shapes(centres.shape[:-2], scene.batch_shape)

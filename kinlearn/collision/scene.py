@@ -14,6 +14,10 @@ leading batch dimensions ``...`` shared by all of them (the rows' layouts are th
   marks padding, so that scenes with different numbers of obstacles can share one batch (see
   :meth:`Scene.stack`). Masked entries are ignored by validation and by every distance.
 
+- ``cloud``: None or a :class:`~kinlearn.collision.cloud.PointCloud`, points (each a ball of its radius)
+  shared by every scene of the batch, checked through its compiled distance grid;
+  :meth:`Scene.from_points` makes one from an array, a file or a camera's cloud, with primitives beside it.
+
 Any count may be 0. Batch shapes broadcast against each other and against configurations
 (right-aligned, as in torch); :meth:`Scene.unsqueeze` inserts a batch dimension (for example a time
 axis). :meth:`Scene.from_primitives` builds one scene from typed objects, :meth:`Scene.primitives`
@@ -37,10 +41,11 @@ from .moveit import primitives_from_moveit, primitives_to_moveit
 
 __all__ = ["SCENE_FORMAT", "Scene", "as_scene"]
 
-#: Version of the scene ``.npz`` layout written by :meth:`Scene.save` (2: oriented boxes, cylinders).
+#: Version of the scene ``.npz`` layout written by :meth:`Scene.save` (2: oriented boxes, cylinders; a
+#: scene with a point cloud is written as 3, which older readers refuse rather than drop its points).
 SCENE_FORMAT = 2
-#: Scene formats :meth:`Scene.load` reads (1: spheres and axis-aligned boxes).
-SCENE_FORMATS = (1, 2)
+#: Scene formats :meth:`Scene.load` reads (1: spheres and axis-aligned boxes; 3: with a point cloud).
+SCENE_FORMATS = (1, 2, 3)
 
 #: Per kind: (table field, mask field, primitive class).
 _TABLES = tuple((k.table, f"{k.kind}_mask", k) for k in SCENE_KINDS)
@@ -145,6 +150,7 @@ class Scene:
     box_mask: torch.Tensor | None = None
     cylinders: torch.Tensor | None = None
     cylinder_mask: torch.Tensor | None = None
+    cloud: object | None = None
 
     def __init__(
         self,
@@ -155,8 +161,12 @@ class Scene:
         box_mask: torch.Tensor | None = None,
         cylinders=None,
         cylinder_mask: torch.Tensor | None = None,
+        cloud=None,
+        **more,
     ):
         given = {"spheres": spheres, "boxes": boxes, "cylinders": cylinders}
+        # the tables of further kinds (kinlearn.collision.kinds), by their table names
+        given |= {k.table: more.pop(k.table, None) for k in SCENE_KINDS if k.table not in given}
         ref = next((t for t in given.values() if isinstance(t, torch.Tensor) and t.is_floating_point()), None)
         ref = (
             ref if ref is not None else next((t for t in given.values() if isinstance(t, torch.Tensor)), None)
@@ -168,6 +178,12 @@ class Scene:
         dtype = first.dtype if first is not None else torch.get_default_dtype()
         device = first.device if first is not None else device
         masks = {"sphere_mask": sphere_mask, "box_mask": box_mask, "cylinder_mask": cylinder_mask}
+        masks |= {m: more.pop(m, None) for m in (f"{k.kind}_mask" for k in SCENE_KINDS) if m not in masks}
+        if more:
+            raise ObstacleError(
+                f"a Scene has no field {sorted(more)[0]!r}; its tables are "
+                + ", ".join(f"{k.table} ({k.kind}_mask)" for k in SCENE_KINDS)
+            )
         for name, mask_name, kind in _TABLES:
             t = tables[name]
             if t is None:
@@ -203,21 +219,31 @@ class Scene:
                 + ", ".join(f"{k} {tuple(v.shape)}" for k, v in tables.items())
                 + (f", floor {tuple(f.shape)}" if f is not None else "")
             ) from exc
-        for k, v in (*tables.items(), *masks.items(), ("floor", f)):
+        if cloud is not None:
+            from .cloud import PointCloud
+
+            if not isinstance(cloud, PointCloud):
+                raise ObstacleError(
+                    f"a scene's cloud must be a PointCloud (Scene.from_points), got {type(cloud).__name__}"
+                )
+        for k, v in (*tables.items(), *masks.items(), ("floor", f), ("cloud", cloud)):
             object.__setattr__(self, k, v)
 
     @classmethod
-    def _unchecked(cls, **fields) -> Scene:
+    def _unchecked(cls, cloud=None, **fields) -> Scene:
         """A scene from tensors already validated (views or indexing of a valid scene)."""
         out = object.__new__(cls)
         for name, _ in _FIELDS:
             object.__setattr__(out, name, fields.get(name))
+        object.__setattr__(out, "cloud", cloud)
         return out
 
     def _map(self, fn) -> Scene:
-        """A scene of ``fn(tensor, trailing dims)`` applied to every present field (unchecked)."""
+        """A scene of ``fn(tensor, trailing dims)`` applied to every present field (unchecked); the cloud,
+        shared by the whole batch, kept."""
         return Scene._unchecked(
-            **{n: (None if (t := getattr(self, n)) is None else fn(t, tail)) for n, tail in _FIELDS}
+            cloud=self.cloud,
+            **{n: (None if (t := getattr(self, n)) is None else fn(t, tail)) for n, tail in _FIELDS},
         )
 
     # ---------------------------------------------------------------------------------------------
@@ -259,9 +285,84 @@ class Scene:
         identity). See :func:`kinlearn.collision.moveit.primitives_from_moveit`."""
         return cls.from_primitives(primitives_from_moveit(source, base_pose), dtype=dtype)
 
+    @classmethod
+    def from_points(
+        cls,
+        points,
+        *,
+        radius: float | None = None,
+        frame=None,
+        resolution: float | None = None,
+        cleaning=None,
+        self_filter: tuple | None = None,
+        drop_nonfinite: bool = False,
+        primitives: Scene | Sequence[Primitive] | None = None,
+        floor=None,
+    ) -> Scene:
+        """A scene of sensed points, each an obstacle ball of ``radius`` (m; default
+        :data:`~kinlearn.collision.cloud.DEFAULT_RADIUS`, 1 cm), beside optional ``primitives`` (a Scene or
+        a list of them) and ``floor``.
+
+        ``points``: an ``(N, 3)`` array or tensor (m), or a ``.npy``, ``.ply`` or ``.pcd`` file's path
+        (:func:`~kinlearn.collision.cloud.read_points`). ``frame``: the camera's pose in the robot's base
+        frame (4 × 4, ``(position, quaternion xyzw)`` or ``[x, y, z, qx, qy, qz, qw]``) when the points are
+        in the camera's frame; None: they are in the base frame. ``resolution``: the edge of the distance
+        grid's cells (default 1 cm; see :mod:`kinlearn.collision.cloud` for its conservative margin).
+        ``cleaning`` (:class:`~kinlearn.collision.cloud.Cleaning`) and ``self_filter`` ``(body, q)`` (the
+        robot's :class:`BodySpheres` or a planner, and its joints when the cloud was taken: points on its own
+        body are dropped, and the cloud cropped to its reach) clean the points first;
+        ``drop_nonfinite`` drops NaN rows (a depth camera's missing pixels) instead of refusing them.
+
+        Raises :class:`~kinlearn.errors.PointCloudError` for points of another shape, NaN rows, no points,
+        millimetres or a bad pose, :class:`~kinlearn.errors.PointCloudFileError` for a file it cannot read.
+        """
+        from .cloud import (
+            DEFAULT_RADIUS,
+            DEFAULT_RESOLUTION,
+            PointCloud,
+            check_points,
+            clean_points,
+            points_in_base,
+            read_points,
+        )
+
+        if isinstance(points, (str, Path)):
+            points = read_points(points)
+        pts = points_in_base(check_points(points, drop_nonfinite=drop_nonfinite), frame)
+        radius = DEFAULT_RADIUS if radius is None else radius
+        if cleaning is not None or self_filter is not None:
+            pts = clean_points(pts, float(radius), cleaning, self_filter)
+        cloud = PointCloud(pts, radius, DEFAULT_RESOLUTION if resolution is None else resolution)
+        if primitives is None:
+            base = cls(floor=floor)
+        elif isinstance(primitives, Scene):
+            if len(primitives.batch_shape) or primitives.cloud is not None:
+                raise ObstacleError("from_points adds its points to an unbatched scene of primitives alone")
+            if floor is not None and primitives.floor is not None:
+                raise ObstacleError("a scene has one floor: give floor= or a scene with a floor, not both")
+            base = primitives if floor is None else primitives.with_floor(floor)
+        else:
+            base = cls.from_primitives(primitives, floor=floor)
+        return base.with_cloud(cloud)
+
+    def with_cloud(self, cloud) -> Scene:
+        """This scene with ``cloud`` (a :class:`~kinlearn.collision.cloud.PointCloud`, or None) as its points."""
+        fields = {n: getattr(self, n) for n, _ in _FIELDS}
+        return Scene(**fields, cloud=cloud)
+
+    def with_floor(self, floor) -> Scene:
+        """This scene with a floor at height ``floor`` (m, or None)."""
+        fields = {n: getattr(self, n) for n, _ in _FIELDS if n != "floor"}
+        return Scene(**fields, floor=floor, cloud=self.cloud)
+
     def to_moveit(self, frame_id: str = "base_link", name: str = "kinlearn") -> dict:
         """This (unbatched) scene as a MoveIt ``PlanningScene`` dict, for ``yaml.safe_dump``. See
-        :func:`kinlearn.collision.moveit.primitives_to_moveit`."""
+        :func:`kinlearn.collision.moveit.primitives_to_moveit`. A scene with a point cloud is refused
+        (a planning scene of primitives cannot hold it)."""
+        if self.cloud is not None:
+            raise ObstacleError(
+                "a scene with a point cloud cannot be written as a MoveIt scene of primitives"
+            )
         return primitives_to_moveit(self.primitives(), frame_id, name)
 
     def primitives(self) -> list[Primitive]:
@@ -324,8 +425,8 @@ class Scene:
 
     @property
     def axis_aligned(self) -> bool:
-        """True when the scene holds no cylinder and every box has the identity rotation."""
-        if self.cylinders.shape[-2]:
+        """True when the scene holds nothing but spheres and boxes, every box with the identity rotation."""
+        if any(getattr(self, n).shape[-2] for n, _, k in _TABLES if k.kind not in ("sphere", "box")):
             return False
         R = self.boxes[..., 6:15]
         return bool((R == R.new_tensor(IDENTITY)).all())
@@ -417,7 +518,11 @@ class Scene:
             raise ObstacleError(
                 "Scene.stack: some scenes have a floor and some do not; give all or none a floor"
             )
-        return Scene(**fields, floor=floor)
+        if any(s.cloud is not scenes[0].cloud for s in scenes):
+            raise ObstacleError(
+                "Scene.stack: a batch shares one point cloud; these scenes hold different ones (plan them apart)"
+            )
+        return Scene(**fields, floor=floor, cloud=scenes[0].cloud)
 
     def unstack(self) -> list[Scene]:
         """A batch ``(n,)`` scene → ``n`` unbatched scenes without their padding."""
@@ -428,7 +533,7 @@ class Scene:
         for i in range(self.batch_shape[0]):
             one = full[i]
             tables = {kind.table: rows for kind, rows, _ in one.tables(live=True)}
-            out.append(Scene(**tables, floor=one.floor))
+            out.append(Scene(**tables, floor=one.floor, cloud=self.cloud))
         return out
 
     # ---------------------------------------------------------------------------------------------
@@ -439,6 +544,9 @@ class Scene:
             t = getattr(self, name)
             if t is not None:
                 out[name] = t.detach().cpu().double().numpy() if t.is_floating_point() else t.cpu().numpy()
+        if self.cloud is not None:
+            out["cloud_points"] = np.array(self.cloud.points)
+            out["cloud_sizes"] = np.array([self.cloud.radius, self.cloud.resolution])
         return out
 
     @classmethod
@@ -449,12 +557,19 @@ class Scene:
             a = torch.as_tensor(np.asarray(arrays[key]))
             return a.to(dtype) if a.dtype != torch.bool else a
 
-        return cls(**{name: get(name) for name, _ in _FIELDS})
+        cloud = None
+        if "cloud_points" in arrays:
+            from .cloud import PointCloud
+
+            radius, resolution = (float(v) for v in np.asarray(arrays["cloud_sizes"]).reshape(2))
+            cloud = PointCloud(np.asarray(arrays["cloud_points"]), radius, resolution)
+        return cls(**{name: get(name) for name, _ in _FIELDS}, cloud=cloud)
 
     def save(self, path: str | Path, robot: str = "") -> Path:
         """Write the scene to ``path`` (``.npz``) atomically; ``robot`` names the robot whose base frame it is in."""
+        version = SCENE_FORMAT if self.cloud is None else 3
         return save_npz(
-            path, kind="scene", robot=robot, config={"scene_format": SCENE_FORMAT}, arrays=self.arrays()
+            path, kind="scene", robot=robot, config={"scene_format": version}, arrays=self.arrays()
         )
 
     @classmethod
@@ -480,7 +595,9 @@ class Scene:
         return (
             f"Scene(batch={tuple(self.batch_shape)}, spheres={self.num_spheres}, boxes={self.num_boxes}, "
             f"cylinders={self.num_cylinders}, "
-            f"floor={floor}, dtype={self.dtype})"
+            f"floor={floor}, "
+            + ("" if self.cloud is None else f"points={self.cloud.num_points}, ")
+            + f"dtype={self.dtype})"
         )
 
 
