@@ -12,6 +12,7 @@ obstacle-aware trajectory model        :func:`train_obstacle_model`, :class:`Obs
                                        :class:`ObstacleLossConfig`
 body model                             :func:`train_body_model`
 identification (calibration)           :func:`identify`, :class:`IdentifyConfig`, :class:`Identification`
+a new arm, URDF to planner             :func:`onboard`, :class:`OnboardConfig`, :func:`load_onboarded`
 the generic loop's settings            :class:`TrainConfig`, :class:`OptimConfig`
 =====================================  =============================================================
 
@@ -31,6 +32,7 @@ if TYPE_CHECKING:
     from .training.joint_path import PathLossConfig, PathTrainConfig, train_path_model
     from .training.loop import OptimConfig, TrainConfig
     from .training.obstacle_path import ObstacleLossConfig, ObstacleTrainConfig, train_obstacle_model
+    from .training.onboard import OnboardConfig, load_onboarded, onboard
     from .training.tm import TMTrainConfig, load_tm, tm_preset, train_tm
 
 __all__ = [
@@ -38,13 +40,16 @@ __all__ = [
     "IdentifyConfig",
     "ObstacleLossConfig",
     "ObstacleTrainConfig",
+    "OnboardConfig",
     "OptimConfig",
     "PathLossConfig",
     "PathTrainConfig",
     "TMTrainConfig",
     "TrainConfig",
     "identify",
+    "load_onboarded",
     "load_tm",
+    "onboard",
     "tm_preset",
     "train_body_model",
     "train_config",

@@ -442,7 +442,7 @@ def _run_validate(args: argparse.Namespace) -> int:
 #: Modules holding further subcommands; each registers its commands with
 #: :func:`~kinlearn.cli.common.register_subcommand` (or has a ``register`` function added here). Imported
 #: when the full parser is built.
-SUBCOMMAND_MODULES = ("tm", "plan", "train_planners", "evaluate", "export", "body", "identify", "view")
+SUBCOMMAND_MODULES = ("tm", "plan", "train_planners", "evaluate", "export", "body", "identify", "view", "onboard")
 
 #: Every command with its one-line help, in the parser's order: what ``kinlearn --help`` lists without
 #: importing the commands' modules (torch among them). ``tests/test_lazy_imports.py`` holds it to the
@@ -496,6 +496,10 @@ COMMANDS = (
     (
         "view",
         "Plan from a start to a goal and show the plan: in the browser (viser, on localhost, until Ctrl-C), or as a GIF with --gif. Exit status 0 when the plan reaches its goal, 1 when it misses it, 2 for bad input.",
+    ),
+    (
+        "onboard",
+        "Fit collision spheres to a URDF's own collision geometry, babble, identify the chain, train the free-space planner and the obstacle network on the seven scene families scaled to the arm; writes RUN_DIR/planner (Planner.load) and RUN_DIR/robot (its spheres).",
     ),
 )
 

@@ -578,11 +578,15 @@ _URDF_BODIES: dict[tuple, tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.nda
 def _from_urdf(
     robot: Robot, path: Path, drop_links: tuple[str, ...], rule: dict
 ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
-    key = (robot.name, robot.urdf, str(path), drop_links, tuple(sorted(rule.items())))
+    key = (robot.name, robot.urdf, str(path), drop_links, json.dumps(rule, sort_keys=True))
     hit = _URDF_BODIES.get(key)
     if hit is None:
         spheres = urdf_spheres(robot, path, drop_links)
         pairs = _default_pairs(spheres[:, 0].astype(np.int64))
+        excluded = {tuple(sorted(p)) for p in rule.get("excluded_link_pairs", [])}
+        if excluded and len(pairs):  # link pairs an SRDF disables, or that touch everywhere
+            ends = np.sort(spheres[:, 0].astype(np.int64)[pairs], axis=1)
+            pairs = pairs[np.array([(int(a), int(b)) not in excluded for a, b in ends], dtype=bool)]
         kept, _ = always_overlapping(
             robot,
             spheres,
@@ -612,8 +616,17 @@ def body_spheres(
     """
     own = getattr(robot, "sphere_urdf", None)
     if own is not None and not dense and sphere_set is None:
-        spheres, pairs, limits = _from_urdf(robot, Path(own), (), {})
-        name = "spherized"
+        if Path(own).suffix.lower() == ".json":  # a sphere model (kinlearn.collision.spherize writes one)
+            model = _read_model(str(own))
+            entry = model["sets"][model.get("default_set", "fitted")]
+            spheres, pairs, limits = _from_urdf(
+                robot, Path(own).parent / entry["urdf"], tuple(entry.get("drop_links", ())),
+                model.get("self_collision", {}),
+            )  # fmt: skip
+            name = model.get("default_set", "fitted")
+        else:
+            spheres, pairs, limits = _from_urdf(robot, Path(own), (), {})
+            name = "spherized"
     else:
         model = sphere_sets(robot)
         if sphere_set is not None and dense:

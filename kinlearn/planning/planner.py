@@ -36,7 +36,7 @@ import numpy as np
 import torch
 
 from ..body.kinematics import kinematics
-from ..body.robot import BUILTIN_ROBOTS, Robot, load_robot
+from ..body.robot import BUILTIN_ROBOTS, ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import as_int
 from ..collision.body import BodySpheres
@@ -867,6 +867,9 @@ def _robot(robot: str | Robot | None, name: str) -> Robot:
 def _shipped_folder(robot: str) -> Path:
     """The folder of the planner kinlearn ships for ``robot`` (a ConfigError for any other arm)."""
     path = DEFAULT_CHECKPOINTS / robot
+    own = getattr(load_robot(robot), "planner_dir", None) if robot in ROBOTS and robot not in BUILTIN_ROBOTS else None
+    if own is not None:  # an onboarded arm (kinlearn.training.onboard.load_onboarded): its own planner folder
+        return Path(own)
     # Only kinlearn's own arms ship planners: a registered arm never gets another arm's.
     if robot not in BUILTIN_ROBOTS or not (path / "tm.pt").is_file():
         shipped = sorted(p.name for p in DEFAULT_CHECKPOINTS.iterdir() if (p / "tm.pt").is_file())
