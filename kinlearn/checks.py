@@ -129,14 +129,17 @@ def as_real(
     maximum: float | None = None,
     open_minimum: bool = False,
     finite: bool = True,
+    expected: str | None = None,
 ) -> float:
     """``value`` as a Python float: a real number (Python, NumPy or a 0-d real tensor; not a bool or a
     complex number), finite unless ``finite=False``, ≥ ``minimum`` (> with ``open_minimum``) and ≤
-    ``maximum``; :class:`ConfigError` naming ``what`` and the bound otherwise."""
+    ``maximum``; :class:`ConfigError` naming ``what`` and the bound otherwise (``expected``: what the
+    message says is allowed, instead of the bounds written out)."""
     low = "" if minimum is None else f"{'>' if open_minimum else '≥'} {minimum:g}"
     high = "" if maximum is None else f"≤ {maximum:g}"
     bounds = " and ".join(b for b in (low, high) if b)
-    expected = f"a {'finite ' if finite else ''}real number" + (f" {bounds}" if bounds else "")
+    if expected is None:
+        expected = f"a {'finite ' if finite else ''}real number" + (f" {bounds}" if bounds else "")
     v = float(_scalar(value, what, "fiu", expected))
     if math.isnan(v) or (finite and math.isinf(v)):
         raise ConfigError(f"{what} must be {expected}, got {v}")

@@ -54,3 +54,42 @@ def test_a_sphere_radius_that_is_no_number_is_refused_at_registration(tmp_path):
 
     with pytest.raises(RobotDescriptionError, match="radius 'big'"):
         urdf_spheres(panda, bad)
+
+
+def test_configurations_take_numpy_and_torch_numbers_and_keep_python_ones():
+    """A NumPy or 0-d torch number in a configuration is taken as the Python number it is, so the
+    configuration still writes to config.json."""
+    import dataclasses
+    import json
+
+    from kinlearn.data.endpoints import EndpointConfig
+    from kinlearn.data.problems import ProblemConfig
+    from kinlearn.planning.obstacle_baselines import OptimiserConfig
+    from kinlearn.training.obstacle_path import ObstacleLossConfig
+
+    configs = [
+        EndpointConfig(robot="iiwa14", start_spread=np.float32(0.25)),
+        ProblemConfig(time_limit=np.float64(2.0), max_travel=torch.tensor(0.02)),
+        OptimiserConfig(lr=np.float32(0.01)),
+        ObstacleLossConfig(margin=np.float32(0.05), imitation=np.int64(1)),
+    ]
+    for cfg in configs:
+        values = dataclasses.asdict(cfg)
+        json.dumps(values)  # no NumPy or torch scalar left in it
+    assert configs[0].start_spread == pytest.approx(0.25) and configs[1].max_travel == pytest.approx(0.02)
+    with pytest.raises(ConfigError, match=r"ObstacleLossConfig\.margin must be a finite number ≥ 0"):
+        ObstacleLossConfig(margin=np.float32(-1))
+    with pytest.raises(ConfigError, match="time_limit"):
+        ProblemConfig(time_limit=np.nan)
+
+
+def test_scene_families_and_the_sampler_take_numpy_numbers():
+    from kinlearn.collision.rrt import rrt_connect
+    from kinlearn.data.scenes import SCENE_FAMILIES, build_scene
+
+    family = SCENE_FAMILIES[0]
+    a = build_scene(family, torch.Generator().manual_seed(0), scale=np.float32(1.0), tool=np.float64(0.0))
+    b = build_scene(family, torch.Generator().manual_seed(0), scale=1.0, tool=0.0)
+    assert a.primitives == b.primitives
+    with pytest.raises(ConfigError, match=r"time_limit must be a number of seconds > 0 \(or inf\)"):
+        rrt_connect(None, None, None, None, None, None, time_limit=np.float32(-1.0))

@@ -143,6 +143,14 @@ def _run_identify(args: argparse.Namespace) -> int:
         f"(it includes the observations' noise, robust σ ≈ {r['noise_sigma'] * 1e3:.3f} mm per axis); "
         f"{r['outliers_dropped']} outliers dropped"
     )
+    ex = r["excitation"]
+    least = min(range(len(ex["joint_range"])), key=ex["joint_range"].__getitem__)
+    condition = "—" if ex["condition"] is None else f"{ex['condition']:.3g}"
+    print(
+        f"excitation: joints moved {min(ex['joint_range']):.2f}–{max(ex['joint_range']):.2f} rad (least: joint "
+        f"{least + 1}); parameter Jacobian rank {ex['parameter_rank']} of {ex['expected_rank']}, condition "
+        f"{condition}"
+    )
     if undetermined:
         print(
             "axis direction not determined by position data (the end-effector point lies on it): joint(s) "

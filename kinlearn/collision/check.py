@@ -15,12 +15,11 @@ to make a clean result a guarantee for the sphere body.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import torch
 
-from ..checks import check_finite, check_last_dim
+from ..checks import as_real, check_finite, check_last_dim
 from ..errors import ConfigError, ShapeError
 from .body import BodySpheres
 from .distance import body_obstacle_distance, self_collision_distance
@@ -120,8 +119,9 @@ def check_path(
             f"joint paths must have shape (..., T+1, {body.robot.dof}), got {tuple(joints.shape)}"
         )
     check_finite(joints, "joint paths")
-    if not (isinstance(max_travel, (int, float)) and math.isfinite(max_travel) and max_travel > 0):
-        raise ConfigError(f"max_travel must be a finite number of metres > 0, got {max_travel!r}")
+    max_travel = as_real(
+        max_travel, "max_travel", minimum=0.0, open_minimum=True, expected="a finite number of metres > 0"
+    )
     batch = joints.shape[:-2]
     scene = _scene_for(scene, batch, "paths of batch shape")
     n_wp, dof = joints.shape[-2], joints.shape[-1]

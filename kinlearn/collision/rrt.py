@@ -32,6 +32,7 @@ import time
 import numba
 import numpy as np
 
+from ..checks import as_int, as_real
 from ..errors import ConfigError, ShapeError
 from . import kernel
 
@@ -240,8 +241,7 @@ class RrtConnect:
         for name, v in (("start", q0), ("goal", q1), ("lower", lo), ("upper", hi)):
             if v.shape != (dof,):
                 raise ShapeError(f"RRT-Connect's {name} must have shape ({dof},), got {v.shape}")
-        if not (isinstance(max_nodes, int) and max_nodes >= 2):
-            raise ConfigError(f"max_nodes must be an integer >= 2, got {max_nodes!r}")
+        max_nodes = as_int(max_nodes, "max_nodes", minimum=2)
         self.step = 0.2 * float(np.linalg.norm(np.minimum(hi - lo, TURN))) if step is None else float(step)
         if not (math.isfinite(self.step) and self.step > 0):
             raise ConfigError(f"step must be a number of radians > 0, got {step!r}")
@@ -363,10 +363,12 @@ def rrt_connect(
     Returns ``(path (V, dof) or None, seconds taken, iterations)``. ``clock``: the time source
     (default ``time.perf_counter``). ``options`` go to :class:`RrtConnect`.
     """
-    if not (isinstance(time_limit, (int, float)) and time_limit > 0 and not math.isnan(time_limit)):
-        raise ConfigError(f"time_limit must be a number of seconds > 0 (or inf), got {time_limit!r}")
-    if rounds is not None and (isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1):
-        raise ConfigError(f"rounds must be an integer >= 1 (or None: sized to their time), got {rounds!r}")
+    time_limit = as_real(
+        time_limit, "time_limit", minimum=0.0, open_minimum=True, finite=False,
+        expected="a number of seconds > 0 (or inf)",
+    )  # fmt: skip
+    if rounds is not None:
+        rounds = as_int(rounds, "rounds (or None: sized to their time)", minimum=1)
     if max_iterations is not None and (
         isinstance(max_iterations, bool) or not isinstance(max_iterations, int) or max_iterations < 1
     ):

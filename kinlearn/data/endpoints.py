@@ -24,7 +24,7 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
-from ..checks import check_region
+from ..checks import as_real, check_region
 from ..errors import ConfigError
 from ..io import load_npz, save_npz
 
@@ -78,8 +78,8 @@ class EndpointConfig:
             raise ConfigError(f"EndpointConfig.n must be a positive number of pairs, got {self.n!r}")
         for name in ("start_spread", "min_distance", "goal_margin"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
-                raise ConfigError(f"EndpointConfig.{name} must be a finite number ≥ 0, got {value!r}")
+            value = as_real(value, f"EndpointConfig.{name}", minimum=0.0, expected="a finite number ≥ 0")
+            object.__setattr__(self, name, value)
         if self.region is not None:
             check_region(self.region, "EndpointConfig.region")
 

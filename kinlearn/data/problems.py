@@ -52,6 +52,7 @@ import torch
 
 from ..body.kinematics import approach_axis, dls_step, kinematics, pointing_dls_step
 from ..body.robot import Robot, load_robot
+from ..checks import as_real
 from ..collision.body import BodySpheres, body_spheres, planning_body
 from ..collision.check import check_path, clearances
 from ..collision.ompl import OmplRrtConnect, import_ompl
@@ -159,8 +160,8 @@ class ProblemConfig:
             "max_travel",
         ):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ConfigError(f"ProblemConfig.{name} must be a finite number >= 0, got {value!r}")
+            value = as_real(value, f"ProblemConfig.{name}", minimum=0.0, expected="a finite number >= 0")
+            object.__setattr__(self, name, value)
         for name in ("ik_batch", "ik_iterations", "max_attempts"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:

@@ -42,6 +42,7 @@ import torch
 
 from ..body.kinematics import kinematics
 from ..body.robot import Robot
+from ..checks import as_real
 from ..collision.geometry import Box, Cylinder, Primitive, Sphere
 from ..collision.scene import Scene
 from ..errors import ConfigError
@@ -514,10 +515,8 @@ def build_scene(
     is low in the bin; no other family's targets change, and ``tool = 0`` draws the same scenes."""
     if family not in _BUILDERS:
         raise ConfigError(f"unknown scene family {family!r}; choose one of {', '.join(SCENE_FAMILIES)}")
-    if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
-        raise ConfigError(f"scale must be a finite number > 0, got {scale!r}")
-    if not (isinstance(tool, (int, float)) and math.isfinite(tool) and tool >= 0):
-        raise ConfigError(f"tool must be a finite number >= 0 (m), got {tool!r}")
+    scale = as_real(scale, "scale", minimum=0.0, open_minimum=True, expected="a finite number > 0")
+    tool = as_real(tool, "tool", minimum=0.0, expected="a finite number >= 0 (m)")
     for _ in range(tries):
         built = _BUILDERS[family](gen, float(scale), float(tool))
         if built is not None:

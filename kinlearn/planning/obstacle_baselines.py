@@ -46,7 +46,6 @@ classes ``JointLine(body, steps=10)`` and ``CartesianLine(body, steps=10, ...)``
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from dataclasses import asdict, dataclass
@@ -58,7 +57,7 @@ import torch
 
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
-from ..checks import as_int
+from ..checks import as_int, as_real
 from ..collision import (
     BodySpheres,
     Scene,
@@ -333,8 +332,8 @@ class OptimiserConfig:
                 )
         for name in ("margin", "self_margin", "lr", "smooth", "collision", "self_collision"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ConfigError(f"OptimiserConfig.{name} must be a finite number >= 0, got {value!r}")
+            value = as_real(value, f"OptimiserConfig.{name}", minimum=0.0, expected="a finite number >= 0")
+            object.__setattr__(self, name, value)
         if self.lr <= 0:
             raise ConfigError(f"OptimiserConfig.lr must be > 0, got {self.lr!r}")
 

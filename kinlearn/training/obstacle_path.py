@@ -45,6 +45,7 @@ import torch
 
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
+from ..checks import as_real
 from ..collision.body import BodySpheres, body_spheres
 from ..collision.distance import body_obstacle_distance, self_collision_distance
 from ..collision.geometry import safe_sqrt
@@ -93,8 +94,8 @@ class ObstacleLossConfig:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
-                raise ConfigError(f"ObstacleLossConfig.{f.name} must be a finite number ≥ 0, got {v!r}")
+            v = as_real(v, f"ObstacleLossConfig.{f.name}", minimum=0.0, expected="a finite number ≥ 0")
+            object.__setattr__(self, f.name, v)
 
 
 @dataclass(frozen=True)
