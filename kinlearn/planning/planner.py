@@ -38,7 +38,7 @@ import torch
 from ..body.kinematics import kinematics
 from ..body.robot import BUILTIN_ROBOTS, ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
-from ..checks import as_int
+from ..checks import as_int, as_real
 from ..collision.body import BodySpheres
 from ..collision.scene import Scene, as_scene
 from ..data.babbling import MAX_STEP
@@ -213,13 +213,9 @@ class Planner(ObstacleStages):
         self.retreat = retreat
         if retreat_share is None:
             retreat_share = _retreat_share(robot.name)
-        if (
-            isinstance(retreat_share, bool)
-            or not isinstance(retreat_share, (int, float))
-            or not 0.0 <= retreat_share <= 1.0
-        ):
-            raise ConfigError(f"retreat_share must be a number in [0, 1] (or None), got {retreat_share!r}")
-        self.retreat_share = float(retreat_share)
+        self.retreat_share = as_real(
+            retreat_share, "retreat_share", minimum=0.0, maximum=1.0, expected="a number in [0, 1] (or None)"
+        )
         self._vias: RetreatVias | bool | None = None  # made on the first retreat (False: not possible)
         self._np_body_cache = None
         self._wide_robot = None  # the robot obstacle problems are checked with (first use)
