@@ -8,7 +8,8 @@ to the chain link it hangs from, so the spheres cover it wherever it is.
 
 For each chain link a small set of spheres is chosen that **covers** the link's surface:
 
-1. surface points are drawn area-weighted (primitives: on their exact surfaces);
+1. surface points are drawn area-weighted (primitives: on their exact surfaces), with the meshes'
+   vertices and points on their edges (corners and rims, which area sampling almost never hits);
 2. the link's solid is voxelised (surface voxels, interior filled); its filled voxel centres are the
    candidate sphere centres, and its filled volume is what a sphere's excess volume is measured
    against;
@@ -390,7 +391,14 @@ def fit_link(group: LinkGeometry, config: SpherizeConfig = SpherizeConfig()) -> 
     """Spheres ``(S, 4)`` [x, y, z, r] covering ``group``'s surface, and what was measured (see the module
     docstring). Deterministic given ``config.seed`` and the link's index."""
     gen = np.random.default_rng([config.seed, group.index])
-    pts = group.sample(config.fit_points, gen)
+    # surface points, and the parts' vertices and points on their edges: the corners and rims a cover
+    # misses first (area sampling almost never lands on them)
+    corners = np.concatenate([np.asarray(p.mesh.vertices) for p in group.parts])
+    if len(corners) > config.fit_points:
+        corners = corners[np.sort(gen.choice(len(corners), config.fit_points, replace=False))]
+    pts = np.concatenate(
+        [group.sample(config.fit_points, gen), corners, _edge_points(group, config.fit_points // 3, gen)]
+    )
     solid, pitch = _solid(group, config.voxels)
     cell = pitch**3
     if len(solid) > config.candidates:
@@ -428,7 +436,14 @@ def fit_link(group: LinkGeometry, config: SpherizeConfig = SpherizeConfig()) -> 
     radii = np.array([r for _, r in chosen])
     centres, radii = _tighten(centres, radii, pts)
     # a denser, independent sample: every point ends inside, the least growth each
-    check = group.sample(config.check_points, np.random.default_rng([config.seed, group.index, 1]))
+    check_gen = np.random.default_rng([config.seed, group.index, 1])
+    check = np.concatenate(
+        [
+            group.sample(config.check_points, check_gen),
+            corners,
+            _edge_points(group, config.check_points // 3, check_gen),
+        ]
+    )
     grown = 0.0
     for _ in range(3):
         d = np.linalg.norm(check[:, None, :] - centres[None], axis=-1) - radii[None]
@@ -451,6 +466,17 @@ def fit_link(group: LinkGeometry, config: SpherizeConfig = SpherizeConfig()) -> 
         "largest_growth": grown,
     }
     return np.concatenate([centres, radii[:, None]], 1), report
+
+
+def _edge_points(group: LinkGeometry, n: int, gen: np.random.Generator) -> np.ndarray:
+    """``(n, 3)`` points on the parts' mesh edges, length-weighted."""
+    segs = np.concatenate([np.asarray(p.mesh.vertices)[np.asarray(p.mesh.edges_unique)] for p in group.parts])
+    length = np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1)
+    if n <= 0 or length.sum() <= 0:
+        return np.zeros((0, 3))
+    pick = gen.choice(len(segs), size=n, p=length / length.sum())
+    t = gen.random(n)[:, None]
+    return segs[pick, 0] + t * (segs[pick, 1] - segs[pick, 0])
 
 
 def _tighten(centres: np.ndarray, radii: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

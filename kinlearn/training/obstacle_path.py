@@ -180,13 +180,15 @@ def make_training_problems(
     families: tuple[str, ...] = LEGACY_FAMILIES,
     sphere_set: str | None = None,
     within: str = "robot",
+    max_attempts: int | None = None,
 ) -> list[Path]:
     """Generate (or reuse) unverified training problems: ``per_family`` of each of ``families`` (default
     the three the shipped iiwa14 network was trained on) with :data:`TRAINING_SEEDS`, in files of
     ``chunk`` problems under ``out_dir``, for the body ``sphere_set`` names (default the robot's planning
     body, :class:`~kinlearn.data.problems.ProblemConfig`), starts and goals within the joint limits
     ``within`` names (``"robot"`` or ``"body"``: the body's, the ur5's tool model's ±π). Deterministic:
-    chunk c of a family is problems ``c·chunk …`` of its seed's sequence, whoever generates it. A file
+    chunk c of a family is problems ``c·chunk …`` of its seed's sequence, whoever generates it.
+    ``max_attempts``: scenes tried per problem (default :class:`~kinlearn.data.problems.ProblemConfig`'s). A file
     already there made for another body or within other limits is a :class:`~kinlearn.errors.ConfigError`
     (choose another ``out_dir``)."""
     unknown = [f for f in families if f not in FAMILIES]
@@ -194,7 +196,9 @@ def make_training_problems(
         raise ConfigError(f"training families must be some of {', '.join(FAMILIES)}, got {list(families)}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    cfg = ProblemConfig(verify=False, sphere_set=sphere_set, within=within)
+    # a small arm's cells hold fewer free poses: more scenes tried per problem
+    extra = {} if max_attempts is None else {"max_attempts": max_attempts}
+    cfg = ProblemConfig(verify=False, sphere_set=sphere_set, within=within, **extra)
     robot = robot or load_robot("iiwa14")
     want = cfg.body(robot).name
     paths = []

@@ -71,6 +71,7 @@ class OnboardConfig:
     obstacle_iterations: int = 1500
     obstacle_batch_size: int = 64
     candidates: int = 16
+    max_attempts: int = 400
     solvable_only: bool = True
     identify: bool = True
     spheres: SpherizeConfig = field(default_factory=SpherizeConfig)
@@ -430,12 +431,16 @@ def _run_steps(robot: Robot, run_dir: Path, config: OnboardConfig, step, progres
         total = len(families) * math.ceil(config.problems_per_family / 250)
         make_training_problems(
             run_dir / "problems", config.problems_per_family, robot=robot, families=families,
-            progress=(lambda k: bar(k, total)) if bar else None,
+            max_attempts=config.max_attempts, progress=(lambda k: bar(k, total)) if bar else None,
         )  # fmt: skip
 
     step("problems", do_problems)
     problem_paths = make_training_problems(
-        run_dir / "problems", config.problems_per_family, robot=robot, families=families
+        run_dir / "problems",
+        config.problems_per_family,
+        robot=robot,
+        families=families,
+        max_attempts=config.max_attempts,
     )  # made already: the same files, checked
 
     def do_obstacles(resumed: bool) -> None:
