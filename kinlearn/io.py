@@ -389,6 +389,18 @@ def load_npz(path: str | Path, *, kind: str, robot: str | None = None) -> tuple[
     path = Path(path)
     if not path.is_file():
         raise DatasetError(f"no dataset file at {path}")
+    with open(path, "rb") as fh:
+        head = fh.read(256)
+    if head[:4] != b"PK\x03\x04":  # an .npz is a zip archive; anything else is named for what it is
+        first = head.split(b"\n", 1)[0]
+        yaml_like = path.suffix.lower() in (".yaml", ".yml") or (b":" in first and b"," not in first)
+        hint = (
+            " (it looks like YAML: a MoveIt planning scene is read with Scene.from_moveit, "
+            "`kinlearn plan --scene`)"
+            if yaml_like
+            else ""
+        )
+        raise DatasetError(f"{path} is not a readable kinlearn dataset: not an .npz (a zip archive){hint}")
     try:
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["__meta__"]))

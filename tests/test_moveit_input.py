@@ -258,3 +258,14 @@ def test_cli_refuses_bad_moveit_files_with_their_message_and_no_traceback(tmp_pa
         assert out.returncode == 2, out.stderr
         assert "Traceback" not in out.stderr
         assert match in out.stderr
+
+
+def test_a_moveit_file_loaded_as_a_kinlearn_scene_points_to_from_moveit(tmp_path):
+    from kinlearn.errors import DatasetError
+
+    path = tmp_path / "scene.yaml"
+    path.write_text(yaml.safe_dump(_scene(_obj())))
+    with pytest.raises(
+        DatasetError, match=r"looks like YAML: a MoveIt planning scene is read with Scene\.from_moveit"
+    ):
+        Scene.load(path)
