@@ -79,6 +79,11 @@ class TimingError(PlanningError):
     """A joint path that could not be time-parameterised within the given limits."""
 
 
+class UnsafeTrajectoryError(TimingError):
+    """The executed motion of a plan cannot be made collision-free: even along the plan's own straight
+    segments, at rest at every waypoint, the timed samples collide (the joint path itself collides)."""
+
+
 class RunDirectoryError(ConfigError):
     """A run directory that already holds a run: continue it (``--resume``, same configuration), replace it
     (``--overwrite``) or choose another one."""

@@ -48,6 +48,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any, Literal
 
 import numpy as np
@@ -55,7 +56,15 @@ import torch
 
 from ..body.robot import Robot
 from ..checks import as_int, as_real
-from ..errors import ConfigError, DatasetError, JointLimitError, NonFiniteError, ShapeError, TimingError
+from ..errors import (
+    ConfigError,
+    DatasetError,
+    JointLimitError,
+    NonFiniteError,
+    ShapeError,
+    TimingError,
+    UnsafeTrajectoryError,
+)
 from ..io import atomic_write
 
 __all__ = ["DEFAULT_ACCELERATION_TIME", "TimedTrajectory", "time_parameterize"]
@@ -89,7 +98,11 @@ class TimedTrajectory:
         robot: the robot's name; ``joint_names``: its movable joints, base to tip (``dof`` names).
         velocity_limits, acceleration_limits: ``(dof,)`` the limits the trajectory was timed under.
         waypoint_times: ``(N,)`` the time at which the trajectory passes each input waypoint.
-        interpolant: ``"spline"`` or ``"pchip"``, the path through the waypoints (module docstring).
+        interpolant: ``"spline"``, ``"pchip"`` or ``"linear"`` (the polyline itself, at rest at each
+            waypoint), the path through the waypoints (module docstring); ``"mixed"`` where a repaired
+            trajectory joins pieces of more than one.
+        verified: whether the executed motion (these samples) was verified against a scene and body
+            (:meth:`~kinlearn.planning.plan.Plan.timed` of a plan among obstacles).
     """
 
     t: np.ndarray
@@ -103,6 +116,7 @@ class TimedTrajectory:
     acceleration_limits: np.ndarray
     waypoint_times: np.ndarray
     interpolant: str
+    verified: bool = False
 
     def __post_init__(self) -> None:
         for name in ("t", "q", "qd", "qdd", "velocity_limits", "acceleration_limits", "waypoint_times"):
@@ -174,6 +188,7 @@ class TimedTrajectory:
             "robot": self.robot,
             "joint_names": list(self.joint_names),
             "interpolant": self.interpolant,
+            "verified": self.verified,
             "duration": self.duration,
             "velocity_limits": self.velocity_limits.tolist(),
             "acceleration_limits": self.acceleration_limits.tolist(),
@@ -204,7 +219,8 @@ class TimedTrajectory:
                 f"{path}: timed-trajectory format {obj.get('format')!r}; this kinlearn reads format {TIMED_FORMAT}"
             )
         try:
-            fields = {k: obj[k] for k in cls.__dataclass_fields__}
+            fields = {k: obj[k] for k in cls.__dataclass_fields__ if k != "verified"}
+            fields["verified"] = bool(obj.get("verified", False))
             dof = len(fields["joint_names"])
             for name in ("q", "qd", "qdd"):  # an empty trajectory would lose its second dimension
                 fields[name] = np.asarray(fields[name], dtype=np.float64).reshape(-1, dof)
@@ -382,68 +398,31 @@ def _sample_times(duration: float, dt: float | None, samples: int | None) -> np.
 # ---------------------------------------------------------------------------------------------- public
 
 
-def time_parameterize(
-    robot: Robot,
-    joints: torch.Tensor | np.ndarray,
-    *,
-    velocity_limits: float | np.ndarray | torch.Tensor | None = None,
-    acceleration_limits: float | np.ndarray | torch.Tensor | None = None,
-    velocity_scale: float = 1.0,
-    dt: float | None = None,
-    samples: int | None = None,
-    interpolant: Interpolant = "auto",
-) -> TimedTrajectory:
-    """The time-optimal rest-to-rest trajectory along a joint path, within velocity/acceleration limits.
+#: Rounds of knots added where the executed motion leaves the checked corridor, before the motion is
+#: brought to rest at the corners there (each round halves the knot spacing around every collision).
+REFINE_ROUNDS = 5
 
-    Args:
-        robot: the robot the path belongs to (its joint names, position and velocity limits).
-        joints: ``(T + 1, dof)`` one joint path (rad), e.g. ``plan.joints`` of a single plan; every
-            configuration within the position limits. Consecutive repeated configurations count once.
-        velocity_limits: rad/s, one number or ``(dof,)``; default: the URDF's velocity limits.
-        acceleration_limits: rad/s², one number or ``(dof,)``; default: velocity limits (unscaled)
-            divided by :data:`DEFAULT_ACCELERATION_TIME` (0.5 s).
-        velocity_scale: factor in (0, 1] applied to the velocity limits (not the accelerations).
-        dt: sample period in s (default 0.01 s); the last sample is always at ``duration``.
-        samples: number of samples from 0 to ``duration`` inclusive (≥ 2), instead of ``dt``.
-        interpolant: ``"auto"``, ``"spline"`` or ``"pchip"``: the smooth path through the waypoints
-            (see the module docstring).
+#: What :func:`time_parameterize` calls to verify the executed motion: the sampled positions ``(K, dof)``
+#: in, per sample interval ``(K − 1,)`` whether it collides (either end, or anywhere between) out.
+Verifier = Callable[[np.ndarray], np.ndarray]
 
-    Returns:
-        A :class:`TimedTrajectory`. A path whose configurations are all the same gives one sample at
-        rest with duration 0.
 
-    Raises:
-        ShapeError, NonFiniteError, JointLimitError: a malformed path, or one outside the limits.
-        ConfigError: non-positive limits, a velocity_scale outside (0, 1], a bad dt/samples/interpolant.
-        TimingError: toppra found no parameterisation.
-    """
-    if interpolant not in ("auto", "spline", "pchip"):
-        raise ConfigError(f"interpolant must be 'auto', 'spline' or 'pchip', got {interpolant!r}")
-    if dt is not None and samples is not None:
-        raise ConfigError("give dt or samples, not both")
-    if dt is not None:
-        dt = as_real(dt, "dt (s)", minimum=0.0, open_minimum=True)
-    if samples is not None:
-        samples = as_int(samples, "samples", minimum=2, maximum=MAX_SAMPLES)
-    q_in = _joint_path(robot, joints)
-    vel, acc = _resolve_limits(robot, velocity_limits, acceleration_limits, velocity_scale)
+@dataclass
+class _Piece:
+    """A rest-to-rest stretch of the trajectory through knots ``(n, dof)``: its duration, the time it
+    passes each knot, an evaluator ``ts → (q, qd, qdd)`` and the interpolant used."""
 
-    # Cumulative chord length; consecutive duplicates collapse into one waypoint.
-    chord = np.linalg.norm(np.diff(q_in, axis=0), axis=1)
-    keep = np.concatenate([[True], chord > _DUPLICATE_TOL])
-    which = np.cumsum(keep) - 1  # input waypoint → index among the kept ones
-    qs = q_in[keep]
-    ss = np.concatenate([[0.0], np.cumsum(chord[keep[1:]])])
-    common = dict(
-        robot=robot.name, joint_names=robot.joint_names, velocity_limits=vel, acceleration_limits=acc
-    )
-    if len(qs) == 1:
-        zeros = np.zeros((1, robot.dof))
-        return TimedTrajectory(
-            t=np.zeros(1), q=qs, qd=zeros, qdd=zeros, duration=0.0,
-            waypoint_times=np.zeros(len(q_in)), interpolant="spline", **common,
-        )  # fmt: skip
+    duration: float
+    knot_times: np.ndarray
+    evaluate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
+    interpolant: str
 
+
+def _spline_piece(robot: Robot, qs: np.ndarray, interpolant: Interpolant, vel, acc) -> _Piece:
+    """The time-optimal traversal of the smooth interpolant through ``qs`` (toppra); TimingError where
+    toppra finds none or cannot bring the limits' excess within tolerance."""
+    chord = np.linalg.norm(np.diff(qs, axis=0), axis=1)
+    ss = np.concatenate([[0.0], np.cumsum(chord)])
     path, used = _make_path(robot, ss, qs, interpolant)
     grid = _grid(ss)
     v_solve, a_solve = vel, acc
@@ -460,8 +439,72 @@ def time_parameterize(
             f"the timed path still exceeds a limit by {excess:.3g}% after {_MAX_RESOLVES} solves; "
             "the path may have a near-corner: add waypoints or use interpolant='pchip'"
         )
+    knot_times = np.asarray(traj._ts, dtype=np.float64)[np.searchsorted(grid, ss)]
+    return _Piece(float(traj.duration), knot_times, lambda ts: _evaluate(traj, ts), used)
 
-    duration = float(traj.duration)
+
+def _linear_piece(qs: np.ndarray, vel: np.ndarray, acc: np.ndarray) -> _Piece:
+    """The polyline through ``qs`` itself, at rest at every vertex: each segment a → b is crossed along
+    the straight line in the least time its limits allow (accelerate at the most any joint allows,
+    cruise at the most velocity, decelerate: a trapezoid, or a triangle where the segment is short)."""
+    starts, deltas, durations, shapes = [], [], [], []
+    for a, b in zip(qs[:-1], qs[1:], strict=True):
+        d = b - a
+        moving = np.abs(d) > 0
+        v = float(np.min(vel[moving] / np.abs(d[moving])))  # path speed, segment lengths per second
+        ac = float(np.min(acc[moving] / np.abs(d[moving])))
+        if v * v / ac >= 1.0:  # never reaches full speed: a triangle
+            ta = math.sqrt(1.0 / ac)
+            shapes.append((ta, 0.0, ac, ac * ta))
+            durations.append(2.0 * ta)
+        else:
+            ta = v / ac
+            cruise = (1.0 - v * ta) / v
+            shapes.append((ta, cruise, ac, v))
+            durations.append(2.0 * ta + cruise)
+        starts.append(a)
+        deltas.append(d)
+    offsets = np.concatenate([[0.0], np.cumsum(durations)])
+
+    def evaluate(ts: np.ndarray):
+        k = np.clip(np.searchsorted(offsets, ts, side="right") - 1, 0, len(durations) - 1)
+        u = np.clip(ts - offsets[k], 0.0, None)
+        s, sd, sdd = np.empty_like(ts), np.empty_like(ts), np.empty_like(ts)
+        for i, (ta, cruise, ac, top) in enumerate(shapes):
+            m = k == i
+            x = np.minimum(u[m], durations[i])
+            rise, flat, fall = x < ta, (x >= ta) & (x < ta + cruise), x >= ta + cruise
+            y = np.where(rise, 0.5 * ac * x * x, 0.0)
+            y = np.where(flat, 0.5 * ac * ta * ta + top * (x - ta), y)
+            back = durations[i] - x
+            y = np.where(fall, 1.0 - 0.5 * ac * back * back, y)
+            s[m] = y
+            sd[m] = np.where(rise, ac * x, np.where(flat, top, ac * back))
+            sdd[m] = np.where(rise, ac, np.where(flat, 0.0, -ac))
+        a, d = np.asarray(starts)[k], np.asarray(deltas)[k]
+        return a + s[:, None] * d, sd[:, None] * d, sdd[:, None] * d
+
+    return _Piece(float(offsets[-1]), offsets.copy(), evaluate, "linear")
+
+
+def _piece(robot: Robot, qs: np.ndarray, interpolant: Interpolant, vel, acc, straight: bool) -> _Piece:
+    """A piece through ``qs``: the smooth interpolant (two knots: the straight segment), or the polyline
+    at rest at its vertices where ``straight`` or where toppra finds no parameterisation."""
+    if straight or len(qs) == 2:
+        return _linear_piece(qs, vel, acc)
+    try:
+        return _spline_piece(robot, qs, interpolant, vel, acc)
+    except TimingError:
+        if interpolant == "spline":
+            raise
+        return _linear_piece(qs, vel, acc)
+
+
+def _assemble(pieces: list[_Piece], dt, samples):
+    """Samples ``(t, q, qd, qdd)`` of the pieces one after the other (at rest between them), and the time
+    each knot is passed (the knot shared by two pieces once)."""
+    offsets = np.concatenate([[0.0], np.cumsum([p.duration for p in pieces])])
+    duration = float(offsets[-1])
     step = DEFAULT_DT if dt is None else dt
     if samples is None and duration / step + 2 > MAX_SAMPLES:
         raise ConfigError(
@@ -470,11 +513,156 @@ def time_parameterize(
             "pass a larger dt or samples=, or larger velocity/acceleration limits"
         )
     ts = _sample_times(duration, dt, samples)
-    q, qd, qdd = _evaluate(traj, ts)
-    q[-1], qd[0], qd[-1] = qs[-1], 0.0, 0.0  # exact end configuration and rest (rounding ≈ 1e-12 otherwise)
-    q = np.clip(q, robot.lower, robot.upper)
-    knot_times = np.asarray(traj._ts, dtype=np.float64)[np.searchsorted(grid, ss)]
+    which = np.clip(np.searchsorted(offsets, ts, side="right") - 1, 0, len(pieces) - 1)
+    dof = None
+    q = qd = qdd = None
+    for i, p in enumerate(pieces):
+        m = which == i
+        if not m.any():
+            continue
+        local = np.clip(ts[m] - offsets[i], 0.0, p.duration)
+        a, b, c = p.evaluate(local)
+        if q is None:
+            dof = a.shape[1]
+            q, qd, qdd = (np.empty((len(ts), dof)) for _ in range(3))
+        q[m], qd[m], qdd[m] = a, b, c
+    knot_times = [pieces[0].knot_times]
+    knot_times += [p.knot_times[1:] + offsets[i] for i, p in enumerate(pieces) if i > 0]
+    return ts, q, qd, qdd, duration, np.concatenate(knot_times)
+
+
+def _bad_knots(bad: np.ndarray, ts: np.ndarray, knot_times: np.ndarray) -> np.ndarray:
+    """The knot intervals ``(n − 1,)`` that the colliding sample intervals ``bad (K − 1,)`` overlap."""
+    out = np.zeros(len(knot_times) - 1, dtype=bool)
+    for k in np.flatnonzero(bad):
+        lo = max(int(np.searchsorted(knot_times, ts[k], side="right")) - 1, 0)
+        hi = min(int(np.searchsorted(knot_times, ts[k + 1], side="left")), len(knot_times) - 1)
+        out[lo : max(hi, lo + 1)] = True
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- public
+
+
+def time_parameterize(
+    robot: Robot,
+    joints: torch.Tensor | np.ndarray,
+    *,
+    velocity_limits: float | np.ndarray | torch.Tensor | None = None,
+    acceleration_limits: float | np.ndarray | torch.Tensor | None = None,
+    velocity_scale: float = 1.0,
+    dt: float | None = None,
+    samples: int | None = None,
+    interpolant: Interpolant = "auto",
+    verify: Verifier | None = None,
+) -> TimedTrajectory:
+    """The time-optimal rest-to-rest trajectory along a joint path, within velocity/acceleration limits,
+    its executed motion verified where ``verify`` is given.
+
+    Args:
+        robot: the robot the path belongs to (its joint names, position and velocity limits).
+        joints: ``(T + 1, dof)`` one joint path (rad), e.g. ``plan.joints`` of a single plan; every
+            configuration within the position limits. Consecutive repeated configurations count once.
+        velocity_limits: rad/s, one number or ``(dof,)``; default: the URDF's velocity limits.
+        acceleration_limits: rad/s², one number or ``(dof,)``; default: velocity limits (unscaled)
+            divided by :data:`DEFAULT_ACCELERATION_TIME` (0.5 s).
+        velocity_scale: factor in (0, 1] applied to the velocity limits (not the accelerations).
+        dt: sample period in s (default 0.01 s); the last sample is always at ``duration``.
+        samples: number of samples from 0 to ``duration`` inclusive (≥ 2), instead of ``dt``.
+        interpolant: ``"auto"``, ``"spline"`` or ``"pchip"``: the smooth path through the waypoints
+            (see the module docstring).
+        verify: a check of the executed motion (:data:`Verifier`: the samples in, the colliding sample
+            intervals out; :meth:`~kinlearn.planning.plan.Plan.timed` passes the dense check of the
+            plan's own scene and body). Where the samples collide, the path is repaired and timed
+            again (see the module docstring) until they pass.
+
+    Returns:
+        A :class:`TimedTrajectory`. A path whose configurations are all the same gives one sample at
+        rest with duration 0.
+
+    Raises:
+        ShapeError, NonFiniteError, JointLimitError: a malformed path, or one outside the limits.
+        ConfigError: non-positive limits, a velocity_scale outside (0, 1], a bad dt/samples/interpolant.
+        TimingError: ``interpolant="spline"`` and toppra found no parameterisation.
+        UnsafeTrajectoryError: ``verify`` still finds a collision when the motion follows the path's
+            own straight segments (the path itself collides).
+    """
+    if interpolant not in ("auto", "spline", "pchip"):
+        raise ConfigError(f"interpolant must be 'auto', 'spline' or 'pchip', got {interpolant!r}")
+    if dt is not None and samples is not None:
+        raise ConfigError("give dt or samples, not both")
+    if dt is not None:
+        dt = as_real(dt, "dt (s)", minimum=0.0, open_minimum=True)
+    if samples is not None:
+        samples = as_int(samples, "samples", minimum=2, maximum=MAX_SAMPLES)
+    q_in = _joint_path(robot, joints)
+    vel, acc = _resolve_limits(robot, velocity_limits, acceleration_limits, velocity_scale)
+
+    # Consecutive duplicates collapse into one waypoint.
+    chord = np.linalg.norm(np.diff(q_in, axis=0), axis=1)
+    keep = np.concatenate([[True], chord > _DUPLICATE_TOL])
+    which = np.cumsum(keep) - 1  # input waypoint → index among the kept ones
+    qs = q_in[keep]
+    common = dict(
+        robot=robot.name, joint_names=robot.joint_names, velocity_limits=vel, acceleration_limits=acc
+    )
+    if len(qs) == 1:
+        zeros = np.zeros((1, robot.dof))
+        return TimedTrajectory(
+            t=np.zeros(1), q=qs, qd=zeros, qdd=zeros, duration=0.0,
+            waypoint_times=np.zeros(len(q_in)), interpolant="spline", verified=verify is not None, **common,
+        )  # fmt: skip
+
+    # The knots: the waypoints, and points added on the polyline's own segments (so every knot and
+    # every segment between consecutive knots lies on the path that was checked).
+    knots, vertex = qs, np.arange(len(qs))  # vertex[i]: the knot index of waypoint i
+    stops = {0, len(qs) - 1}  # knots the motion comes to rest at (piece boundaries)
+    straight: set[int] = set()  # pieces (by their first knot) that follow the polyline itself
+    round_ = 0
+    while True:
+        bounds = sorted(stops)
+        pieces = [
+            _piece(robot, knots[a : b + 1], interpolant, vel, acc, a in straight)
+            for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+        ]
+        ts, q, qd, qdd, duration, knot_times = _assemble(pieces, dt, samples)
+        q[-1], qd[0], qd[-1] = knots[-1], 0.0, 0.0  # exact end configuration and rest
+        q = np.clip(q, robot.lower, robot.upper)
+        bad = None if verify is None else np.asarray(verify(q), dtype=bool)
+        if bad is None or not bad.any():
+            break
+        intervals = _bad_knots(bad, ts, knot_times)
+        if round_ < REFINE_ROUNDS:  # halve the knot spacing around each collision
+            grow = intervals.copy()
+            grow[1:] |= intervals[:-1]
+            grow[:-1] |= intervals[1:]
+            mids = (knots[:-1] + knots[1:]) / 2
+            order = np.concatenate([np.arange(len(knots)), np.flatnonzero(grow) + 0.5])
+            pos = np.argsort(order, kind="stable")
+            knots = np.concatenate([knots, mids[grow]])[pos]
+            new_index = np.empty(len(pos), dtype=np.int64)
+            new_index[pos] = np.arange(len(pos))
+            vertex = new_index[vertex]
+            stops = {int(new_index[s]) for s in stops}
+            straight = {int(new_index[s]) for s in straight}
+        elif round_ == REFINE_ROUNDS:  # rest at the waypoints that bound each collision
+            for i in np.flatnonzero(intervals):
+                stops.add(int(vertex[max(np.searchsorted(vertex, i, side="right") - 1, 0)]))
+                stops.add(int(vertex[min(np.searchsorted(vertex, i + 1, side="left"), len(vertex) - 1)]))
+        else:  # the pieces still colliding follow the polyline itself
+            bounds = sorted(stops)
+            more = {bounds[max(np.searchsorted(bounds, i, side="right") - 1, 0)] for i in np.flatnonzero(intervals)}
+            if more <= straight:  # they already do: the path itself collides
+                raise UnsafeTrajectoryError(
+                    f"the executed motion still collides in {int(bad.sum())} sample interval(s) when it "
+                    "follows the path's own straight segments, at rest at every waypoint: the joint path itself collides "
+                    "(plan.collision_free says whether the planner cleared it); nothing safe to execute"
+                )
+            straight |= more
+        round_ += 1
+    used = {p.interpolant for p in pieces}
     return TimedTrajectory(
         t=ts, q=q, qd=qd, qdd=qdd, duration=duration,
-        waypoint_times=knot_times[which], interpolant=used, **common,
+        waypoint_times=knot_times[vertex][which], interpolant=used.pop() if len(used) == 1 else "mixed",
+        verified=verify is not None, **common,
     )  # fmt: skip

@@ -1,0 +1,187 @@
+"""Shortening a collision-free joint path on the compiled checker: a deterministic, fixed-budget pass.
+
+Every path a planner hands over among obstacles goes through :func:`shorten` (the planner's shortcut
+stage, and the compiled sampler's own paths), whatever stage made it. The pass works on the polyline of
+joint configurations and keeps it free under the same dense check every plan is judged by
+(:mod:`kinlearn.collision.kernel`: at most ``max_travel`` of body-sphere travel between checked
+configurations, self-collision and the floor included). Two phases:
+
+1. **Vertex skipping**, systematic: from the first vertex, the farthest later vertex it sees along a
+   free straight segment becomes the next one (the segments tried from the far end down), then from
+   there. It removes the detours of a stage that backs out, crosses and goes in, and a sampler's
+   zig-zags, at the cost of about one check per vertex pair tried.
+2. **Partial shortcuts** (Geraerts and Overmars, "Creating high-quality paths for motion planning",
+   IJRR 2007): two points drawn along the path's length, on different segments, are joined where the
+   straight segment between them is free and shorter. Corners that no two vertices see past are cut.
+   The points come from a counter-based generator seeded by ``seed``: the same path, seed and budget
+   give the same result on every machine.
+
+The joint-space length (the sum of the segments' Euclidean norms) never grows: a change is kept only
+where it shortens the path. The result starts at the path's first configuration and ends at its last,
+exactly.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..checks import as_int
+from ..errors import ConfigError, ShapeError
+from . import kernel
+
+__all__ = ["DEFAULT_ATTEMPTS", "shorten"]
+
+_jit = numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+
+#: Partial shortcuts tried per path by default (a budget of work, not of time).
+DEFAULT_ATTEMPTS = 32
+#: A change must shorten the path by more than this (rad) to be kept: rounding never loops.
+_GAIN = 1e-9
+
+
+@_jit
+def _uniform(counter) -> float:
+    """A number in [0, 1) from a splitmix64 step of ``counter[0]``."""
+    counter[0] += 1
+    z = np.uint64(counter[0]) * np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@_jit
+def _seg_free(a, b, seg, max_travel, margin, f, n, s) -> bool:
+    for j in range(a.shape[0]):
+        seg[0, j], seg[1, j] = a[j], b[j]
+    return kernel._free_packed(seg, max_travel, margin, f, n, s)
+
+
+@_jit
+def _norm(a, b) -> float:
+    d = 0.0
+    for j in range(a.shape[0]):
+        e = a[j] - b[j]
+        d += e * e
+    return math.sqrt(d)
+
+
+@_jit
+def _skip(cur, m, out, seg, max_travel, margin, f, n, s) -> int:
+    """Phase 1 on ``cur[:m]``: the vertices kept, written to ``out``; returns their count."""
+    out[0] = cur[0]
+    count, i = 1, 0
+    while i < m - 1:
+        nxt = i + 1
+        for k in range(m - 1, i + 1, -1):
+            if _seg_free(cur[i], cur[k], seg, max_travel, margin, f, n, s):
+                nxt = k
+                break
+        out[count] = cur[nxt]
+        count += 1
+        i = nxt
+    return count
+
+
+@_jit
+def _shorten(path, cap, attempts, seed, max_travel, margin, f, n, s, out) -> int:
+    """:func:`shorten`'s compiled core: the shortened path in ``out[:count]`` (``out (cap, dof)``, ``cap``
+    at least the path's vertex count); returns ``count``."""
+    V, dof = path.shape
+    seg = np.empty((2, dof))
+    cur = np.empty((cap, dof))
+    nxt = np.empty((cap, dof))
+    m = _skip(path, V, cur, seg, max_travel, margin, f, n, s)
+    counter = np.array([seed * 0x100000001 + 7], dtype=np.int64)
+    cum = np.empty(cap)
+    a, b = np.empty(dof), np.empty(dof)
+    for _ in range(attempts):
+        if m < 3:
+            break
+        cum[0] = 0.0
+        for k in range(1, m):
+            cum[k] = cum[k - 1] + _norm(cur[k - 1], cur[k])
+        total = cum[m - 1]
+        u1, u2 = _uniform(counter) * total, _uniform(counter) * total
+        if u1 > u2:
+            u1, u2 = u2, u1
+        i1, i2 = 0, 0
+        while i1 < m - 2 and cum[i1 + 1] <= u1:
+            i1 += 1
+        while i2 < m - 2 and cum[i2 + 1] <= u2:
+            i2 += 1
+        if i1 == i2:
+            continue
+        if m + 2 - (i2 - i1) > cap:
+            continue
+        for which in range(2):
+            u, i, p = (u1, i1, a) if which == 0 else (u2, i2, b)
+            span = cum[i + 1] - cum[i]
+            t = 0.0 if span <= 0.0 else min(max((u - cum[i]) / span, 0.0), 1.0)
+            for j in range(dof):
+                p[j] = cur[i, j] + t * (cur[i + 1, j] - cur[i, j])
+        gain = (cum[i2 + 1] - cum[i1]) - (_norm(cur[i1], a) + _norm(a, b) + _norm(b, cur[i2 + 1]))
+        if not gain > _GAIN:
+            continue
+        if not _seg_free(a, b, seg, max_travel, margin, f, n, s):
+            continue
+        c = 0
+        for k in range(i1 + 1):
+            nxt[c] = cur[k]
+            c += 1
+        nxt[c] = a
+        nxt[c + 1] = b
+        c += 2
+        for k in range(i2 + 1, m):
+            nxt[c] = cur[k]
+            c += 1
+        # drop vertices that repeat their predecessor (a point drawn on a vertex)
+        m = 1
+        cur[0] = nxt[0]
+        for k in range(1, c):
+            if _norm(nxt[k], cur[m - 1]) > 0.0 or k == c - 1:
+                cur[m] = nxt[k]
+                m += 1
+        if m >= 2 and _norm(cur[m - 1], cur[m - 2]) == 0.0:  # the last vertex kept once
+            cur[m - 2] = cur[m - 1]
+            m -= 1
+    for k in range(m):
+        out[k] = cur[k]
+    return m
+
+
+def shorten(
+    body,
+    scene,
+    path,
+    *,
+    cap: int | None = None,
+    attempts: int = DEFAULT_ATTEMPTS,
+    seed: int = 0,
+    max_travel: float = 0.01,
+    margin: float = 0.0,
+) -> np.ndarray:
+    """The collision-free joint path ``path (V, dof)`` shortened (see the module docstring), as ``(V', dof)``
+    with ``2 <= V' <= cap`` (default: ``V``): its first and last configurations exactly, every segment
+    free under the dense check of ``body`` (a :class:`~kinlearn.collision.kernel.KernelBody`) among
+    ``scene`` (a :class:`~kinlearn.collision.kernel.KernelScene`), and a joint-space length no greater
+    than the input's. The input's own segments are trusted as free (the caller checked them: the pass
+    only ever replaces segments by checked ones). ``attempts``: partial shortcuts tried; ``seed``: their
+    draws."""
+    p = np.ascontiguousarray(path, dtype=np.float64)
+    if p.ndim != 2 or p.shape[0] < 2 or p.shape[1] != body.dof:
+        raise ShapeError(f"shorten needs a joint path (V >= 2, {body.dof}), got shape {p.shape}")
+    if not np.isfinite(p).all():
+        raise ShapeError("shorten needs a finite joint path")
+    cap = p.shape[0] if cap is None else as_int(cap, "cap", minimum=2)
+    if cap < p.shape[0]:
+        raise ConfigError(f"cap ({cap}) must be at least the path's {p.shape[0]} vertices")
+    attempts = as_int(attempts, "attempts", minimum=0)
+    seed = as_int(seed, "seed", minimum=0)
+    out = np.empty((cap, body.dof))
+    f, nn = body.packing_of(p)  # every point of the pass lies in the path's convex hull
+    count = _shorten(p, cap, attempts, seed, float(max_travel), float(margin), f, nn, scene.packed, out)
+    return out[:count].copy()
