@@ -192,6 +192,8 @@ def _parse_yaml(text: str, path) -> object:
             return None
         _check_nodes(node, path)
         return loader.construct_document(node)
+    except SceneFormatError:
+        raise
     except yaml.YAMLError as exc:
         raise SceneFormatError(f"{path} is not valid YAML: {exc}") from None
     except RecursionError:
