@@ -8,6 +8,7 @@ returns a judged :class:`~kinlearn.planning.plan.Plan`. The built-in ones, by re
 ``cartesian-line``        :class:`CartesianLine`        the end effector on a straight line by DLS IK
 ``rrt-connect``           :class:`RRTConnect`           OMPL RRT-Connect in free space
 ``scene-rrt-connect``     :class:`SceneRRTConnect`      OMPL RRT-Connect around the obstacles (dense check)
+``compiled-rrt-connect``  :class:`CompiledRRTConnect`   RRT-Connect compiled with the dense check
 ``trajectory-optimiser``  :class:`TrajectoryOptimiser`  Adam on a knot path around the obstacles
 ========================  ============================  ==================================================
 

@@ -4,6 +4,7 @@ returns what it holds, by the kind the file records."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from .errors import CheckpointError
 
@@ -23,7 +24,7 @@ CHECKPOINT_KINDS = {
 _RUN_FILES = ("tm.pt", "chain.pt")
 
 
-def load(path: str | Path, robot: str | None = None):
+def load(path: str | Path, robot: str | None = None) -> Any:
     """What the checkpoint file or run directory at ``path`` holds, ready to use (eval mode).
 
     - A directory holding ``tm.pt`` (a trained or exported planner): the

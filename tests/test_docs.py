@@ -1,8 +1,8 @@
 """Every Python and shell block of README.md and docs/*.md runs here, so that a drifted example fails.
 
 One test per file; its blocks run in order in a temporary directory (as a reader at a clone's root:
-``benchmarks/`` and ``kinlearn/checkpoints/`` are linked in), and blocks of one file may build on each
-other:
+``benchmarks/``, ``examples/`` and ``kinlearn/checkpoints/`` are linked in), and blocks of one file may
+build on each other:
 
 - ````python```: one namespace per file.
 - ````bash```: read command by command (``\\`` continues a line, ``#`` starts a comment, ``&&`` chains).
@@ -426,6 +426,7 @@ def test_doc_blocks_run(doc, reader_files, tmp_path, monkeypatch):
         pytest.skip(f"{rel} has no block to run")
     shutil.copytree(reader_files, tmp_path, dirs_exist_ok=True)
     (tmp_path / "benchmarks").symlink_to(ROOT / "benchmarks")
+    (tmp_path / "examples").symlink_to(ROOT / "examples")
     (tmp_path / "kinlearn").mkdir()
     (tmp_path / "kinlearn" / "checkpoints").symlink_to(Path(kinlearn.__file__).parent / "checkpoints")
     monkeypatch.chdir(tmp_path)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 
 from ..checks import check_finite, check_last_dim, check_region, real_array
 from ..errors import (
@@ -93,8 +94,8 @@ def register_robot(
     urdf: str | Path,
     ee_frame: str,
     *,
-    home=None,
-    region=None,
+    home: ArrayLike | None = None,
+    region: ArrayLike | None = None,
     description: str = "",
     overwrite: bool = False,
     spheres: str | Path | None = None,
@@ -337,7 +338,7 @@ class Robot:
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, dof={self.dof}, ee_frame={self.ee_frame!r})"
 
-    def with_limits(self, lower, upper) -> Robot:
+    def with_limits(self, lower: ArrayLike, upper: ArrayLike) -> Robot:
         """This robot (the same name, chain and URDF) with other position limits ``lower``/``upper``
         ``(dof,)``, or this very robot where they are its own: what a planner among obstacles checks and
         judges its problems with where its planning body's model allows more than the robot
@@ -353,7 +354,9 @@ class Robot:
         other.lower, other.upper = lo, hi
         return other
 
-    def limits(self, dtype: torch.dtype = torch.float32, device=None) -> tuple[torch.Tensor, torch.Tensor]:
+    def limits(
+        self, dtype: torch.dtype = torch.float32, device: torch.device | str | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Position limits as tensors ``(lower, upper)``, each of shape ``(dof,)``."""
         return (
             torch.as_tensor(self.lower, dtype=dtype, device=device),
@@ -365,7 +368,7 @@ class Robot:
         shape: int | tuple[int, ...],
         generator: torch.Generator | None = None,
         dtype: torch.dtype = torch.float32,
-        device=None,
+        device: torch.device | str | None = None,
         margin: float = 0.0,
         limits: tuple[torch.Tensor, torch.Tensor] | None = None,
     ) -> torch.Tensor:

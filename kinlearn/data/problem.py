@@ -21,10 +21,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 
 from ..body.kinematics import kinematics
 from ..body.robot import Robot, load_robot
@@ -32,6 +33,10 @@ from ..body.state import StateLayout
 from ..checks import check_finite, check_real_dtype, real_array
 from ..collision.scene import Scene, as_scene
 from ..errors import BatchIndexError, ConfigError, ShapeError, StateError
+
+if TYPE_CHECKING:
+    from .endpoints import EndpointPairs
+    from .problems import ProblemSet
 
 __all__ = ["GOAL_KINDS", "STATE_EF_TOLERANCE", "Problem"]
 
@@ -94,11 +99,11 @@ class Problem:
     def make(
         cls,
         robot: Robot,
-        start,
-        goal=None,
+        start: ArrayLike,
+        goal: ArrayLike | None = None,
         *,
-        goal_position=None,
-        obstacles=None,
+        goal_position: ArrayLike | None = None,
+        obstacles: Scene | ArrayLike | None = None,
     ) -> Problem:
         """Checked problems from ``start`` (joints ``(..., dof)`` or states ``(..., dof + 3)``) to ``goal``
         (joints, states, or an end-effector position ``(..., 3)``, also as ``goal_position=``), around
@@ -233,18 +238,20 @@ class Problem:
         return torch.cat((self.start, self.goal), dim=-1)
 
     @classmethod
-    def from_pairs(cls, pairs) -> Problem:
+    def from_pairs(cls, pairs: EndpointPairs) -> Problem:
         """The problems of endpoint pairs (:class:`~kinlearn.data.endpoints.EndpointPairs`: goal states)."""
         return cls.from_states(load_robot(pairs.config.robot), pairs.start, pairs.goal)
 
     @classmethod
-    def from_problem_set(cls, problems) -> Problem:
+    def from_problem_set(cls, problems: ProblemSet) -> Problem:
         """The problems of an obstacle benchmark set (:class:`~kinlearn.data.problems.ProblemSet`:
         start and goal joints, one scene each), checked like :meth:`make`."""
         return cls.make(load_robot(problems.robot), problems.start, problems.goal, obstacles=problems.scene)
 
     @classmethod
-    def from_states(cls, robot: Robot, start: torch.Tensor, goal: torch.Tensor, obstacles=None) -> Problem:
+    def from_states(
+        cls, robot: Robot, start: torch.Tensor, goal: torch.Tensor, obstacles: Scene | ArrayLike | None = None
+    ) -> Problem:
         """Problems from start and goal states known to be consistent (e.g. drawn by
         :func:`~kinlearn.data.endpoints.make_endpoints`): shapes are checked, FK is not recomputed."""
         lay = StateLayout(robot.dof)
