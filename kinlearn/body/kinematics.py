@@ -187,7 +187,8 @@ class FastKinematics(Kinematics):
         return out + t if t != 0.0 else out
 
     #: Batches are processed in chunks of this many configurations: the ≈80 elementwise products
-    #: then work on cache-resident tensors, ≈3× faster at batch 1e6 than one pass on the whole batch.
+    #: then work on cache-resident tensors, faster at large batches than one pass on the whole batch
+    #: (benchmarks/kinematics_speed.py).
     chunk: int = 65536
 
     def _position_flat(self, q: torch.Tensor) -> torch.Tensor:

@@ -124,7 +124,11 @@ def _add_reproduce(sub) -> None:
     )
     mode = p.add_mutually_exclusive_group()
     mode.add_argument(
-        "--quick", action="store_const", const="quick", dest="preset", help="≤ 10 min on 2 cores"
+        "--quick",
+        action="store_const",
+        const="quick",
+        dest="preset",
+        help="the quick preset: fewer seeds, smaller runs",
     )
     mode.add_argument(
         "--smoke", action="store_const", const="smoke", dest="preset", help="seconds; for tests"

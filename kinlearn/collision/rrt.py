@@ -45,10 +45,8 @@ _jit = numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 #: beyond a turn adds no pose to sample, only ways to reach one. The panda's and the iiwa14's (ranges
 #: under a turn) stay OMPL's, 2.6–2.8 rad; the ur5's ±2π joints would give 5.8 rad, a step that sweeps
 #: metres of the arm per motion check and is mostly trapped, and give 3.1 rad instead. On the ur5's
-#: tuning problems made for its gripper (seeds 3004–3010, 20 per family, one seed each): within 50 ms
-#: 95.0% at 5.8 rad (the machine shared), 97.9% at 3.1 rad, 96.4–97.9% at 2.0 and 97.9–98.6% at 1.5
-#: (two runs each); a flat cap of 1.5 rad cost the panda and the iiwa14 time (p50 3.9–4.4
-#: against 3.2–4.0 ms and 1.2–1.3 against 1.0–1.1 ms, two runs each), so the cap is by turns, not rad.
+#: tuning problems (seeds 3004–3010) the capped step solved more within a budget than OMPL's; a flat cap
+#: in radians cost the panda and the iiwa14 time, so the cap is by turns, not rad.
 TURN = 2.0 * math.pi
 
 #: The longest a round of :func:`rrt_connect` is meant to take, s (and at most a quarter of the time left):
@@ -188,28 +186,21 @@ class RrtConnect:
     ``seed`` fixes the samples.
     ``local``: the share of samples drawn near the extended tree's root, Gaussian with ``sigma`` rad
     per joint (the rest uniform in the limits): starts and goals inside shelves, cubbies and cages sit
-    in narrow cells whose way out uniform samples rarely find. On 140 generated iiwa14 problems of the
-    seven families (50 ms each): 86% with uniform samples alone, 97% with the defaults.
+    in narrow cells whose way out uniform samples rarely find: on generated problems of the seven
+    families the defaults solve many more within a budget than uniform samples alone.
     ``local_step``: the largest extension towards a sample near the root (default: ``step``). A short one
-    lets a tree creep out of a deep cell that long steps jump across: on 140 tuning problems of the
-    panda (seeds 3004–3010, 4 seeds each) 0.5 rad solved 97.3% within 50 ms against 96.6%, and the three
-    hardest cubby and cage problems 78% against 44–61%; on the iiwa14's it cost time (mean 2.3 against
-    1.4 ms) and on the ur5's it changed nothing, so it is not the default.
+    lets a tree creep out of a deep cell that long steps jump across: on the panda's tuning problems
+    (seeds 3004–3010) a short one helped the hardest cubby and cage problems; on the iiwa14's it cost
+    time and on the ur5's it changed nothing, so it is not the default.
 
     ``balanced``: extend the smaller tree each round (the trees take turns when equal), not the two in
     turn: a tree stuck in a cell gets the samples until it is out. On the tuning problems (seeds
-    3004–3010, 3 seeds each, the machine shared with two trainings) the share solved within 20 ms went
-    93.3 → 97.9% for the panda (all its feasible ones within 50 ms), 98.3 → 100% for the iiwa14 and
-    48.1 → 49.3% for the ur5 (half its tuning problems are infeasible); the mean time to a path fell by
-    a third to a half.
+    3004–3010) it solved more within a budget on every arm and shortened the mean time to a path.
 
     ``branches``: polylines each tree starts with, ``(start tree's, goal tree's)``, each ``(V, dof)`` from
     its root (the root left out), its segments already found free by the same check: the planner gives
-    the retreat stage's free retreats, so the trees start out of their cells. On the tuning problems the
-    fixed-time stages left colliding (the ur5 with its gripper, seeds 3004–3010: 30 problems, 12 seeds
-    each) the median iterations to a path fell from 192 to 131 (p90 805 → 612), the share solved within
-    25 ms rose from 89.2 to 92.2% and within 40 ms stayed level (96.4 against 95.6%); the panda's (6
-    problems) and the iiwa14's (2) were as before.
+    the retreat stage's free retreats, so the trees start out of their cells: on the tuning problems the
+    fixed-time stages left colliding it took fewer iterations to a path.
 
     ``run(iterations)`` grows the trees for up to that many more iterations (fewer where they meet) and
     returns the path ``(V, dof)`` once found (``None`` while not); ``iterations`` counts those run;

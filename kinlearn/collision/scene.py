@@ -402,7 +402,7 @@ class Scene:
         shapes += [m.shape[:-1] for _, n, _ in _TABLES if (m := getattr(self, n)) is not None]
         if self.floor is not None:
             shapes.append(self.floor.shape)
-        if all(t == shapes[0] for t in shapes):  # most scenes (torch's broadcast costs ~10 µs per call)
+        if all(t == shapes[0] for t in shapes):  # most scenes (torch's broadcast costs time on every call)
             return torch.Size(shapes[0])
         return torch.broadcast_shapes(*shapes)
 
@@ -646,8 +646,7 @@ def _remembered_sphere_scene(shape: tuple[int, ...], data: bytes) -> Scene:
     """The scene of spheres ``(..., K, 4)`` given by their float64 bytes, made once for the last few
     arrays given: a user planning query after query among the same list of balls converts it once, and
     the compiled check packs that scene once (:class:`~kinlearn.collision.kernel.KernelScene` keeps a
-    scene's packing while the scene lives); a free-line plan given a list of balls took 0.23 ms against
-    0.09 ms given the scene. Scenes are immutable, so sharing one is safe; a list that changed is other
+    scene's packing while the scene lives). Scenes are immutable, so sharing one is safe; a list that changed is other
     bytes, another scene. A malformed one raises here every time (errors are not remembered)."""
     spheres = torch.from_numpy(np.frombuffer(data, dtype=np.float64).reshape(shape).copy())
     return Scene(spheres=spheres)

@@ -19,8 +19,7 @@ is copied from the analytic body it is trained against. The radii can be inflate
 distance errs on the safe side; it is saved with the weights.
 
 Predicting each link's frame (a 3×4 transform, the centres then fixed linear combinations of it)
-instead of the centres was measured to be no more accurate for the same steps and width (p99 10.1
-vs 9.5 mm after 20k steps of a 160-160-160 SiLU MLP on the 12-sphere body), with more outputs; the
+instead of the centres was no more accurate for the same steps and width, with more outputs; the
 centres are predicted directly.
 
 Training and validation live in :mod:`kinlearn.training.body`; loading and running a body model
