@@ -517,3 +517,22 @@ def test_links_point_at_files(doc):
         if not (doc.parent / target.split("#")[0]).exists():
             missing.append(target)
     assert not missing, f"{doc.name} links to files that do not exist: {missing}"
+
+
+def test_the_shipped_log_is_babbling_with_its_stated_noise():
+    """examples/data/iiwa14_log.csv, which the README's calibration reads, is what examples/data/make_log.py
+    says it is: the bundled iiwa14's babbling, its positions off the analytic FK by 1 mm of noise per axis."""
+    from kinlearn.data.recorded import load_recorded
+
+    sys.path.insert(0, str(ROOT / "examples" / "data"))
+    try:
+        import make_log
+    finally:
+        sys.path.remove(str(ROOT / "examples" / "data"))
+    obs = load_recorded(make_log.LOG, robot="iiwa14")
+    cfg = make_log.CONFIG
+    assert len(obs.theta) == cfg.walkers * (cfg.steps + 1) and int(obs.episode.max()) + 1 == cfg.walkers
+    noise = obs.ef - kinlearn.kinematics(kinlearn.load_robot("iiwa14")).position(obs.theta)
+    assert cfg.ef_noise == 0.001
+    assert torch.allclose(noise.std(0), torch.full((3,), cfg.ef_noise, dtype=noise.dtype), rtol=0.1)
+    assert float(noise.mean(0).abs().max()) < 1e-4
