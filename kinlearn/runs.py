@@ -28,6 +28,7 @@ and writes ``config.json``; commands call it once all their checks passed.
 from __future__ import annotations
 
 import atexit
+import errno
 import json
 import os
 import shutil
@@ -70,8 +71,19 @@ def _live_holder(path: Path, lock: Path | None = None) -> dict | None:
         pid, host = int(holder["pid"]), str(holder["host"])
     except FileNotFoundError:
         return None
-    except (OSError, ValueError, KeyError, TypeError):  # torn or foreign: as good as stale
-        lock.unlink(missing_ok=True)
+    except (OSError, ValueError, KeyError, TypeError):  # torn or foreign
+        try:
+            age = time.time() - lock.stat().st_mtime
+        except OSError:
+            return None
+        if age < 10.0:  # being written this moment (where locks cannot be linked whole): held
+            return {
+                "pid": "?",
+                "host": "?",
+                "command": "a command that is starting",
+                "since": time.time() - age,
+            }
+        lock.unlink(missing_ok=True)  # an old torn lock: as good as stale
         return None
     if host == socket.gethostname():
         if pid == os.getpid():
@@ -99,24 +111,47 @@ def _acquire(path: Path, command: str, made: Path | None = None, lock: Path | No
         return False
     record = {"pid": os.getpid(), "host": socket.gethostname(), "command": command, "since": time.time()}
     for _ in range(3):
+        if _create_lock(lock, record):
+            _HELD[lock] = made
+            return True
+        holder = _live_holder(path, lock)
+        if holder is not None:
+            raise _refuse_held(path, holder, lock)
+        # a stale lock, cleared: try again
+    raise RunDirectoryError(f"could not lock {path} ({lock} keeps reappearing)")
+
+
+def _create_lock(lock: Path, record: dict) -> bool:
+    """Create ``lock`` holding ``record``, whole or not at all; False if it exists. The record is written
+    to a file of this process's first and linked to the lock's name (atomic: a second writer never reads
+    a half-written lock and takes it for a stale one); where links are not supported, the lock is created
+    exclusively and written. A lock that cannot be written is an :class:`~kinlearn.errors.OutputError`."""
+    tmp = lock.with_name(f"{lock.name}.{os.getpid()}.tmp")
+    try:
         try:
+            tmp.write_text(json.dumps(record))
+            os.link(tmp, lock)
+            return True
+        except FileExistsError:
+            return False
+        except OSError as exc:
+            if exc.errno not in (errno.EPERM, errno.EXDEV, errno.EMLINK, getattr(errno, "EOPNOTSUPP", -1)):
+                raise
+        try:  # no links here: an exclusive create
             fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
         except FileExistsError:
-            holder = _live_holder(path, lock)
-            if holder is not None:
-                raise _refuse_held(path, holder, lock) from None
-            continue  # a stale lock, cleared: try again
-        except OSError as exc:  # no space, read-only, no permission: typed, with what to do
-            raise _output_error(lock, exc) from exc
+            return False
         try:
             with os.fdopen(fd, "w") as fh:
                 json.dump(record, fh)
-        except OSError as exc:
+        except OSError:
             lock.unlink(missing_ok=True)
-            raise _output_error(lock, exc) from exc
-        _HELD[lock] = made
+            raise
         return True
-    raise RunDirectoryError(f"could not lock {path} ({lock} keeps reappearing)")
+    except OSError as exc:  # no space, read-only, no permission: typed, with what to do
+        raise _output_error(lock, exc) from exc
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def acquire_lock(path: str | Path, command: str, lock: str | Path | None = None) -> None:

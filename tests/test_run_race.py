@@ -12,6 +12,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 
 import pytest
 import torch
@@ -61,23 +62,31 @@ def test_a_second_writer_started_into_the_same_new_folder_is_refused_naming_the_
     release_locks()
 
 
-def _fail_open(code):
-    real = os.open
-
-    def fake(path, flags, *args):
-        if str(path).endswith(LOCK_FILE):
-            raise OSError(code, os.strerror(code), str(path))
-        return real(path, flags, *args)
+def _fail_link(code):
+    def fake(src, dst, *args, **kwargs):
+        raise OSError(code, os.strerror(code), str(dst))
 
     return fake
 
 
 @pytest.mark.parametrize("code, says", [(errno.ENOSPC, "the disk is full"), (errno.EROFS, "read-only")])
 def test_a_lock_that_cannot_be_written_is_typed_and_leaves_nothing(tmp_path, monkeypatch, code, says):
-    monkeypatch.setattr(runs.os, "open", _fail_open(code))
+    monkeypatch.setattr(runs.os, "link", _fail_link(code))
     with pytest.raises(OutputError, match=says):
         _open(tmp_path / "a" / "run")
     assert not (tmp_path / "a").exists()  # the folders made for the lock are gone again
+
+
+def test_a_lock_being_written_is_not_taken_for_a_stale_one(tmp_path):
+    path = tmp_path / "run"
+    path.mkdir()
+    (path / LOCK_FILE).write_text('{"pid": 12')  # torn: its writer is writing it this moment
+    with pytest.raises(RunDirectoryError, match="a command that is starting"):
+        _open(path)
+    old = time.time() - 60
+    os.utime(path / LOCK_FILE, (old, old))  # torn and old: stale
+    assert _open(path).mode == "new"
+    release_locks()
 
 
 def test_a_run_that_failed_before_any_output_blocks_no_rerun(tmp_path):
