@@ -210,18 +210,18 @@ def test_poses_written_as_lists_read_as_their_mappings(tmp_path):
     ):
         Scene.from_moveit(bad)
     bad["world"]["collision_objects"][1]["primitive_poses"][0]["orientation"] = "up"
-    with pytest.raises(SceneFormatError, match="orientation must be a mapping"):
+    with pytest.raises(SceneFormatError, match=r"orientation \(object 'old_style_box'\) must be a mapping"):
         Scene.from_moveit(bad)
 
 
 @pytest.mark.parametrize(
     "obj, match",
     [
-        ({"id": "bowl", "meshes": [{"triangles": []}]}, "'bowl' holds meshes"),
-        ({"id": "wall", "planes": [{"coef": [0, 0, 1, 0]}]}, "'wall' holds planes"),
+        ({"id": "bowl", "meshes": [{"triangles": []}]}, r"\(object 'bowl'\) holds meshes"),
+        ({"id": "wall", "planes": [{"coef": [0, 0, 1, 0]}]}, r"\(object 'wall'\) holds planes"),
         (
             {"id": "funnel", "primitives": [{"type": 4, "dimensions": [1, 1]}], "primitive_poses": [{}]},
-            "'funnel' primitive 0 is a cone",
+            r"primitives\[0\] \(object 'funnel'\) is a cone",
         ),
         ({"id": "odd", "primitives": [{"type": 1, "dimensions": [1, 1, 1]}]}, "one pose each"),
         (
