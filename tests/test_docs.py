@@ -1,7 +1,7 @@
 """Every Python and shell block of README.md and docs/*.md runs here, so that a drifted example fails.
 
 One test per file; its blocks run in order in a temporary directory (as a reader at a clone's root:
-``benchmarks/``, ``examples/`` and ``kinlearn/checkpoints/`` are linked in), and blocks of one file may
+``benchmarks/``, ``examples/``, ``robots/`` and ``kinlearn/checkpoints/`` are linked in), and blocks of one file may
 build on each other:
 
 - ````python```: one namespace per file.
@@ -19,8 +19,9 @@ build on each other:
 
 Tiny sizes: the docs show real ones; :data:`TINY_OPTIONS` sets the amounts of work of the commands,
 :data:`TINY_DEFAULTS` lowers configuration defaults, :data:`TINY_PYTHON` replaces literal text of a
-file's Python (each entry must still match, so that this table keeps up with the docs). The reader's own
-files the docs name (``log.csv``, ``my_arm.urdf``, ``scene.yaml``, …) are written first (:func:`user_files`).
+file's Python (each entry must still match, so that this table keeps up with the docs). Every file a
+block reads is one a clone holds (``examples/data/``: a recorded log, a URDF, a MoveIt scene and request):
+no placeholder file is made for the docs.
 """
 
 from __future__ import annotations
@@ -31,7 +32,6 @@ import os
 import re
 import runpy
 import shlex
-import shutil
 import sys
 import types
 import warnings
@@ -163,73 +163,6 @@ def test_tiny_python_still_matches():
         text = "\n".join(b.text for b in ALL_BLOCKS if b.doc == doc and RUN.get(b.info) == "python")
         for old, _ in pairs:
             assert old in text, f"TINY_PYTHON[{doc!r}]: {old!r} is no longer in its Python blocks"
-
-
-# --------------------------------------------------------------------------------------------------
-# The reader's files
-# --------------------------------------------------------------------------------------------------
-
-ARM4_URDF = """<?xml version="1.0"?>
-<robot name="myarm">
-  <link name="base"/><link name="l1"/><link name="l2"/><link name="l3"/><link name="l4"/><link name="tool0"/>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
-    <origin xyz="0 0 0.15"/><axis xyz="0 0 1"/><limit lower="-2.9" upper="2.9" velocity="1.5" effort="40"/></joint>
-  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
-    <origin xyz="0 0 0.2"/><axis xyz="0 1 0"/><limit lower="-1.8" upper="1.8" velocity="1.5" effort="40"/></joint>
-  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/>
-    <origin xyz="0 0 0.3"/><axis xyz="0 1 0"/><limit lower="-2.2" upper="2.2" velocity="2.0" effort="20"/></joint>
-  <joint name="j4" type="revolute"><parent link="l3"/><child link="l4"/>
-    <origin xyz="0 0 0.25"/><axis xyz="0 1 0"/><limit lower="-2.0" upper="2.0" velocity="3.0" effort="10"/></joint>
-  <joint name="j_tool" type="fixed"><parent link="l4"/><child link="tool0"/><origin xyz="0 0 0.1"/></joint>
-</robot>
-"""
-
-
-@pytest.fixture(scope="module")
-def reader_files(tmp_path_factory) -> Path:
-    """Files a reader brings, made once: a recorded iiwa14 log, URDFs, a MoveIt scene and request, a scene."""
-    import yaml
-
-    from kinlearn.collision import Box, Cylinder, Scene, Sphere
-    from kinlearn.data.recorded import Observations, save_recorded
-
-    d = tmp_path_factory.mktemp("reader")
-    iiwa = kinlearn.load_robot("iiwa14")
-    babbled = kinlearn.babble(kinlearn.BabblingConfig(walkers=10, steps=150, ef_noise=0.001, seed=3))
-    save_recorded(d / "log.csv", Observations.from_transitions(babbled, iiwa.joint_names))
-    urdf = iiwa.urdf.decode()
-    tool = (
-        f'  <link name="tool0"/>\n  <joint name="tool0_joint" type="fixed"><parent link="{iiwa.ee_frame}"/>'
-        '<child link="tool0"/><origin xyz="0 0 0.02"/></joint>\n</robot>'
-    )
-    (d / "my_arm.urdf").write_text(urdf[: urdf.rindex("</robot>")] + tool + "\n")
-    (d / "myarm.urdf").write_text(ARM4_URDF)
-    (d / "path" / "to").mkdir(parents=True)
-    (d / "path" / "to" / "myarm.urdf").write_text(ARM4_URDF)
-    scene = Scene.from_primitives(
-        [
-            Box((0.75, 0.0, 0.1), (0.3, 0.5, 0.025)),
-            Cylinder((-0.7, 0.6, 0.3), 0.04, 0.3),
-            Sphere((0.0, -0.8, 0.5), 0.1),
-        ]
-    )
-    (d / "scene.yaml").write_text(yaml.safe_dump(scene.to_moveit(frame_id="panda_link0")))
-    scene.save(d / "scene.npz")
-    panda = kinlearn.load_robot("panda")
-    start, goal = panda.sample(2, torch.Generator().manual_seed(1), dtype=torch.float64)
-    names = panda.joint_names
-    request = {
-        "start_state": {"joint_state": {"name": list(names), "position": start.tolist()}},
-        "goal_constraints": [
-            {
-                "joint_constraints": [
-                    {"joint_name": n, "position": v} for n, v in zip(names, goal.tolist(), strict=True)
-                ]
-            }
-        ],
-    }
-    (d / "request.yaml").write_text(yaml.safe_dump(request))
-    return d
 
 
 # --------------------------------------------------------------------------------------------------
@@ -419,14 +352,13 @@ def lowered_defaults(monkeypatch) -> None:
 
 
 @pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.relative_to(ROOT).as_posix())
-def test_doc_blocks_run(doc, reader_files, tmp_path, monkeypatch):
+def test_doc_blocks_run(doc, tmp_path, monkeypatch):
     rel = doc.relative_to(ROOT).as_posix()
     runnable = [b for b in blocks(doc) if b.info in RUN]
     if not runnable:
         pytest.skip(f"{rel} has no block to run")
-    shutil.copytree(reader_files, tmp_path, dirs_exist_ok=True)
-    (tmp_path / "benchmarks").symlink_to(ROOT / "benchmarks")
-    (tmp_path / "examples").symlink_to(ROOT / "examples")
+    for shipped in ("benchmarks", "examples", "robots"):  # what a clone holds
+        (tmp_path / shipped).symlink_to(ROOT / shipped)
     (tmp_path / "kinlearn").mkdir()
     (tmp_path / "kinlearn" / "checkpoints").symlink_to(Path(kinlearn.__file__).parent / "checkpoints")
     monkeypatch.chdir(tmp_path)
