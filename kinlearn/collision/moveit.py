@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -90,17 +89,34 @@ _NAMES = {"box": BOX, "sphere": SPHERE, "cylinder": CYLINDER, "cone": CONE}
 _OPERATIONS = {"add": 0, "remove": 1, "append": 2, "move": 3}
 
 
-@dataclass(frozen=True)
 class _At:
-    """Where a value lies in the document: its key path and the collision object it belongs to."""
+    """Where a value lies in the document: its key path (built only when a message needs it) and the
+    collision object it belongs to."""
 
-    path: str
-    label: str = ""
+    __slots__ = ("key", "label", "parent")
+
+    def __init__(self, key: str | int = "", label: str = "", parent: _At | None = None):
+        self.key, self.label, self.parent = key, label, parent
 
     def __truediv__(self, key: str | int) -> _At:
-        if isinstance(key, int):
-            return _At(f"{self.path}[{key}]", self.label)
-        return _At(f"{self.path}.{key}" if self.path else key, self.label)
+        return _At(key, self.label, self)
+
+    def labelled(self, label: str) -> _At:
+        return _At(self.key, label, self.parent)
+
+    @property
+    def path(self) -> str:
+        parts, at = [], self
+        while at is not None:
+            parts.append(at.key)
+            at = at.parent
+        out = ""
+        for key in reversed(parts):
+            if isinstance(key, int):
+                out += f"[{key}]"
+            elif key:
+                out += f".{key}" if out else key
+        return out
 
     def __str__(self) -> str:
         where = self.path or "the document"
@@ -495,7 +511,7 @@ def primitives_from_moveit(source: str | Path | Mapping, base_pose=None) -> list
         at = objects_at / i
         obj = _mapping(obj, at, "id, pose, primitives, primitive_poses", optional=False)
         if obj.get("id") is not None:
-            at = _At(at.path, _name(obj["id"], at / "id"))
+            at = at.labelled(_name(obj["id"], at / "id"))
         if _operation(obj.get("operation"), at / "operation") == 1:
             continue
         given = _frame_id(obj, at)
