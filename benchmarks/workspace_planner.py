@@ -79,7 +79,7 @@ def main() -> None:
     print(workspace_table(task))
     figures["paper task"] = from_markdown(workspace_table(task), caption=title)
     write_result(
-        "workspace_planner",
+        "workspace_planner" + ("" if robot.name == "iiwa14" else f"_{robot.name}"),
         figures,
         title=f"The workspace planner on held-out pairs ({robot.name})",
         threads=args.threads,
