@@ -79,7 +79,7 @@ def _check_sphere_radii(urdf: bytes, path: Path) -> None:
         for sphere in link.iterfind("collision/geometry/sphere"):
             text = sphere.get("radius")
             try:
-                r = float(text)
+                r = float(text if text is not None else "nan")
             except (TypeError, ValueError):
                 r = math.nan
             if not (math.isfinite(r) and 0 < r < 1e3):
@@ -189,7 +189,7 @@ def _example_robot_data_dir() -> Path:
         text = str(f).replace("\\", "/")
         if marker in text:
             root = text[: text.index(marker) + len(marker)]
-            path = Path(dist.locate_file(root))
+            path = Path(str(dist.locate_file(root)))
             if path.is_dir():
                 return path
     raise RobotDescriptionError(f"example-robot-data {dist.version} is installed but holds no {marker}")
@@ -264,7 +264,7 @@ def validate_urdf(urdf: bytes, name: str) -> ET.Element:
     links = seen["link"]
     parent_of: dict[str, str] = {}
     for el in root.findall("joint"):
-        jname = el.get("name")
+        jname = el.get("name", "")  # every joint has a name: checked above
         ends = {}
         for end in ("parent", "child"):
             e = el.find(end)
@@ -277,7 +277,7 @@ def validate_urdf(urdf: bytes, name: str) -> ET.Element:
                     f"{name}: joint {jname!r}{_line_of(text, 'joint', jname)} names {end} link "
                     f"{e.get('link')!r}, which the URDF does not declare as a <link>"
                 )
-            ends[end] = e.get("link")
+            ends[end] = e.get("link", "")
         child = ends["child"]
         if child in parent_of:
             raise RobotDescriptionError(
@@ -423,12 +423,12 @@ def _parse_chain(
     urdf: bytes, ee_frame: str, name: str
 ) -> tuple[str, tuple[Joint, ...], np.ndarray, dict[str, np.ndarray]]:
     root = validate_urdf(urdf, name)
-    links = {el.get("name") for el in root.findall("link")}
+    links = {el.get("name", "") for el in root.findall("link")}  # validate_urdf: every one named
     by_child: dict[str, ET.Element] = {}
     for el in root.findall("joint"):
         child = el.find("child")
         if child is not None:
-            by_child[child.get("link")] = el
+            by_child[child.get("link", "")] = el
     if ee_frame not in links:
         shown = ", ".join(sorted(links)[:40])
         raise RobotDescriptionError(
@@ -440,7 +440,8 @@ def _parse_chain(
     while link in by_child:
         el = by_child[link]
         path.append(el)
-        link = el.find("parent").get("link")
+        parent = el.find("parent")  # validate_urdf: every joint has one, naming a link
+        link = "" if parent is None else parent.get("link", "")
         if len(path) > len(by_child):
             raise RobotDescriptionError(f"{name}: the URDF's joints form a loop")
     root_link = link
@@ -450,7 +451,7 @@ def _parse_chain(
     origins: dict[str, np.ndarray] = {}
     T_acc = np.eye(4)
     for el in path:
-        jname, jtype = el.get("name"), el.get("type")
+        jname, jtype = el.get("name", ""), el.get("type")
         origins[jname] = _origin(el.find("origin"), f"joint {jname}")
         T_acc = T_acc @ origins[jname]
         if jtype == "fixed":
