@@ -34,7 +34,7 @@ from kinlearn.baselines import joint_line, rrt_connect_timed
 from kinlearn.errors import MissingDependencyError
 from kinlearn.evaluation.workspace import heldout_pairs
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
-from kinlearn.planning.plan import judge
+from kinlearn.planning.judge import judge
 from kinlearn.planning.planner import Planner
 
 

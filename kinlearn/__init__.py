@@ -46,7 +46,8 @@ if TYPE_CHECKING:
     from .collision import Scene
     from .data.problem import Problem
     from .loading import load
-    from .planning.plan import Plan, PlannerLike, Tolerance, judge
+    from .planning.judge import judge
+    from .planning.plan import Plan, PlannerLike, Tolerance
     from .planning.planner import Planner, plan
 
 __version__ = "0.1.0"

@@ -197,14 +197,12 @@ def test_every_sphere_at_once_is_each_sphere_alone():
     signs = set()
     for s in range(6):
         ks = K.KernelScene(random_scene(rng, n=int(rng.integers(1, 9)), floor=bool(s % 2)))
-        spheres, boxes, cylinders, floor = ks.args()
+        tables, floor = ks.args()
         c = rng.uniform([0.1, -0.7, 0.0], [0.9, 0.7, 1.2], (40, 3))
         radii, on_floor = rng.uniform(0.0, 0.1, 40), rng.random(40) < 0.7
         out = np.empty(40)
-        K._spheres_scene(c, radii, on_floor, spheres, boxes, cylinders, floor, np.empty((3, 40)), out)
-        alone = [
-            K._sphere_scene(*c[m], radii[m], on_floor[m], spheres, boxes, cylinders, floor) for m in range(40)
-        ]
+        K._spheres_scene(c, radii, on_floor, tables, floor, np.empty((3, 40)), out)
+        alone = [K._sphere_scene(*c[m], radii[m], on_floor[m], tables, floor) for m in range(40)]
         assert np.array_equal(out, alone)
         signs |= set(np.sign(out).tolist())
     assert {-1.0, 1.0} <= signs  # spheres inside and outside
@@ -428,14 +426,17 @@ def test_a_motion_whose_end_state_collides_is_not_free(arm):
 
 
 def test_kernel_scene_is_one_buffer_with_each_primitive_s_bounding_radius():
-    """A packed scene's tables are views of its one buffer ``[K, B, C, has floor, height, rows…]``, each
-    box and cylinder followed by the radius of its bounding ball (the kernels cull by it)."""
+    """A packed scene's tables are views of its one buffer ``[rows and columns per kind…, has floor, height,
+    tables…]``, each box and cylinder followed by the radius of its bounding ball (the kernels cull by it)."""
     scene = random_scene(np.random.default_rng(5), n=9)
     ks = K.KernelScene(scene)
     tables = {k.table: t.numpy() for k, t, _ in scene.tables(live=True)}
     k, b, c = (len(tables[t]) for t in ("spheres", "boxes", "cylinders"))
     assert k and b and c
-    np.testing.assert_array_equal(ks.packed[:5], [k, b, c, 1.0, float(scene.floor)])
+    shapes = [s for t in ks.tables for s in t.shape]
+    S = len(ks.tables)
+    np.testing.assert_array_equal(ks.packed[: 2 * S + 2], [*shapes, 1.0, float(scene.floor)])
+    assert shapes[:6] == [k, 4, b, 16, c, 15]
     np.testing.assert_array_equal(ks.spheres, tables["spheres"])
     np.testing.assert_array_equal(ks.boxes[:, :-1], tables["boxes"])
     np.testing.assert_array_equal(ks.cylinders[:, :-1], tables["cylinders"])
@@ -446,7 +447,8 @@ def test_kernel_scene_is_one_buffer_with_each_primitive_s_bounding_radius():
     for t in (ks.spheres, ks.boxes, ks.cylinders, ks.floor):
         assert np.shares_memory(t, ks.packed)
     bare = K.KernelScene(Scene.from_spheres([[0.5, 0.0, 0.5, 0.25]], floor=None))
-    np.testing.assert_array_equal(bare.packed, [1, 0, 0, 0, 0, 0.5, 0.0, 0.5, 0.25])
+    head = [1, 4] + [s for t in bare.tables[1:] for s in t.shape] + [0, 0]
+    np.testing.assert_array_equal(bare.packed, [*head, 0.5, 0.0, 0.5, 0.25])
 
 
 def test_free_depths_refuse_nan_and_count_every_via_in_an_empty_scene():

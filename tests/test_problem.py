@@ -24,7 +24,8 @@ from kinlearn.errors import (
     ShapeError,
     StateError,
 )
-from kinlearn.planning.plan import Plan, PlannerLike, judge
+from kinlearn.planning.judge import judge
+from kinlearn.planning.plan import Plan, PlannerLike
 from kinlearn.planning.planner import Planner
 
 

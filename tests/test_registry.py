@@ -16,7 +16,8 @@ from kinlearn.collision import body_spheres
 from kinlearn.data.problem import Problem
 from kinlearn.errors import ConfigError
 from kinlearn.evaluation.model_error import evaluate_believed, planner_labels
-from kinlearn.planning.plan import Plan, judge
+from kinlearn.planning.judge import judge
+from kinlearn.planning.plan import Plan
 
 
 @dataclass(frozen=True)

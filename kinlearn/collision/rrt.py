@@ -29,16 +29,16 @@ from __future__ import annotations
 import math
 import time
 
-import numba
 import numpy as np
 
+from ..body.jit import jit
 from ..checks import as_int, as_real
 from ..errors import ConfigError, ShapeError
 from . import kernel
 
 __all__ = ["ROUND_SECONDS", "TURN", "RrtConnect", "rrt_connect", "warm_up"]
 
-_jit = numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+_jit = jit(error_model="numpy")
 
 #: The most of a joint's range the default step counts, rad: one turn. The default step is OMPL's default
 #: range, 0.2 of the joint box's diagonal, with every joint's range counted at most once round: a range

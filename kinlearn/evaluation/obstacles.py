@@ -35,7 +35,8 @@ from ..data.problem import LIMIT_TOLERANCE, Problem
 from ..data.problems import FAMILIES, ProblemSet
 from ..errors import ConfigError, ShapeError
 from ..io import atomic_write
-from ..planning.plan import DEFAULT_TOLERANCE, Tolerance, judge
+from ..planning.judge import judge
+from ..planning.plan import DEFAULT_TOLERANCE, Tolerance
 from ..planning.plan import START_TOLERANCE as PLAN_START_TOLERANCE
 from .metrics import dense_path_length
 

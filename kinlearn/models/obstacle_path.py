@@ -28,7 +28,7 @@ import torch
 from torch import nn
 
 from ..body.state import StateLayout
-from ..collision.geometry import Cylinder, Sphere, aabb_half_extents, shape_tensor
+from ..collision.geometry import aabb_half_extents, shape_tensor
 from ..collision.scene import Scene
 from ..errors import CheckpointError, ConfigError
 from ..io import half_weights, load_checkpoint, save_checkpoint
@@ -137,8 +137,7 @@ def scene_primitives(
         if table.shape[-2] == 0:  # nothing of this kind: no rows (and no work)
             continue
         t = table.to(dtype).expand(batch, *table.shape[-2:])
-        one, zero = torch.ones_like(t[..., :1]), torch.zeros_like(t[..., :1])
-        sphere, cylinder = (one if kind is Sphere else zero), (one if kind is Cylinder else zero)
+        sphere, cylinder = (torch.full_like(t[..., :1], flag) for flag in kind.network_flags)
         parts.append(
             torch.cat((t[..., :3], aabb_half_extents(kind, t), sphere, shape_tensor(kind, t), cylinder), -1)
         )

@@ -52,7 +52,8 @@ from ..errors import (
     ShapeError,
 )
 from ..polyline import resample
-from .plan import Plan, judge
+from .judge import judge
+from .plan import Plan
 
 __all__ = [
     "Baseline",

@@ -70,7 +70,8 @@ from ..data.problem import Problem
 from ..errors import ConfigError, KinlearnDeprecationWarning, ShapeError, UnknownRobotError
 from . import baselines as _free
 from .baselines import MAX_STEPS, Baseline
-from .plan import Plan, judge
+from .judge import judge
+from .plan import Plan
 
 __all__ = [
     "CompiledRRTConnect",

@@ -59,7 +59,8 @@ from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
 from .around import ObstacleStages, _kernel, _load_kernels, _retreat_over
 from .inference import NumpyPathModel
-from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance, judge, verdict_small
+from .judge import judge, verdict_small
+from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance
 from .retreat import RetreatVias
 from .stages import Deadline
 from .stages import retreat_share as _retreat_share

@@ -26,10 +26,10 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 import torch
 
+from ..body.jit import jit
 from ..collision.kernel import checked_tips, first_free_boxed
 from ..errors import NonFiniteError
 from ..models.obstacle_path import ObstaclePathModel
@@ -37,7 +37,7 @@ from .inference import _arr, _folded_mlp
 
 __all__ = ["CompiledObstacleModel"]
 
-_jit = numba.njit(cache=True, nogil=True, fastmath=False)
+_jit = jit()  # stamped with the kernels it calls: their edits recompile it (kinlearn.body.jit)
 
 
 def _packed_mlp(seq: torch.nn.Sequential, mean, std, rows: int | None = None):
