@@ -152,3 +152,21 @@ def test_load_refuses_what_it_does_not_know(tmp_path):
         kinlearn.load(tmp_path / "odd.pt")
     with pytest.raises(CheckpointError, match=r"odd\.pt"):  # a folder of other checkpoints names them
         kinlearn.load(tmp_path)
+
+
+def test_the_front_doors_imports_are_its_all():
+    """What ``kinlearn/__init__.py`` imports (the errors, and the lazy table under ``TYPE_CHECKING``) is
+    ``__all__`` and nothing else, so the list a reader sees and the names that resolve are one."""
+    import ast
+
+    tree = ast.parse((ROOT / "kinlearn" / "__init__.py").read_text(encoding="utf-8"))
+    imported = {
+        alias.asname or alias.name
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 1 and node.module != "lazy"
+        for alias in node.names
+    }
+    assert imported | {"__version__"} == set(kinlearn.__all__)
+    for name in kinlearn.__all__:
+        assert name in dir(kinlearn) and getattr(kinlearn, name) is not None, name
+    assert issubclass(kinlearn.KinlearnWarning, UserWarning) and "KinlearnWarning" in kinlearn.__all__
