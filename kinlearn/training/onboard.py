@@ -58,7 +58,9 @@ STEPS = ("spheres", "babble", "fm", "im", "identify", "planner", "problems", "ob
 
 @dataclass(frozen=True)
 class OnboardConfig:
-    """The sizes of :func:`onboard`'s steps (see :data:`ONBOARD_SIZES` for named ones)."""
+    """The sizes of :func:`onboard`'s steps (see :data:`ONBOARD_SIZES` for named ones). ``families``: the
+    scene families the obstacle network trains on (names or ``"scenes"``, the seven); ``max_attempts``:
+    scenes tried per training problem (a small arm finds a free pose in a cell in fewer of them)."""
 
     transitions: int = 300_000
     fm_epochs: int = 30
@@ -72,6 +74,7 @@ class OnboardConfig:
     obstacle_batch_size: int = 64
     candidates: int = 16
     max_attempts: int = 400
+    families: tuple[str, ...] = ("scenes",)
     solvable_only: bool = True
     identify: bool = True
     spheres: SpherizeConfig = field(default_factory=SpherizeConfig)
@@ -94,6 +97,7 @@ class OnboardConfig:
         d = dict(d)
         d["spheres"] = SpherizeConfig(**d.get("spheres", {}))
         d["fk_hidden"] = tuple(d.get("fk_hidden", (128, 128, 128)))
+        d["families"] = tuple(d.get("families", ("scenes",)))
         return cls(**d)
 
 
@@ -112,8 +116,9 @@ ONBOARD_SIZES: dict[str, OnboardConfig] = {
         obstacle_iterations=10,
         obstacle_batch_size=8,
         candidates=4,
+        max_attempts=60,
+        families=("cage", "wall", "clutter"),
         solvable_only=False,
-        identify=False,
         spheres=SpherizeConfig(
             fit_points=400, check_points=2000, voxels=12, candidates=150, radii=8, samples=200
         ),
@@ -423,7 +428,7 @@ def _run_steps(robot: Robot, run_dir: Path, config: OnboardConfig, step, progres
         )
 
     step("planner", do_planner)
-    families = select_families(["scenes"])
+    families = select_families(list(config.families))
     problem_paths: list[Path] = []
 
     def do_problems(_r: bool) -> None:
