@@ -258,3 +258,16 @@ def test_a_moveit_file_loaded_as_a_kinlearn_scene_points_to_from_moveit(tmp_path
         DatasetError, match=r"looks like YAML: a MoveIt planning scene is read with Scene\.from_moveit"
     ):
         Scene.load(path)
+
+
+def test_a_dense_list_past_the_budget_is_refused_before_it_is_composed(tmp_path, monkeypatch):
+    import kinlearn.collision.moveit as moveit
+
+    monkeypatch.setattr(moveit, "MAX_YAML_NODES", 1000)
+    path = tmp_path / "dense.yaml"
+    path.write_text("world: [" + ",".join(["0"] * 3000) + "]")
+    composed = []
+    monkeypatch.setattr(moveit, "_check_nodes", lambda *a: composed.append(a))
+    with pytest.raises(SceneFormatError, match=r"more than 1,000 values \(3,00\d separators\)"):
+        Scene.from_moveit(path)
+    assert not composed

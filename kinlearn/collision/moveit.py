@@ -75,8 +75,8 @@ FLOOR_SLAB = (10.0, 10.0, 1.0)
 #: The largest YAML file read (bytes); a larger one is refused before it is read.
 MAX_YAML_BYTES = 256 * 2**20
 #: The most values (scalars, lists and mappings; an alias counts as many as it stands for) a YAML
-#: document may hold: enough for a scene of 10⁵ objects.
-MAX_YAML_NODES = 5_000_000
+#: document may hold: a scene of 10⁵ objects of one primitive each, fully written, holds about 6 × 10⁶.
+MAX_YAML_NODES = 10_000_000
 #: The deepest nesting of lists and mappings a YAML document may hold (a scene needs 7).
 MAX_YAML_DEPTH = 64
 #: The most primitives a scene may hold.
@@ -201,6 +201,14 @@ def _parse_yaml(text: str, path) -> object:
         import yaml
     except ImportError as exc:  # pragma: no cover - pyyaml is a dependency
         raise MissingDependencyError("reading MoveIt YAML needs PyYAML: `pip install pyyaml`") from exc
+    # Every value but the first follows one of these characters: more of them than the budget is refused
+    # before the text is composed (dense lists of tiny values would cost gigabytes of nodes).
+    separators = sum(text.count(c) for c in ",:\n[{-")
+    if separators > MAX_YAML_NODES:
+        raise SceneFormatError(
+            f"{path} would hold more than {MAX_YAML_NODES:,} values ({separators:,} separators); a scene or "
+            "request is refused past that budget"
+        )
     loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)(text)
     try:
         node = loader.get_single_node()
