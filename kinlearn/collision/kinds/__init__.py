@@ -23,8 +23,9 @@ import math
 import numpy as np
 
 from ...body.jit import jit
-from . import box, cylinder, sphere
+from . import box, capsule, cylinder, sphere
 from .box import Box
+from .capsule import Capsule
 from .cylinder import Cylinder
 from .plane import Plane
 from .primitive import IDENTITY, NET_WIDTH, Primitive, check_rotations, safe_sqrt
@@ -36,6 +37,7 @@ __all__ = [
     "PACKED_KINDS",
     "SCENE_KINDS",
     "Box",
+    "Capsule",
     "Cylinder",
     "Plane",
     "Primitive",
@@ -52,7 +54,7 @@ __all__ = [
 
 #: The kinds a :class:`~kinlearn.collision.Scene` holds as batched tables, in order (a scene's floor is
 #: its plane).
-SCENE_KINDS: tuple[type[Primitive], ...] = (Sphere, Box, Cylinder)
+SCENE_KINDS: tuple[type[Primitive], ...] = (Sphere, Box, Cylinder, Capsule)
 #: The dispatch table: kind → its class (and so its row layout and signed distance).
 KINDS: dict[str, type[Primitive]] = {k.kind: k for k in (*SCENE_KINDS, Plane)}
 #: What the compiled kernels pack of a scene, in order: every kind's :meth:`Primitive.kernel_rows`
@@ -78,7 +80,7 @@ def _table(buf, k):
 @jit
 def unpack(buf):
     """A packed scene → (its tables, one per packed kind, views of ``buf``; ``floor = [has floor, height]``)."""
-    return (_table(buf, 0), _table(buf, 1), _table(buf, 2)), buf[2 * _S : HEADER]
+    return (_table(buf, 0), _table(buf, 1), _table(buf, 2), _table(buf, 3)), buf[2 * _S : HEADER]
 
 
 def packed_shapes(rows: tuple[np.ndarray, ...]) -> np.ndarray:
@@ -103,6 +105,7 @@ def pack(rows, shapes, has_floor, height):
     sphere.pack(rows[0], tables[0])
     box.pack(rows[1], tables[1])
     cylinder.pack(rows[2], tables[2])
+    capsule.pack(rows[3], tables[3])
     return buf
 
 
@@ -115,6 +118,7 @@ def sphere_scene(x, y, z, r, on_floor, tables, floor):
     d = sphere.nearest(x, y, z, tables[0], d)
     d = box.nearest(x, y, z, tables[1], d)
     d = cylinder.nearest(x, y, z, tables[2], d)
+    d = capsule.nearest(x, y, z, tables[3], d)
     d = d - r
     if floor[0] > 0.5 and on_floor:
         d = min(d, z - r - floor[1])
@@ -134,6 +138,7 @@ def spheres_scene(c, radii, on_floor, tables, floor, xyz, out):
     sphere.nearest_many(X, Y, Z, M, tables[0], out)
     box.nearest_many(X, Y, Z, M, tables[1], out)
     cylinder.nearest_many(X, Y, Z, M, tables[2], out)
+    capsule.nearest_many(X, Y, Z, M, tables[3], out)
     for m in range(M):
         out[m] = out[m] - radii[m]
     if floor[0] > 0.5:
@@ -152,6 +157,7 @@ def network_rows(tables, reach):
         sphere.network_count(tables[0]),
         box.network_count(tables[1]),
         cylinder.network_count(tables[2]),
+        capsule.network_count(tables[3]),
     )
     n = 0
     for k in range(_S):
@@ -170,6 +176,10 @@ def network_rows(tables, reach):
     for i in range(counts[2]):
         cylinder.network_row(tables[2], i, out, r)
         bound[r] = cylinder.radius(tables[2], i)
+        r += 1
+    for i in range(counts[3]):
+        capsule.network_row(tables[3], i, out, r)
+        bound[r] = capsule.radius(tables[3], i)
         r += 1
     if reach == np.inf:
         return out
