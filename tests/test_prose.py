@@ -6,7 +6,7 @@
 - the API reference documents every front-door name and every error and warning;
 - every figure in a README table under a ``python benchmarks/<script>.py`` command is a cell of that
   benchmark's stored result (``benchmarks/results/``): the README shows current numbers only;
-- README and docs say no milestone ("stop 12") and keep within their size.
+- README and docs name no internal milestone and keep within their size.
 """
 
 from __future__ import annotations
