@@ -37,7 +37,7 @@ def setting():
 
 
 def test_shortened_paths_are_free_no_longer_and_keep_their_ends(setting):
-    robot, body, scene, paths = setting
+    _robot, body, scene, paths = setting
     gained = 0.0
     for path in paths:
         short = shorten(body, scene, path)

@@ -232,7 +232,7 @@ def _add_train_obstacle_planner(sub) -> None:
         default="sampler",
         help="whose paths --imitation and --solvable-only read: the compiled RRT-Connect's (20,000 iterations "
         "per problem; default) or a kinlearn planner's own plans (plan(..., obstacles=...) by default: its "
-        "fixed-time stages, then 2,000 sampler iterations; --teacher-planner), self-distillation",
+        "fixed-time stages, then its default budget of sampler iterations; --teacher-planner), self-distillation",
     )
     p.add_argument(
         "--teacher-planner",

@@ -5,7 +5,7 @@ goal; the smaller one (balanced bidirectional search, LaValle, *Planning Algorit
 extends a step of at most ``step`` radians towards a random configuration
 (uniform in the limits, or near its root), the other then greedily connects towards the new node,
 until they meet. The joined
-path is shortened by random vertex shortcuts (any two vertices whose straight segment is free join).
+path is shortened by the shortcut pass every plan goes through (:mod:`kinlearn.collision.shortcut`).
 Every state and motion is checked by the compiled dense check of :mod:`kinlearn.collision.kernel`
 (≤ ``max_travel`` of sphere travel between checked configurations, self-collision and the floor
 included), so a path found is free by the same rule every plan is judged by.
@@ -35,6 +35,7 @@ from ..body.jit import jit
 from ..checks import as_int, as_real
 from ..errors import ConfigError, ShapeError
 from . import kernel
+from .shortcut import DEFAULT_ATTEMPTS, shorten_packed
 
 __all__ = ["ROUND_SECONDS", "TURN", "RrtConnect", "rrt_connect", "warm_up"]
 
@@ -155,27 +156,6 @@ def _grow(
         if count[b] >= nodes.shape[1]:
             state[_STATUS] = -1
             return
-
-
-@_jit
-def _shortcut(path, attempts, state, max_travel, f, n, s):
-    """Random vertex shortcuts of ``path (V, dof)``: the vertices kept (a boolean mask)."""
-    V, dof = path.shape
-    keep = np.ones(V, dtype=np.bool_)
-    seg = np.empty((2, dof))
-    for _ in range(attempts):
-        idx = np.flatnonzero(keep)
-        m = idx.shape[0]
-        if m < 3:
-            break
-        x = int(_uniform(state) * m)
-        y = int(_uniform(state) * m)
-        i, k = min(x, y), max(x, y)
-        if k - i < 2:
-            continue
-        if _free(path[idx[i]], path[idx[k]], seg, max_travel, f, n, s):
-            keep[idx[i + 1 : k]] = False
-    return keep
 
 
 class RrtConnect:
@@ -319,12 +299,14 @@ class RrtConnect:
         self._path = np.array([*half[0][::-1], *half[1][1:]])
         return self._path
 
-    def shortcut(self, path: np.ndarray, attempts: int | None = None) -> np.ndarray:
-        """``path`` shortened by ``attempts`` random vertex shortcuts (default ``4 · V``)."""
+    def shortcut(self, path: np.ndarray, attempts: int = DEFAULT_ATTEMPTS) -> np.ndarray:
+        """``path`` (one this search found) shortened by the shortcut pass every plan goes through
+        (:func:`~kinlearn.collision.shortcut.shorten`: vertex skipping, then ``attempts`` partial
+        shortcuts), on this search's body and scene."""
         p = np.ascontiguousarray(path, np.float64)
-        k = 4 * p.shape[0] if attempts is None else int(attempts)
-        keep = _shortcut(p, k, self.state, self.max_travel, self._f, self._n, self._s)
-        return p[keep]
+        return shorten_packed(
+            p, self._f, self._n, self._s, p.shape[0], int(attempts), 0, self.max_travel, 0.0
+        )
 
 
 def rrt_connect(
@@ -344,7 +326,7 @@ def rrt_connect(
 ) -> tuple[np.ndarray | None, float, int]:
     """Solve one query with :class:`RrtConnect` for at most ``time_limit`` seconds (checked between
     rounds; ``math.inf`` for no limit) and at most ``max_iterations`` iterations (default: no limit),
-    shortcutting the path found (4 · V random shortcuts, V at a time, while time is left). ``rounds``:
+    shortening the path found by the shortcut pass (:mod:`kinlearn.collision.shortcut`). ``rounds``:
     iterations per round; by default they are sized to take at most :data:`ROUND_SECONDS` and a quarter
     of the time left. The rounds change when the search stops, never the path it finds.
 
@@ -381,11 +363,8 @@ def rrt_connect(
             per = (now - t_grow) / rrt.iterations
             room = min(ROUND_SECONDS, 0.25 * (time_limit - (now - t0)))
             size = max(1, min(2 * size, int(room / per) if per > 0 else 2 * size))
-    if path is not None and shortcut:  # 4 · V random shortcuts, a few at a time while time is left
-        for _ in range(4):
-            if clock() - t0 >= time_limit:
-                break
-            path = rrt.shortcut(path, path.shape[0])
+    if path is not None and shortcut:  # the shortcut pass, a fixed budget
+        path = rrt.shortcut(path)
     return path, clock() - t0, rrt.iterations
 
 

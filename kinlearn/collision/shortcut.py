@@ -6,10 +6,11 @@ joint configurations and keeps it free under the same dense check every plan is 
 (:mod:`kinlearn.collision.kernel`: at most ``max_travel`` of body-sphere travel between checked
 configurations, self-collision and the floor included). Two phases:
 
-1. **Vertex skipping**, systematic: from the first vertex, the farthest later vertex it sees along a
-   free straight segment becomes the next one (the segments tried from the far end down), then from
-   there. It removes the detours of a stage that backs out, crosses and goes in, and a sampler's
-   zig-zags, at the cost of about one check per vertex pair tried.
+1. **Vertex skipping**: from the first vertex, the later vertices are tried from the last one down;
+   the first one it sees along a free straight segment becomes the next vertex, then from there. It
+   removes the detours of a stage that backs out, crosses and goes in, and a sampler's zig-zags. A
+   segment that collides usually costs the check little (its probe finds the contact early), one that
+   is free a full walk, so trying the far vertices first spends the walks on the segments kept.
 2. **Partial shortcuts** (Geraerts and Overmars, "Creating high-quality paths for motion planning",
    IJRR 2007): two points drawn along the path's length, on different segments, are joined where the
    straight segment between them is free and shorter. Corners that no two vertices see past are cut.
@@ -25,19 +26,20 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from ..body.jit import jit
 from ..checks import as_int
 from ..errors import ConfigError, ShapeError
 from . import kernel
 
-__all__ = ["DEFAULT_ATTEMPTS", "shorten"]
+__all__ = ["DEFAULT_ATTEMPTS", "shorten", "shorten_packed"]
 
-_jit = numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+_jit = jit(error_model="numpy")  # stamped with the kernels it calls (kinlearn.body.jit)
 
-#: Partial shortcuts tried per path by default (a budget of work, not of time).
-DEFAULT_ATTEMPTS = 32
+#: Partial shortcuts tried per path by default (a budget of work, not of time): each free one costs a
+#: walk of its new segment, so a few cut the corners vertex skipping leaves (``benchmarks/executable.py``).
+DEFAULT_ATTEMPTS = 8
 #: A change must shorten the path by more than this (rad) to be kept: rounding never loops.
 _GAIN = 1e-9
 
@@ -181,7 +183,13 @@ def shorten(
         raise ConfigError(f"cap ({cap}) must be at least the path's {p.shape[0]} vertices")
     attempts = as_int(attempts, "attempts", minimum=0)
     seed = as_int(seed, "seed", minimum=0)
-    out = np.empty((cap, body.dof))
     f, nn = body.packing_of(p)  # every point of the pass lies in the path's convex hull
-    count = _shorten(p, cap, attempts, seed, float(max_travel), float(margin), f, nn, scene.packed, out)
+    return shorten_packed(p, f, nn, scene.packed, cap, attempts, seed, float(max_travel), float(margin))
+
+
+def shorten_packed(path, f, n, s, cap, attempts, seed, max_travel, margin) -> np.ndarray:
+    """:func:`shorten` on a checked float64 path and a packed body (``f, n``: a packing right for every
+    point of the path's convex hull) and scene (``s``), for callers holding those (the sampler)."""
+    out = np.empty((cap, path.shape[1]))
+    count = _shorten(path, cap, attempts, seed, max_travel, margin, f, n, s, out)
     return out[:count].copy()

@@ -231,7 +231,7 @@ class ObstacleStages:
             paths, pick, free = first
         out = paths[np.arange(n), pick]
         if free.all():  # every plan cleared by stage 1 (a batch-1 plan most often): no later stage runs
-            return out, free, np.full(n, "learned", dtype=object)
+            return self._shorten_free(out, free, packed), free, np.full(n, "learned", dtype=object)
         stage = np.where(free, "learned", "none").astype(object)
         batched = len(scene.batch_shape) > 0
 
@@ -291,7 +291,26 @@ class ObstacleStages:
                 out[i], free[i], stage[i] = dense, True, found[i][1]
         if not free.all():  # the user's plan() is four calls up
             self._explain(theta0, thetaT, free, packed, stacklevel=5)
-        return out, free, stage
+        return self._shorten_free(out, free, packed), free, stage
+
+    def _shorten_free(self, paths: np.ndarray, free: np.ndarray, packed: list) -> np.ndarray:
+        """The shortcut stage on every cleared plan of ``paths (N, K, dof)`` (:meth:`_shortened`)."""
+        for i in np.flatnonzero(free if self.shortcut else ()):
+            paths[i] = self._shortened(paths[i], packed[i])
+        return paths
+
+    def _shortened(self, path: np.ndarray, nscene) -> np.ndarray:
+        """The shortcut stage (:func:`~kinlearn.collision.shortcut.shorten`: vertex skipping, then
+        :data:`~kinlearn.collision.shortcut.DEFAULT_ATTEMPTS` partial shortcuts, deterministic) on a cleared
+        path ``(K, dof)``, kept at ``K`` knots by repeating its last one (the goal): every segment of the
+        result is one the pass checked, or none (a repeated knot), so its verdict is the pass's."""
+        from ..collision.shortcut import shorten
+
+        K = path.shape[0]
+        short = shorten(self._np_body, nscene, path, cap=K, max_travel=CHECK_TRAVEL)
+        if short.shape[0] < K:
+            short = np.concatenate((short, np.repeat(short[-1:], K - short.shape[0], axis=0)))
+        return short
 
     def _cleared(self, found: dict, K: int, packed: list) -> dict[int, np.ndarray]:
         """The later stages' paths ``found`` ({problem: (path, stage)}) at ``K`` knots each (:func:`densify`),
@@ -431,7 +450,8 @@ class ObstacleStages:
     ):
         """Stage 4: the compiled RRT-Connect from ``start`` to ``goal`` for what ``deadline`` leaves (less
         :data:`~kinlearn.planning.stages.DEADLINE_RESERVE`) and at most ``iterations`` iterations (0: no
-        budget but the deadline), shortcut; its path ``(V, dof)`` or None. ``branches``: the free
+        budget but the deadline); its path ``(V, dof)`` or None (the shortcut stage shortens it with the
+        other stages' plans). ``branches``: the free
         retreats of the start and of the goal, its trees' first branches (out of a cell already)."""
         from ..collision.rrt import rrt_connect
 
@@ -442,7 +462,7 @@ class ObstacleStages:
         path, _, _ = rrt_connect(
             self._np_body, nscene, start, goal, lo[0], hi[0], time_limit=left, seed=seed,
             max_travel=CHECK_TRAVEL, clock=deadline.clock,
-            max_iterations=iterations or None, branches=branches,
+            max_iterations=iterations or None, branches=branches, shortcut=False,
         )  # fmt: skip
         return path
 

@@ -11,10 +11,12 @@ import torch
 
 from ..body.robot import Robot
 from ..checks import as_real
+from ..collision.body import BodySpheres
+from ..collision.scene import Scene
 from ..data.problem import Problem
 from ..errors import ConfigError, ShapeError
 
-__all__ = ["CHECK_TRAVEL", "DEFAULT_TOLERANCE", "Plan", "PlannerLike", "Tolerance"]
+__all__ = ["CHECK_TRAVEL", "DEFAULT_TOLERANCE", "Plan", "PlannerLike", "Tolerance", "executed_check"]
 
 #: Sphere travel (m) allowed between two configurations the dense collision check looks at.
 CHECK_TRAVEL = 0.01
@@ -74,6 +76,9 @@ class Plan:
             refinement), ``"rrt"`` (RRT-Connect under a deadline), ``"none"`` (no stage cleared the
             obstacles: flagged, ``success`` False). A ``str`` for a single plan, an array of them
             ``(...)`` for a batch; ``None`` for a baseline's plan.
+        scene: the obstacles the plan was made and checked among (a :class:`~kinlearn.collision.Scene`,
+            batched like the plan or shared), ``None`` in free space; ``body``: the collision spheres it
+            was checked with. :meth:`timed` verifies the executed motion against both.
 
     Derived: ``start`` ``(..., dof + 3)`` the start state [θ(0), ef(0)]; ``actions`` ``(..., T, dof)`` the
     joint changes a(0) … a(T−1).
@@ -91,6 +96,8 @@ class Plan:
     robot: str | None = None
     collision_free: torch.Tensor | None = None
     stage: str | np.ndarray | None = None
+    scene: Scene | None = None
+    body: BodySpheres | None = None
 
     #: Fields holding per-plan tensors, indexed with the batch (``collision_free`` too, where set).
     _BATCHED = (
@@ -194,6 +201,8 @@ class Plan:
         except (IndexError, TypeError) as exc:
             raise ShapeError(f"index {idx!r} does not fit the plan's batch shape {self.batch_shape}") from exc
         fields = {f: getattr(self, f)[idx] for f in self._BATCHED if getattr(self, f) is not None}
+        if self.scene is not None and self.scene.batch_shape:
+            fields["scene"] = self.scene[idx]
         if isinstance(self.stage, np.ndarray):
             stage = self.stage[idx]
             fields["stage"] = str(stage) if np.ndim(stage) == 0 else stage
@@ -217,13 +226,23 @@ class Plan:
             raise ShapeError(f"{what} takes a single plan; index the batch first, e.g. plan[0]")
 
     def timed(self, robot=None, **options):
-        """A time-parameterised trajectory along this plan's joint path within the robot's velocity and
-        acceleration limits (:func:`kinlearn.planning.timing.time_parameterize`, toppra): times, positions,
-        velocities, accelerations, ready for a controller (``.to_csv``, ``.to_json``). One plan at a time."""
+        """The motion a controller executes: a time-optimal trajectory along this plan's joint path within
+        the robot's position, velocity and acceleration limits
+        (:func:`kinlearn.planning.timing.time_parameterize`, toppra): times, positions, velocities,
+        accelerations, at rest at both ends (``.to_csv``, ``.to_json``). One plan at a time.
+
+        A plan made among obstacles keeps its scene and body, and the executed motion is verified
+        against them: its samples, and the motion between consecutive samples, pass the same dense check
+        as the plan (:data:`CHECK_TRAVEL` of sphere travel between checked configurations, the scene,
+        the floor and self-collision). Where the smooth interpolant leaves the checked corridor the path
+        gets more knots on its own segments there, then rests at the corners there, then follows its
+        straight segments there, until the samples pass (``traj.verified`` is True). A plan whose own
+        path collides raises :class:`~kinlearn.errors.UnsafeTrajectoryError`."""
         from .timing import time_parameterize
 
         self._single("timed()")
-        return time_parameterize(self._robot(robot), self.joints, **options)
+        verify = None if self.scene is None else executed_check(self.body, self.scene)
+        return time_parameterize(self._robot(robot), self.joints, verify=verify, **options)
 
     def show(self, robot=None, *, spheres=None, boxes=None, **options):
         """Open an interactive 3-D view of this plan in the browser (viser): the arm along its joint path,
@@ -296,3 +315,31 @@ class PlannerLike(Protocol):
     robot: Robot
 
     def plan(self, problem: Problem) -> Plan: ...
+
+
+def executed_check(body: BodySpheres | None, scene: Scene, max_travel: float = CHECK_TRAVEL):
+    """The check :meth:`Plan.timed` verifies an executed motion with, for one scene (batch shape ``()``)
+    and the body it was planned with: a function of the sampled positions ``q (K, dof)`` giving, per
+    sample interval ``(K − 1,)``, whether it collides — either sample touches the scene, the floor or
+    the body itself (the compiled clearances), or the dense check of the polyline through the samples
+    (``max_travel`` m of sphere travel between checked configurations) finds a collision in it (its
+    first one; the next round of repairs finds any later one)."""
+    from ..collision import kernel
+
+    if body is None:
+        raise ConfigError("a plan among obstacles needs the body it was checked with to verify its motion")
+    if scene.batch_shape:
+        raise ShapeError(f"executed_check takes one scene (batch shape ()), got {tuple(scene.batch_shape)}")
+    kb = kernel.KernelBody.of(body)
+    ks = kernel.KernelScene.of(scene if scene.dtype == torch.float64 else scene.to(torch.float64))
+
+    def verify(q: np.ndarray) -> np.ndarray:
+        d, s = kernel.clearances(kb, ks, q)
+        hit = (d <= 0.0) | (s <= 0.0)
+        bad = hit[:-1] | hit[1:]
+        free, _, first = kernel.check_paths(kb, q[None], ks, max_travel=max_travel, exact=False)
+        if not free[0] and len(bad):
+            bad[min(int(first[0]), len(bad) - 1)] = True
+        return bad
+
+    return verify

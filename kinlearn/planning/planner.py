@@ -71,10 +71,10 @@ __all__ = ["DEFAULT_CHECKPOINTS", "Planner", "plan", "step_to_position"]
 DEFAULT_CHECKPOINTS = Path(__file__).resolve().parents[1] / "checkpoints"
 
 #: RRT-Connect iterations a plan gets by default (no deadline, no ``refine_steps``) where its learned
-#: proposals (or, without an obstacle network, its straight line) cleared nothing: a fixed budget of
-#: work, so the same path on every machine. On the held-out scene problems the sampler solves most
-#: within a few hundred iterations, where 25 refinement steps took about a second for half the success.
-DEFAULT_RRT_ITERATIONS = 2000
+#: proposals (or, without an obstacle network, its straight line) and the retreat stage cleared nothing:
+#: a fixed budget of work, so the same path on every machine. It only binds on the hardest cells (a cage
+#: whose way out a few thousand samples miss); problems the earlier stages clear never reach it.
+DEFAULT_RRT_ITERATIONS = 20_000
 
 
 #: A joint goal this close to the start (rad, every joint) is no move: its plan stays at the start.
@@ -123,6 +123,7 @@ class Planner(ObstacleStages):
         chain: ChainFM | None = None,
         retreat: bool = True,
         retreat_share: float | None = None,
+        shortcut: bool = True,
     ):
         """``fm``/``im``: needed by a waypoint TM, and by a planner without ``chain`` for end-effector
         position goals.
@@ -147,6 +148,10 @@ class Planner(ObstacleStages):
         colliding one, kept if the dense check then finds it free (0: none; the plan's time stays
         bounded either way).
 
+        ``shortcut``: every plan a stage cleared among obstacles is shortened by the shortcut stage
+        (:mod:`kinlearn.collision.shortcut`: deterministic, a fixed budget, checked densely; the path
+        never grows longer); False hands over the stages' paths as they are.
+
         ``refine`` and ``exact_joints`` set the IM/FM rollout (see :func:`~kinlearn.models.rollout.rectify`):
         by default one model-based correction of each action and the joints kept at θ(0) + Σ â.
         ``refine=0, exact_joints=False`` is the paper's Algorithm 1 as published. ``tolerance``: when a
@@ -167,6 +172,7 @@ class Planner(ObstacleStages):
                     f"the {what} was trained for {m.robot_name!r}, the planner is for {robot.name!r}"
                 )
         self.refine, self.exact_joints = int(refine), bool(exact_joints)
+        self.shortcut = bool(shortcut)
         if max_step is None:  # the FM is valid for the steps of the data it learned from
             max_step = fm.max_step if fm is not None else MAX_STEP
         self.tolerance, self.max_step = tolerance, float(max_step)
@@ -418,18 +424,18 @@ class Planner(ObstacleStages):
         if obstacles is not None and goal_position is None:
             first = self._batch1(start, goal, obstacles, steps)
             if first is not None:
-                q, ef, stage1, packed, dtype = first
+                q, ef, stage1, packed, dtype, scene = first
                 paths, pick, free = stage1
                 if free[0]:  # stage 1 cleared it: no Problem made
-                    return self._batch1_plan(q, ef, paths[0, pick[0]], "learned", dtype)
+                    return self._batch1_plan(q, ef, paths[0, pick[0]], "learned", dtype, packed, scene)
                 if self._retreat_vias() is not None and not _retreat_over(timer, self.retreat_share):
                     path, branches = self._retreat(q[0], q[1], packed, steps, timer)
                     if path is not None:  # the retreat stage cleared it: no Problem made either
-                        return self._batch1_plan(q, ef, path, "retreat", dtype)
+                        return self._batch1_plan(q, ef, path, "retreat", dtype, packed, scene)
                     retreated = branches  # the later stages start from its free retreats
                 if refine_steps is not None and steps == 0 and deadline is None:  # no later stage runs
                     self._explain(q[:1], q[1:], _NOT_FREE, [packed], stacklevel=3)
-                    return self._batch1_plan(q, ef, paths[0, pick[0]], "none", dtype, free=False)
+                    return self._batch1_plan(q, ef, paths[0, pick[0]], "none", dtype, packed, scene, free=False)
         problem, dtype, device = self._problem(start, goal, goal_position, obstacles)
         return self._plan(
             problem, steps, refine_steps is None, strict, dtype, device, timer, stage1, retreated
@@ -474,10 +480,10 @@ class Planner(ObstacleStages):
             return None
         ef, paths, pick, free = first
         self._warn_beyond(q, stacklevel=4)
-        return q, ef, (paths[None], pick, free), packed, torch.promote_types(da, db)
+        return q, ef, (paths[None], pick, free), packed, torch.promote_types(da, db), obstacles
 
     def _batch1_plan(
-        self, q, ef, path: np.ndarray, stage: str, dtype: torch.dtype, free: bool = True
+        self, q, ef, path: np.ndarray, stage: str, dtype: torch.dtype, packed, scene: Scene, free: bool = True
     ) -> Plan:
         """The plan of a batch-1 problem whose joint path ``path (K, dof)`` a fixed-time stage cleared
         (:meth:`_batch1`'s stage 1, or the retreat stage run on its arrays), or, ``free`` False, that no
@@ -485,10 +491,13 @@ class Planner(ObstacleStages):
         :func:`judge`'s rule (:func:`~kinlearn.planning.plan.verdict_small`) on the arrays at hand, in the
         output's ``dtype`` (on the CPU, as the batch-1 entry's input)."""
         states = np.concatenate((q, ef), axis=1)
+        if free and self.shortcut:
+            path = self._shortened(path, packed)
         plan = verdict_small(
             self._obstacle_robot, np.ascontiguousarray(path[None]), states[:1], states[1:], True, (),
             (_FREE if free else _NOT_FREE).copy(), self.tolerance, stage=stage,
         )  # fmt: skip
+        plan = dataclasses.replace(plan, scene=scene, body=self.body)
         if dtype == torch.float64:
             return plan
         return _as_output(plan, dtype, _CPU, self._obstacle_robot.lower, self._obstacle_robot.upper)
@@ -603,6 +612,8 @@ class Planner(ObstacleStages):
             plan = dataclasses.replace(
                 plan, goal=torch.from_numpy(goal[0] if lead == () else goal.reshape(*lead, S))
             )
+        if problem.obstacles is not None:  # what the plan was checked against, for its timed motion
+            plan = dataclasses.replace(plan, scene=problem.obstacles, body=self.body)
         limits = problem.robot.lower, problem.robot.upper  # the obstacle robot's among obstacles
         return _as_output(plan, dtype, device, *limits)
 

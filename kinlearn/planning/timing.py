@@ -44,11 +44,12 @@ spline sample by at most the 1e-9 rad the limit check tolerates.
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Callable
 from typing import Any, Literal
 
 import numpy as np
@@ -448,7 +449,7 @@ def _linear_piece(qs: np.ndarray, vel: np.ndarray, acc: np.ndarray) -> _Piece:
     the straight line in the least time its limits allow (accelerate at the most any joint allows,
     cruise at the most velocity, decelerate: a trapezoid, or a triangle where the segment is short)."""
     starts, deltas, durations, shapes = [], [], [], []
-    for a, b in zip(qs[:-1], qs[1:], strict=True):
+    for a, b in itertools.pairwise(qs):
         d = b - a
         moving = np.abs(d) > 0
         v = float(np.min(vel[moving] / np.abs(d[moving])))  # path speed, segment lengths per second
@@ -623,7 +624,7 @@ def time_parameterize(
         bounds = sorted(stops)
         pieces = [
             _piece(robot, knots[a : b + 1], interpolant, vel, acc, a in straight)
-            for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+            for a, b in itertools.pairwise(bounds)
         ]
         ts, q, qd, qdd, duration, knot_times = _assemble(pieces, dt, samples)
         q[-1], qd[0], qd[-1] = knots[-1], 0.0, 0.0  # exact end configuration and rest
@@ -651,7 +652,10 @@ def time_parameterize(
                 stops.add(int(vertex[min(np.searchsorted(vertex, i + 1, side="left"), len(vertex) - 1)]))
         else:  # the pieces still colliding follow the polyline itself
             bounds = sorted(stops)
-            more = {bounds[max(np.searchsorted(bounds, i, side="right") - 1, 0)] for i in np.flatnonzero(intervals)}
+            more = {
+                bounds[max(np.searchsorted(bounds, i, side="right") - 1, 0)]
+                for i in np.flatnonzero(intervals)
+            }
             if more <= straight:  # they already do: the path itself collides
                 raise UnsafeTrajectoryError(
                     f"the executed motion still collides in {int(bad.sum())} sample interval(s) when it "
