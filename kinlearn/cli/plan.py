@@ -82,6 +82,38 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
         help="with --scene: the robot base's pose in the scene's frame (default: the scene's frame)",
     )
     p.add_argument(
+        "--points",
+        type=EXISTING_FILE,
+        default=None,
+        metavar="FILE",
+        help="plan among a point cloud (.npy, .ply or .pcd; metres, the robot's base frame unless "
+        "--camera-pose), each point an obstacle ball of --point-radius; with --obstacles or --scene, beside them",
+    )
+    p.add_argument(
+        "--camera-pose",
+        type=_floats,
+        default=None,
+        metavar="X,Y,Z,QX,QY,QZ,QW",
+        help="with --points: the camera's pose in the robot's base frame (the points are in its frame)",
+    )
+    p.add_argument(
+        "--point-radius",
+        type=number_type(float, low=0),
+        default=None,
+        metavar="M",
+        help="with --points: the radius of each point's obstacle ball (default 0.01)",
+    )
+    p.add_argument(
+        "--self-filter",
+        action="store_true",
+        help="with --points: drop the points on the robot's own body at the start (and those beyond its reach)",
+    )
+    p.add_argument(
+        "--drop-nan",
+        action="store_true",
+        help="with --points: drop points holding NaN (a depth camera's missing pixels) instead of refusing them",
+    )
+    p.add_argument(
         "--request",
         type=EXISTING_FILE,
         default=None,
@@ -166,15 +198,30 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
         from ..collision.scene import Scene
 
         obstacles = Scene.from_moveit(args.scene, base_pose=args.base_pose)
+    if args.points is None and (
+        args.camera_pose is not None or args.point_radius is not None or args.self_filter or args.drop_nan
+    ):
+        raise ConfigError("--camera-pose, --point-radius, --self-filter and --drop-nan describe --points: give it too")
+    if args.points is not None:
+        from ..collision.scene import Scene
+
+        obstacles = Scene.from_points(
+            args.points,
+            radius=args.point_radius,
+            frame=args.camera_pose,
+            self_filter=(planner.body, start[: planner.robot.dof].numpy()) if args.self_filter else None,
+            drop_nonfinite=args.drop_nan,
+            primitives=obstacles,
+        )
     if args.deadline is not None and obstacles is None:
-        raise ConfigError("--deadline bounds planning around obstacles: give --obstacles or --scene too")
+        raise ConfigError("--deadline bounds planning around obstacles: give --obstacles, --scene or --points too")
     if args.no_retreat and obstacles is None:
         raise ConfigError(
-            "--no-retreat leaves out a stage of planning around obstacles: give --obstacles or --scene too"
+            "--no-retreat leaves out a stage of planning around obstacles: give --obstacles, --scene or --points too"
         )
     if args.sphere_set is not None and obstacles is None:
         raise ConfigError(
-            "--sphere-set is the body plans around obstacles are checked with: give --obstacles or --scene too"
+            "--sphere-set is the body plans around obstacles are checked with: give --obstacles, --scene or --points too"
         )
     options = {
         "obstacles": obstacles,

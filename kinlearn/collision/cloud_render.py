@@ -100,16 +100,23 @@ class DepthCamera:
     far: float = 4.0
     noise: float = 0.002
 
-    def rays(self) -> np.ndarray:
-        """Unit ray directions ``(height · width, 3)`` in the base frame."""
+    def pose(self) -> np.ndarray:
+        """The camera's pose in the base frame, 4 × 4: its axes x right, y down, z forward (the optical
+        frame of OpenCV and ROS), its origin at ``position``."""
         o, t = np.asarray(self.position, dtype=float), np.asarray(self.target, dtype=float)
         fwd = (t - o) / np.linalg.norm(t - o)
-        up = np.array([0.0, 0.0, 1.0])
-        right = np.cross(fwd, up)
+        right = np.cross(fwd, np.array([0.0, 0.0, 1.0]))
         if np.linalg.norm(right) < 1e-9:
             right = np.array([0.0, -1.0, 0.0])
         right /= np.linalg.norm(right)
-        down = np.cross(fwd, right)
+        T = np.eye(4)
+        T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = right, np.cross(fwd, right), fwd, o
+        return T
+
+    def rays(self) -> np.ndarray:
+        """Unit ray directions ``(height · width, 3)`` in the base frame."""
+        T = self.pose()
+        right, down, fwd = T[:3, 0], T[:3, 1], T[:3, 2]
         f = 0.5 * self.width / math.tan(math.radians(self.fov) / 2)
         u = np.arange(self.width) + 0.5 - self.width / 2
         v = np.arange(self.height) + 0.5 - self.height / 2
