@@ -23,7 +23,8 @@ RESULTS = ROOT / "benchmarks" / "results"
 OUT = ROOT / "docs" / "results.md"
 SCHEMA = 1
 
-#: Sections first, in this order (what a reader looks for first); the others follow by name.
+#: Benchmarks whose results come first, in this order (what a reader looks for first; a benchmark's
+#: results per arm or option, ``<benchmark>_<suffix>``, together); the others follow by name.
 ORDER = (
     "workspace_planner",
     "position_goals",
@@ -73,8 +74,16 @@ def load(results: Path = RESULTS) -> list[dict]:
         if record["name"] != path.stem:
             raise ResultError(f"{path}: its name is {record['name']!r}")
         out.append(record)
-    rank = {name: i for i, name in enumerate(ORDER)}
-    return sorted(out, key=lambda r: (rank.get(r["name"], len(rank)), r["name"]))
+    return sorted(out, key=lambda r: (_rank(r["name"]), r["name"]))
+
+
+def _rank(name: str) -> int:
+    """Where a result goes on the page: its benchmark's place in :data:`ORDER` (``obstacle_families_ur5``
+    is an ``obstacle_families`` result), after them all when not listed."""
+    for i, stem in enumerate(ORDER):
+        if name == stem or name.startswith(stem + "_"):
+            return i
+    return len(ORDER)
 
 
 def render(records: list[dict]) -> str:
