@@ -264,7 +264,10 @@ def mesh_check(body: MeshBody, paths, scene=None, max_step: float = 0.01) -> np.
 def judge_meshes(plan, scene=None, body: MeshBody | None = None, max_step: float = 0.01) -> np.ndarray:
     """``(...)`` bool: for a :class:`~kinlearn.planning.plan.Plan` (or a batch of them), whether each plan
     it calls successful is also free under the robot's collision meshes (:func:`mesh_check`): the exact,
-    slower second opinion on what the sphere check passed. A plan that did not succeed is False."""
+    slower second opinion on what the sphere check passed. A plan that did not succeed is False. ``scene``:
+    the obstacles (default: the scene the plan records it was planned among, where it records one)."""
+    if scene is None:
+        scene = getattr(plan, "scene", None)
     if body is None:
         from ..body.robot import load_robot
 
@@ -275,6 +278,8 @@ def judge_meshes(plan, scene=None, body: MeshBody | None = None, max_step: float
     flat_ok = ok.reshape(-1)
     flat_j = joints.reshape(-1, *joints.shape[-2:]) if isinstance(joints, torch.Tensor) else joints
     flat_out = out.reshape(-1)
+    batched = scene is not None and len(scene.batch_shape) > 0
+    scenes = scene.expand(*ok.shape).reshape(max(1, ok.size)) if batched else None
     for i in np.flatnonzero(flat_ok):
-        flat_out[i] = bool(mesh_check(body, flat_j[i], scene, max_step))
+        flat_out[i] = bool(mesh_check(body, flat_j[i], scenes[int(i)] if batched else scene, max_step))
     return out
