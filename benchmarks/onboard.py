@@ -58,6 +58,7 @@ def sphere_figures(spheres: np.ndarray, robot, points: int) -> dict:
     """Count, coverage and excess of ``spheres`` rows [link, x, y, z, r] against ``robot``'s URDF geometry."""
     inside = beyond = total = 0
     farthest = excess = solid = 0.0
+    worst = 100.0
     for g in link_geometry(robot):
         if not g.parts:
             continue
@@ -66,9 +67,11 @@ def sphere_figures(spheres: np.ndarray, robot, points: int) -> dict:
         if len(s) == 0:
             beyond += len(pts)
             total += len(pts)
+            worst = 0.0
             continue
         cov = coverage(s, pts, tolerance=0.002)
         inside += round(cov["inside"] * len(pts))
+        worst = min(worst, 100.0 * cov["inside"])
         beyond += cov["beyond_tolerance"]
         total += len(pts)
         farthest = max(farthest, cov["farthest_outside"])
@@ -78,6 +81,7 @@ def sphere_figures(spheres: np.ndarray, robot, points: int) -> dict:
     return {
         "spheres": len(spheres),
         "coverage_pct": 100.0 * inside / total,
+        "worst_link_coverage_pct": worst,
         "beyond_2mm": beyond,
         "points": total,
         "farthest_mm": 1e3 * farthest,
@@ -118,6 +122,7 @@ def sphere_table(arms, points: int) -> tuple[dict, list]:
                     label,
                     f["spheres"],
                     round(f["coverage_pct"], 3),
+                    round(f["worst_link_coverage_pct"], 3),
                     f["beyond_2mm"],
                     round(f["farthest_mm"], 2),
                     round(f["excess_l"], 2),
@@ -211,6 +216,7 @@ def main() -> None:
                 "spheres",
                 "count",
                 "coverage %",
+                "worst link %",
                 "points > 2 mm out",
                 "farthest out (mm)",
                 "excess (L)",
@@ -237,6 +243,14 @@ def main() -> None:
         keep = found.numpy().astype(bool)
         f = plan_figures(planner, mesh, pset, keep)
         f["generated"] = len(pset)
+        if (
+            run_dir is not None and (run_dir / "steps.json").is_file()
+        ):  # how long onboarding it took, per step
+            import json
+
+            steps = json.loads((run_dir / "steps.json").read_text())
+            f["onboard_seconds"] = {k: round(v["seconds"], 1) for k, v in steps.items()}
+            f["onboard_size"] = json.loads((run_dir / "config.json").read_text()).get("onboard", {})
         figures[f"plan {robot.name}"] = f
         plan_rows.append(
             [
