@@ -246,3 +246,20 @@ def test_rendered_clouds_cover_the_primitives():
     seen = cam.points(box)
     np.testing.assert_allclose(seen[:, 0], 0.5, atol=1e-9)  # only the face towards the camera
     assert len(seen) > 100
+
+
+def test_a_cameras_points_in_its_own_frame_and_their_shadows():
+    box = Scene(boxes=torch.tensor([[0.6, 0.0, 0.3, 0.1, 0.2, 0.3]]))
+    cam = DepthCamera(position=(0.0, 0.3, 0.5), target=(0.6, 0.0, 0.3), width=48, height=36, noise=0.0)
+    T = cam.pose()
+    seen = cam.points(box)
+    in_camera = (seen - T[:3, 3]) @ T[:3, :3]
+    assert (in_camera[:, 2] > 0).all()  # in front of the camera: its z looks forward
+    scene = Scene.from_points(in_camera, frame=T)
+    np.testing.assert_allclose(scene.cloud.points, seen, atol=1e-12)
+    shadowed = Scene.from_points(in_camera, frame=T, shadow=0.05, resolution=0.01)
+    assert shadowed.cloud.num_points == 6 * len(seen)
+    behind = shadowed.cloud.points[len(seen) :]
+    assert (np.linalg.norm(behind - T[:3, 3], axis=1) > np.linalg.norm(seen - T[:3, 3], axis=1).min()).all()
+    with pytest.raises(PointCloudError, match="camera's pose"):
+        Scene.from_points(seen, shadow=0.05)

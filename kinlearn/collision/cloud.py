@@ -42,12 +42,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-import numba
 import numpy as np
 import torch
 
+from ..body.jit import jit
 from ..errors import PointCloudError, PointCloudFileError
 from .geometry import check_rotations, rotation_from_quaternion
+from .kinds.cloud import EDGE as _H
+from .kinds.cloud import HEADER as _HEADER
+from .kinds.cloud import HI as _HI
+from .kinds.cloud import LO as _LO
+from .kinds.cloud import NX as _NX
+from .kinds.cloud import NY as _NY
+from .kinds.cloud import NZ as _NZ
+from .kinds.cloud import ORIGIN as _OX
+from .kinds.cloud import RADIUS as _R
+from .kinds.cloud import cloud_distance
 
 __all__ = [
     "DEFAULT_RADIUS",
@@ -60,6 +70,7 @@ __all__ = [
     "cloud_distance",
     "points_in_base",
     "read_points",
+    "shadows",
 ]
 
 #: Default radius (m) of the ball each point stands for: a surface sampled every centimetre is covered
@@ -69,7 +80,7 @@ DEFAULT_RADIUS = 0.01
 DEFAULT_RESOLUTION = 0.01
 #: Metres of grid around the points' bounding box (beyond it, the border cells' bounds less the way
 #: there): about a body sphere's radius and a clearance, where the bounds matter most.
-PAD = 0.08
+PAD = 0.04
 #: The most fine cells a grid may have (a float64 each): a larger cloud extent asks for a crop
 #: (:attr:`Cleaning.reach`) or a coarser resolution.
 MAX_CELLS = 1 << 26
@@ -77,20 +88,6 @@ MAX_CELLS = 1 << 26
 MILLIMETRE_NORM = 20.0
 #: Metres taken off every bound for the rounding of the arithmetic that made it.
 _ROUNDING = 1e-9
-_TINY = float(np.finfo(np.float64).tiny)
-
-_jit = numba.njit(cache=True, nogil=True, fastmath=False)
-_jit_inline = numba.njit(cache=True, nogil=True, fastmath=False, inline="always")
-
-# The packed grid (:attr:`PointCloud.packed`, float64): a header, then a lower bound per cell
-# (nx · ny · nz, C order). Header slots:
-_NX, _NY, _NZ = 0, 1, 2  # dimensions
-_OX = 3  # origin (3): the low corner of cell (0, 0, 0)
-_H = 6  # cell edge
-_LO, _HI = 7, 10  # the points' bounding box (3 + 3)
-_R = 13  # the points' radius
-_HEADER = 14
-
 
 # --------------------------------------------------------------------------------------------------
 # Checking and reading points
@@ -279,6 +276,24 @@ def _read_pcd(p: Path) -> np.ndarray:
     raise PointCloudFileError(f"{p}: unknown PCD DATA {data!r} (ascii or binary)")
 
 
+def shadows(points: np.ndarray, origin, length: float, step: float) -> np.ndarray:
+    """``points (N, 3)`` and, behind each as seen from ``origin`` (the camera), points every ``step`` (m) along
+    its ray for ``length`` (m) further: the space a depth camera cannot see behind a surface, taken as
+    occupied that far (beyond it, and outside the camera's view, unknown space stays free)."""
+    if not (math.isfinite(length) and length >= 0 and math.isfinite(step) and step > 0):
+        raise PointCloudError(
+            f"a shadow's length must be >= 0 and its step > 0 (m), got {length!r}, {step!r}"
+        )
+    n = math.floor(length / step)
+    if n == 0:
+        return points
+    ray = points - np.asarray(origin, dtype=np.float64)
+    ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-12)
+    steps = step * np.arange(1, n + 1)
+    behind = points[:, None, :] + steps[None, :, None] * ray[:, None, :]
+    return np.ascontiguousarray(np.concatenate([points, behind.reshape(-1, 3)]))
+
+
 def points_in_base(points: np.ndarray, frame) -> np.ndarray:
     """Points ``(N, 3)`` given in a camera's frame, moved to the robot's base frame: ``frame`` is the
     camera's pose in the base frame, a 4 × 4 transform, a pair ``(position (3,), quaternion (4,) x, y, z, w)``
@@ -435,7 +450,7 @@ def clean_points(
     return np.ascontiguousarray(pts)
 
 
-@_jit
+@jit
 def _outside_spheres(points, centres, reach, keep):
     """``keep[i]``: point i lies farther than ``reach[m]`` from every centre m."""
     for i in range(points.shape[0]):
@@ -488,7 +503,7 @@ def _inliers(points: np.ndarray, cleaning: Cleaning) -> np.ndarray:
     return keep
 
 
-@_jit
+@jit
 def _neighbourhoods(points, cell, keys, dims, radius, k, out):
     """Per point (sorted by cell key): with ``k`` = 0 the number of other points within ``radius``; else
     the mean distance to its ``k`` nearest among the 27 cells around it (``radius`` for each not found)."""
@@ -538,7 +553,7 @@ def _neighbourhoods(points, cell, keys, dims, radius, k, out):
 _NONE = 1e30  # a cell's squared distance before the transform: no point there
 
 
-@_jit
+@jit
 def _bounds(points):
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
@@ -550,13 +565,14 @@ def _bounds(points):
     return lo, hi
 
 
-@_jit
-def _lines(g, base, n, step, m, v, z, top, site):
+@jit
+def _lines(g, base, n, step, m, v, z, top, site, at, scale=0.0, less=0.0):
     """Felzenszwalb and Huttenlocher's 1-D squared distance transform, in place, of ``m`` lines side by side:
     line c holds ``g[base + q · step + c]`` for q = 0…n−1 (cells of value ≥ :data:`_NONE` hold no site).
-    Walking the lines together keeps every access contiguous (``v``, ``z``, ``site``: ``(n + 1, m)`` work
-    space, ``top (m,)``). Exact on these integer values: an envelope's breakpoint lies between integers
-    unless two parabolas tie there."""
+    Walking the lines together, q by q, keeps every access contiguous (``v``, ``z``, ``site``: ``(n + 1, m)``
+    work space, ``top``, ``at``: ``(m,)``). Exact on these integer values: an envelope's breakpoint lies
+    between integers unless two parabolas tie there. With ``scale`` > 0 (the last pass) each result is
+    written as ``scale · √value − less`` instead."""
     for c in range(m):
         top[c] = -1
     for q in range(n):
@@ -567,11 +583,9 @@ def _lines(g, base, n, step, m, v, z, top, site):
                 continue
             fq2 = fq + q * q
             k = top[c]
-            s = 0.0
-            while k >= 0:
+            while k >= 0:  # pop the parabolas the new one hides (compared without dividing)
                 p = v[k, c]
-                s = (fq2 - (site[k, c] + p * p)) / (2.0 * (q - p))
-                if s <= z[k, c]:
+                if fq2 - site[k, c] <= z[k, c] * (2.0 * (q - p)):
                     k -= 1
                 else:
                     break
@@ -579,23 +593,29 @@ def _lines(g, base, n, step, m, v, z, top, site):
                 k = 0
                 z[0, c] = -np.inf
             else:
+                p = v[k, c]
                 k += 1
-                z[k, c] = s
-            v[k, c], site[k, c] = q, fq
+                z[k, c] = (fq2 - site[k - 1, c]) / (2.0 * (q - p))
+            v[k, c], site[k, c] = q, fq2  # the parabola (x − q)² + fq as x² − 2qx + fq2
             top[c] = k
     for c in range(m):
-        last = top[c]
-        if last < 0:
-            continue
-        k = 0
-        for q in range(n):
+        at[c] = 0
+    for q in range(n):
+        o = base + q * step
+        for c in range(m):
+            last = top[c]
+            if last < 0:
+                continue
+            k = at[c]
             while k < last and z[k + 1, c] < q:
                 k += 1
-            e = q - v[k, c]
-            g[base + q * step + c] = e * e + site[k, c]
+            at[c] = k
+            p = v[k, c]
+            value = site[k, c] - 2.0 * q * p + q * q
+            g[o + c] = scale * math.sqrt(value) - less if scale > 0.0 else value
 
 
-@_jit
+@jit
 def _build(points, radius, h, pad, out_header):
     """The packed grid of ``points (N, 3)`` (see the module docstring): header filled (also into
     ``out_header``), the cells' lower bounds after it, one buffer."""
@@ -609,11 +629,13 @@ def _build(points, radius, h, pad, out_header):
     buf = np.empty(_HEADER + N)
     g = buf[_HEADER:]
     g[:] = _NONE
+    filled = np.zeros(nx, dtype=np.bool_)
     for i in range(points.shape[0]):
         a = int((points[i, 0] - ox) / h)
         b = int((points[i, 1] - oy) / h)
         c = int((points[i, 2] - oz) / h)
         g[(a * ny + b) * nz + c] = 0.0
+        filled[a] = True
     # z: the nearest site along each row, scanning both ways
     for r in range(nx * ny):
         o = r * nz
@@ -631,15 +653,16 @@ def _build(points, radius, h, pad, out_header):
                 g[o + c] = min(g[o + c], float((last - c) * (last - c)))
     n = max(nx, ny) + 1
     v, z = np.empty((n, nz), dtype=np.int64), np.empty((n, nz))
-    site, top = np.empty((n, nz)), np.empty(nz, dtype=np.int64)
-    for a in range(nx):  # y: plane a's lines, nz side by side
-        _lines(g, a * P, ny, nz, nz, v, z, top, site)
-    for b in range(ny):  # x: row b of every plane, nz side by side
-        _lines(g, b * nz, nx, P, nz, v, z, top, site)
-    # squared distances in cells → lower bounds in metres (a site anywhere in its cell: half a diagonal)
-    half = 0.5 * math.sqrt(3.0) * h
-    for i in range(N):
-        g[i] = h * math.sqrt(g[i]) - half - radius - _ROUNDING
+    site, top, at = np.empty((n, nz)), np.empty(nz, dtype=np.int64), np.empty(nz, dtype=np.int64)
+    for a in range(nx):  # y: plane a's lines, nz side by side (a plane without a point stays empty)
+        if filled[a]:
+            _lines(g, a * P, ny, nz, nz, v, z, top, site, at)
+    # x: row b of every plane, nz side by side (every such line holds a site: each plane with a point is
+    # filled by now), written as lower bounds in metres: the centres' distance less half a cell's
+    # diagonal (a point lies anywhere in its cell) and the radius
+    less = 0.5 * math.sqrt(3.0) * h + radius + _ROUNDING
+    for b in range(ny):
+        _lines(g, b * nz, nx, P, nz, v, z, top, site, at, h, less)
     hd = buf[:_HEADER]
     hd[_NX], hd[_NY], hd[_NZ] = nx, ny, nz
     hd[_OX], hd[_OX + 1], hd[_OX + 2] = ox, oy, oz
@@ -651,43 +674,7 @@ def _build(points, radius, h, pad, out_header):
     return buf
 
 
-@_jit_inline
-def _corner(i, n):
-    """Cell index ``i`` clamped into 0…n−1 (any cell's bound holds everywhere)."""
-    return min(max(i, 0), n - 1)
-
-
-@_jit_inline
-def cloud_distance(x, y, z, g):
-    """A lower bound on the signed distance from the point ``(x, y, z)`` to the point balls of the packed
-    grid ``g`` (:attr:`PointCloud.packed`): the largest, over the 8 cell centres around the point, of the
-    centre's bound less the centre's distance, and the bounding box's (see the module docstring)."""
-    ex = max(max(g[_LO] - x, x - g[_HI]), 0.0)
-    ey = max(max(g[_LO + 1] - y, y - g[_HI + 1]), 0.0)
-    ez = max(max(g[_LO + 2] - z, z - g[_HI + 2]), 0.0)
-    d = math.sqrt(max(ex * ex + ey * ey + ez * ez, _TINY)) - g[_R]
-    h = g[_H]
-    nx, ny, nz = int(g[_NX]), int(g[_NY]), int(g[_NZ])
-    # the cell centres around the point, or, outside the grid, the nearest ones on its border
-    fx = min(max((x - g[_OX]) / h - 0.5, -1.0), float(nx))
-    fy = min(max((y - g[_OX + 1]) / h - 0.5, -1.0), float(ny))
-    fz = min(max((z - g[_OX + 2]) / h - 0.5, -1.0), float(nz))
-    i0, j0, k0 = math.floor(fx), math.floor(fy), math.floor(fz)
-    for a in range(2):
-        i = _corner(i0 + a, nx)
-        dx = x - (g[_OX] + (i + 0.5) * h)
-        for b in range(2):
-            j = _corner(j0 + b, ny)
-            dy = y - (g[_OX + 1] + (j + 0.5) * h)
-            row = _HEADER + (i * ny + j) * nz
-            for c in range(2):
-                k = _corner(k0 + c, nz)
-                dz = z - (g[_OX + 2] + (k + 0.5) * h)
-                d = max(d, g[row + k] - math.sqrt(max(dx * dx + dy * dy + dz * dz, _TINY)))
-    return d
-
-
-@_jit
+@jit
 def _distances(points, g, out):
     for i in range(points.shape[0]):
         out[i] = cloud_distance(points[i, 0], points[i, 1], points[i, 2], g)

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..errors import DatasetError, ObstacleError, ShapeError
+from ..errors import DatasetError, ObstacleError, PointCloudError, ShapeError
 from ..io import load_npz, save_npz
 from .geometry import IDENTITY, SCENE_KINDS, Plane, Primitive, check_rotations
 from .moveit import primitives_from_moveit, primitives_to_moveit
@@ -296,6 +296,7 @@ class Scene:
         cleaning=None,
         self_filter: tuple | None = None,
         drop_nonfinite: bool = False,
+        shadow: float = 0.0,
         primitives: Scene | Sequence[Primitive] | None = None,
         floor=None,
     ) -> Scene:
@@ -312,6 +313,9 @@ class Scene:
         robot's :class:`BodySpheres` or a planner, and its joints when the cloud was taken: points on its own
         body are dropped, and the cloud cropped to its reach) clean the points first;
         ``drop_nonfinite`` drops NaN rows (a depth camera's missing pixels) instead of refusing them.
+        ``shadow`` (m, with ``frame``): the space behind each point left after cleaning, as the camera sees
+        it, is taken as occupied that far (:func:`~kinlearn.collision.cloud.shadows`); by default unknown
+        space is free (what the robot's own body hides stays free either way).
 
         Raises :class:`~kinlearn.errors.PointCloudError` for points of another shape, NaN rows, no points,
         millimetres or a bad pose, :class:`~kinlearn.errors.PointCloudFileError` for a file it cannot read.
@@ -324,6 +328,7 @@ class Scene:
             clean_points,
             points_in_base,
             read_points,
+            shadows,
         )
 
         if isinstance(points, (str, Path)):
@@ -332,7 +337,12 @@ class Scene:
         radius = DEFAULT_RADIUS if radius is None else radius
         if cleaning is not None or self_filter is not None:
             pts = clean_points(pts, float(radius), cleaning, self_filter)
-        cloud = PointCloud(pts, radius, DEFAULT_RESOLUTION if resolution is None else resolution)
+        resolution = DEFAULT_RESOLUTION if resolution is None else resolution
+        if shadow:
+            if frame is None:
+                raise PointCloudError("shadow= needs the camera's pose (frame=): the rays run from it")
+            pts = shadows(pts, points_in_base(np.zeros((1, 3)), frame)[0], float(shadow), float(resolution))
+        cloud = PointCloud(pts, radius, resolution)
         if primitives is None:
             base = cls(floor=floor)
         elif isinstance(primitives, Scene):

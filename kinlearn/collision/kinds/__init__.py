@@ -23,9 +23,10 @@ import math
 import numpy as np
 
 from ...body.jit import jit
-from . import box, capsule, cylinder, sphere
+from . import box, capsule, cloud, cylinder, sphere
 from .box import Box
 from .capsule import Capsule
+from .cloud import Cloud
 from .cylinder import Cylinder
 from .plane import Plane
 from .primitive import IDENTITY, NET_WIDTH, Primitive, check_rotations, safe_sqrt
@@ -60,7 +61,7 @@ KINDS: dict[str, type[Primitive]] = {k.kind: k for k in (*SCENE_KINDS, Plane)}
 #: What the compiled kernels pack of a scene, in order: every kind's :meth:`Primitive.kernel_rows`
 #: (a table kind's rows; an obstacle a scene holds otherwise gives its own). The compiled functions
 #: below list the same kinds in the same order, one line each.
-PACKED_KINDS: tuple[type, ...] = SCENE_KINDS
+PACKED_KINDS: tuple[type, ...] = (*SCENE_KINDS, Cloud)
 
 _S = len(PACKED_KINDS)
 #: The packed buffer's header: each kind's packed rows and columns, has floor, height.
@@ -80,7 +81,8 @@ def _table(buf, k):
 @jit
 def unpack(buf):
     """A packed scene → (its tables, one per packed kind, views of ``buf``; ``floor = [has floor, height]``)."""
-    return (_table(buf, 0), _table(buf, 1), _table(buf, 2), _table(buf, 3)), buf[2 * _S : HEADER]
+    tables = (_table(buf, 0), _table(buf, 1), _table(buf, 2), _table(buf, 3), _table(buf, 4))
+    return tables, buf[2 * _S : HEADER]
 
 
 def packed_shapes(rows: tuple[np.ndarray, ...]) -> np.ndarray:
@@ -106,6 +108,7 @@ def pack(rows, shapes, has_floor, height):
     box.pack(rows[1], tables[1])
     cylinder.pack(rows[2], tables[2])
     capsule.pack(rows[3], tables[3])
+    cloud.pack(rows[4], tables[4])
     return buf
 
 
@@ -119,6 +122,7 @@ def sphere_scene(x, y, z, r, on_floor, tables, floor):
     d = box.nearest(x, y, z, tables[1], d)
     d = cylinder.nearest(x, y, z, tables[2], d)
     d = capsule.nearest(x, y, z, tables[3], d)
+    d = cloud.nearest(x, y, z, tables[4], d)
     d = d - r
     if floor[0] > 0.5 and on_floor:
         d = min(d, z - r - floor[1])
@@ -139,6 +143,7 @@ def spheres_scene(c, radii, on_floor, tables, floor, xyz, out):
     box.nearest_many(X, Y, Z, M, tables[1], out)
     cylinder.nearest_many(X, Y, Z, M, tables[2], out)
     capsule.nearest_many(X, Y, Z, M, tables[3], out)
+    cloud.nearest_many(X, Y, Z, M, tables[4], out)
     for m in range(M):
         out[m] = out[m] - radii[m]
     if floor[0] > 0.5:
@@ -158,6 +163,7 @@ def network_rows(tables, reach):
         box.network_count(tables[1]),
         cylinder.network_count(tables[2]),
         capsule.network_count(tables[3]),
+        cloud.network_count(tables[4]),
     )
     n = 0
     for k in range(_S):
@@ -180,6 +186,10 @@ def network_rows(tables, reach):
     for i in range(counts[3]):
         capsule.network_row(tables[3], i, out, r)
         bound[r] = capsule.radius(tables[3], i)
+        r += 1
+    for i in range(counts[4]):
+        cloud.network_row(tables[4], i, out, r)
+        bound[r] = cloud.radius(tables[4], i)
         r += 1
     if reach == np.inf:
         return out
