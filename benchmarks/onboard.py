@@ -46,6 +46,7 @@ from kinlearn.collision.spherize import (
     spherize,
 )
 from kinlearn.data.problems import FAMILIES, ProblemConfig, ProblemSet, make_problems
+from kinlearn.errors import PlanningError
 from kinlearn.planning.planner import Planner
 from kinlearn.training.obstacle_path import expert_paths
 
@@ -148,19 +149,26 @@ def fitted_body_of(robot) -> BodySpheres:
 
 
 def heldout(robot, per_family: int, out: Path) -> Path:
-    """Held-out problems of the seven families for ``robot`` (unverified), saved once under ``out``."""
+    """Held-out problems of the seven families for ``robot`` (unverified), saved once under ``out``; a family
+    none of whose problems can be made (no valid start and goal in 400 scenes) is left out and named in
+    ``<file>.missing.txt``."""
     path = out / f"heldout_{robot.name}_{per_family}.npz"
     if not path.is_file():
-        sets = [
-            make_problems(
-                f,
-                per_family,
-                HELDOUT_SEEDS[f],
-                robot=robot,
-                config=ProblemConfig(verify=False, max_attempts=400),
-            )
-            for f in SCENE_FAMILIES
-        ]
+        sets, missing = [], []
+        for f in SCENE_FAMILIES:
+            try:
+                sets.append(
+                    make_problems(
+                        f,
+                        per_family,
+                        HELDOUT_SEEDS[f],
+                        robot=robot,
+                        config=ProblemConfig(verify=False, max_attempts=400),
+                    )
+                )
+            except PlanningError:
+                missing.append(f)
+        path.with_suffix(".missing.txt").write_text(" ".join(missing) + "\n")
         ProblemSet.concat(sets).save(path)
     return path
 
@@ -243,6 +251,8 @@ def main() -> None:
         keep = found.numpy().astype(bool)
         f = plan_figures(planner, mesh, pset, keep)
         f["generated"] = len(pset)
+        missing = path.with_suffix(".missing.txt")
+        f["families_not_generated"] = missing.read_text().split() if missing.is_file() else []
         if (
             run_dir is not None and (run_dir / "steps.json").is_file()
         ):  # how long onboarding it took, per step
