@@ -194,7 +194,7 @@ def write_result(
           "commit": "0123456789ab",          # git HEAD when measured ("unknown" outside git)
           "dirty": false,                    # kinlearn/ or benchmarks/ had uncommitted changes
           "date": "2026-12-07",              # UTC
-          "machine": {"cpu": "...", "cores": 2, "threads": 1},
+          "machine": {"cpu": "...", "cores": 2, "threads": 1, "load": 3.2},  # load: 1-min average
           "versions": {"python": "3.12.3", "kinlearn": "0.1.0", "torch": "...", "numpy": "...", ...},
           "figures": {
             "forward kinematics": {"columns": ["batch", "ms"], "rows": [[1, 0.21], [1024, 1.9]]},
@@ -215,7 +215,12 @@ def write_result(
         "command": command or _command_line(),
         **_commit(),
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d"),
-        "machine": {"cpu": cpu_name(), "cores": os.cpu_count() or 1, "threads": int(threads)},
+        "machine": {
+            "cpu": cpu_name(),
+            "cores": os.cpu_count() or 1,
+            "threads": int(threads),
+            "load": round(os.getloadavg()[0], 1),  # 1-minute load average as the figures were written
+        },
         "versions": versions(),
         "figures": _plain(dict(figures), "figures"),
     }

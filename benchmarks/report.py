@@ -106,7 +106,9 @@ def _section(r: dict) -> str:
         "```",
         "",
         f"Measured {r['date']} at commit {commit} on {m['cpu']} ({m['cores']} cores, {m['threads']} "
-        f"thread{'s' if m['threads'] != 1 else ''}); {versions}.",
+        f"thread{'s' if m['threads'] != 1 else ''}"
+        + (f", load average {m['load']:g}" if m.get("load") is not None else "")
+        + f"); {versions}.",
         "",
     ]
     if r.get("notes"):
