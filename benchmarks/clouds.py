@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import json
 import time
 import warnings
 
@@ -290,13 +291,13 @@ def main() -> None:
                "p50 ms (solved)", "p50 / primitives (solved both)", "points"]  # fmt: skip
     print()
     print(markdown_table(columns, rows))
+    print("per row (stages that made the plans):", json.dumps(summary, indent=1))
     caption = (
         f"The first {args.per_family} held-out problems of each of the seven families per arm, default plan(), "
         f"points as balls of {args.radius} m through a grid of {args.resolution} m; judged on the true primitives. "
         "Depth camera: unknown (occluded) space is free to the planner."
     )
     figures["planning among clouds"] = table(columns, rows, caption=caption)
-    figures["summary"] = summary
     if args.build_sizes:
         print("\ngrid build times (one thread):")
         brows = build_times(args.build_sizes, args.radius, args.resolution)
