@@ -30,16 +30,16 @@ anywhere but below its last link (a second arm, a head: not a serial chain to th
 from __future__ import annotations
 
 import dataclasses
-import math
 import re
 import time
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..body.robot import BUILTIN_ROBOTS, Robot, load_robot, register_robot
 from ..collision.spherize import SpherizeConfig
-from ..errors import ConfigError, RobotDescriptionError
+from ..errors import ConfigError, KinlearnWarning, PlanningError, RobotDescriptionError
 from ..io import read_json, write_json
 from ..runs import open_run
 
@@ -429,22 +429,41 @@ def _run_steps(robot: Robot, run_dir: Path, config: OnboardConfig, step, progres
 
     step("planner", do_planner)
     families = select_families(list(config.families))
-    problem_paths: list[Path] = []
 
     def do_problems(_r: bool) -> None:
-        bar = _bar(progress, "problem sets")
-        total = len(families) * math.ceil(config.problems_per_family / 250)
-        make_training_problems(
-            run_dir / "problems", config.problems_per_family, robot=robot, families=families,
-            max_attempts=config.max_attempts, progress=(lambda k: bar(k, total)) if bar else None,
-        )  # fmt: skip
+        bar = _bar(progress, "problem families")
+        made, failed = [], []
+        for k, fam in enumerate(families):
+            try:
+                make_training_problems(
+                    run_dir / "problems", config.problems_per_family, robot=robot, families=(fam,),
+                    max_attempts=config.max_attempts,
+                )  # fmt: skip
+                made.append(fam)
+            except PlanningError as exc:  # no free start and goal for this arm in the family's scenes
+                failed.append(fam)
+                warnings.warn(
+                    f"onboard {name}: no {fam} training problems ({exc}); the obstacle network trains without "
+                    "that family",
+                    KinlearnWarning,
+                    stacklevel=2,
+                )
+            if bar:
+                bar(k + 1, len(families))
+        if not made:
+            raise ConfigError(
+                f"onboard {name}: no training problem of any scene family could be made for this arm (its body "
+                "fills the scenes' cells): check the fitted spheres in robot/, or raise max_attempts"
+            )
+        write_json(run_dir / "problems" / "families.json", {"made": made, "not_made": failed})
 
     step("problems", do_problems)
+    made = tuple(read_json(run_dir / "problems" / "families.json")["made"])
     problem_paths = make_training_problems(
         run_dir / "problems",
         config.problems_per_family,
         robot=robot,
-        families=families,
+        families=made,
         max_attempts=config.max_attempts,
     )  # made already: the same files, checked
 
