@@ -173,3 +173,15 @@ class BeyondLimitsWarning(KinlearnWarning):
 
 class DomainWarning(KinlearnWarning):
     """A start or goal outside the domain the planner was trained on: its plan may be poor."""
+
+
+class UnidentifiableError(DatasetError):
+    """Observations that cannot identify a chain: a joint that never moves (named), fewer distinct samples
+    than the chain's parameters need (duplicate rows count once), or a sample budget that leaves too few.
+    Record motion of every joint, or give more distinct samples."""
+
+
+class PoorExcitationWarning(KinlearnWarning):
+    """An identification whose data determine some of the chain's parameters poorly or not at all (the
+    parameter Jacobian loses rank along them): the joints named moved too little or only together, so the
+    chain is right where the data were taken and may be far off elsewhere. Record wider motion of them."""
