@@ -284,9 +284,12 @@ def test_shipped_planner_plans_around_an_obstacle_and_refines(robot, tmp_path):
     assert plain.collision_free.float().mean() >= 0.5  # the straight line collides on every one
     refined = kinlearn.plan(sub.start, sub.goal, obstacles=sub.scene, refine_steps=10)
     assert (refined.collision_free | ~plain.collision_free).all()
-    # Refinement plans on the proposals' halved segments (the same paths): the free ones are kept.
+    # Refinement plans on the proposals' halved segments (the same paths): the free ones are kept, and
+    # the shortcut stage shortens them alike (it works on a path's corners, however finely split).
     assert refined.joints.shape == (12, 23, 7)
-    assert torch.equal(refined.joints[plain.collision_free, ::2], plain.joints[plain.collision_free])
+    for i in torch.nonzero(plain.collision_free).reshape(-1).tolist():
+        assert _polyline_gap(refined.joints[i], plain.joints[i]) < 1e-9
+        assert _polyline_gap(plain.joints[i], refined.joints[i]) < 1e-9
     check = check_path(Planner.default("iiwa14").body, refined.joints.double(), sub.scene)
     assert torch.equal(refined.collision_free, check.collision_free)
     with pytest.raises(ConfigError):
@@ -606,3 +609,14 @@ def test_a_plan_whose_end_collides_says_why():
         warnings.simplefilter("error", CollidingEndWarning)
         far = Scene.from_spheres([[2.0, 2.0, 2.0, 0.1]])
         assert bool(planner.plan(start, goal, obstacles=far, refine_steps=0).collision_free)
+
+
+def _polyline_gap(points: torch.Tensor, polyline: torch.Tensor) -> float:
+    """The largest distance (rad) from a knot of ``points`` to the polyline ``polyline``."""
+    a, b = polyline[:-1].double().numpy(), polyline[1:].double().numpy()
+    d = b - a
+    worst = 0.0
+    for p in points.double().numpy():
+        t = np.clip(((p - a) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0.0, 1.0)
+        worst = max(worst, float(np.linalg.norm(a + t[:, None] * d - p, axis=-1).min()))
+    return worst

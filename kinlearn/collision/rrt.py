@@ -320,13 +320,15 @@ def rrt_connect(
     seed: int = 0,
     rounds: int | None = None,
     shortcut: bool = True,
+    shortcut_attempts: int = DEFAULT_ATTEMPTS,
     clock=None,
     max_iterations: int | None = None,
     **options,
 ) -> tuple[np.ndarray | None, float, int]:
     """Solve one query with :class:`RrtConnect` for at most ``time_limit`` seconds (checked between
     rounds; ``math.inf`` for no limit) and at most ``max_iterations`` iterations (default: no limit),
-    shortening the path found by the shortcut pass (:mod:`kinlearn.collision.shortcut`). ``rounds``:
+    shortening the path found by the shortcut pass (:mod:`kinlearn.collision.shortcut`, with
+    ``shortcut_attempts`` partial shortcuts after its vertex skipping). ``rounds``:
     iterations per round; by default they are sized to take at most :data:`ROUND_SECONDS` and a quarter
     of the time left. The rounds change when the search stops, never the path it finds.
 
@@ -364,7 +366,7 @@ def rrt_connect(
             room = min(ROUND_SECONDS, 0.25 * (time_limit - (now - t0)))
             size = max(1, min(2 * size, int(room / per) if per > 0 else 2 * size))
     if path is not None and shortcut:  # the shortcut pass, a fixed budget
-        path = rrt.shortcut(path)
+        path = rrt.shortcut(path, shortcut_attempts)
     return path, clock() - t0, rrt.iterations
 
 

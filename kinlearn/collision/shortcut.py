@@ -13,13 +13,15 @@ configurations, self-collision and the floor included). Two phases:
    is free a full walk, so trying the far vertices first spends the walks on the segments kept.
 2. **Partial shortcuts** (Geraerts and Overmars, "Creating high-quality paths for motion planning",
    IJRR 2007): two points drawn along the path's length, on different segments, are joined where the
-   straight segment between them is free and shorter. Corners that no two vertices see past are cut.
+   straight segment between them is free and shorter (and the pieces of the two segments left before
+   and after it, checked as segments of their own). Corners that no two vertices see past are cut.
    The points come from a counter-based generator seeded by ``seed``: the same path, seed and budget
    give the same result on every machine.
 
 The joint-space length (the sum of the segments' Euclidean norms) never grows: a change is kept only
 where it shortens the path. The result starts at the path's first configuration and ends at its last,
-exactly.
+exactly. The pass works on the path's corners (vertices on the straight segment between their
+neighbours are dropped first), so a polyline gives the same result however finely it is split.
 """
 
 from __future__ import annotations
@@ -42,6 +44,9 @@ _jit = jit(error_model="numpy")  # stamped with the kernels it calls (kinlearn.b
 DEFAULT_ATTEMPTS = 8
 #: A change must shorten the path by more than this (rad) to be kept: rounding never loops.
 _GAIN = 1e-9
+#: A vertex within this share of its neighbours' distance (plus 1 rad) of the straight segment between
+#: them, in excess length, is no corner (:func:`_corners`).
+_COLLINEAR = 1e-12
 
 
 @_jit
@@ -72,16 +77,44 @@ def _norm(a, b) -> float:
 
 
 @_jit
-def _skip(cur, m, out, seg, max_travel, margin, f, n, s) -> int:
-    """Phase 1 on ``cur[:m]``: the vertices kept, written to ``out``; returns their count."""
+def _corners(path, out, merged) -> int:
+    """The vertices of ``path`` that are corners, written to ``out``; returns their count: a vertex that
+    lies on the straight segment between the vertices kept before it and after it (to rounding) is
+    dropped, so a path and the same polyline split more finely give the same corners. ``merged[j]``: the
+    segment from corner j to corner j + 1 spans dropped vertices (as one segment it was never checked)."""
+    V = path.shape[0]
+    out[0] = path[0]
+    m = 1
+    merged[0] = False
+    for k in range(1, V - 1):
+        a, b, c = out[m - 1], path[k], path[k + 1]
+        if _norm(a, b) + _norm(b, c) - _norm(a, c) <= _COLLINEAR * (_norm(a, c) + 1.0):
+            merged[m - 1] = True
+            continue
+        out[m] = b
+        merged[m] = False
+        m += 1
+    out[m] = path[V - 1]
+    return m + 1
+
+
+@_jit
+def _skip(cur, m, merged, out, seg, max_travel, margin, f, n, s) -> int:
+    """Phase 1 on ``cur[:m]``: the vertices kept, written to ``out``; returns their count, or −1 where a
+    segment joining merged pieces (``merged``) is not free as one segment (the dense check's grid on it
+    differs from its pieces': the pass then leaves the path alone)."""
     out[0] = cur[0]
     count, i = 1, 0
     while i < m - 1:
-        nxt = i + 1
+        nxt = -1
         for k in range(m - 1, i + 1, -1):
             if _seg_free(cur[i], cur[k], seg, max_travel, margin, f, n, s):
                 nxt = k
                 break
+        if nxt < 0:
+            if merged[i] and not _seg_free(cur[i], cur[i + 1], seg, max_travel, margin, f, n, s):
+                return -1
+            nxt = i + 1
         out[count] = cur[nxt]
         count += 1
         i = nxt
@@ -96,7 +129,12 @@ def _shorten(path, cap, attempts, seed, max_travel, margin, f, n, s, out) -> int
     seg = np.empty((2, dof))
     cur = np.empty((cap, dof))
     nxt = np.empty((cap, dof))
-    m = _skip(path, V, cur, seg, max_travel, margin, f, n, s)
+    corners, merged = np.empty((V, dof)), np.empty(V, dtype=np.bool_)
+    m = _skip(corners, _corners(path, corners, merged), merged, cur, seg, max_travel, margin, f, n, s)
+    if m < 0:
+        for k in range(V):
+            out[k] = path[k]
+        return V
     counter = np.array([seed * 0x100000001 + 7], dtype=np.int64)
     cum = np.empty(cap)
     a, b = np.empty(dof), np.empty(dof)
@@ -128,7 +166,13 @@ def _shorten(path, cap, attempts, seed, max_travel, margin, f, n, s, out) -> int
         gain = (cum[i2 + 1] - cum[i1]) - (_norm(cur[i1], a) + _norm(a, b) + _norm(b, cur[i2 + 1]))
         if not gain > _GAIN:
             continue
-        if not _seg_free(a, b, seg, max_travel, margin, f, n, s):
+        # the new segment, and the pieces of the two segments it starts and ends on (a piece's grid is
+        # not its segment's)
+        if not (
+            _seg_free(a, b, seg, max_travel, margin, f, n, s)
+            and _seg_free(cur[i1], a, seg, max_travel, margin, f, n, s)
+            and _seg_free(b, cur[i2 + 1], seg, max_travel, margin, f, n, s)
+        ):
             continue
         c = 0
         for k in range(i1 + 1):

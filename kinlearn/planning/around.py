@@ -303,11 +303,15 @@ class ObstacleStages:
         """The shortcut stage (:func:`~kinlearn.collision.shortcut.shorten`: vertex skipping, then
         :data:`~kinlearn.collision.shortcut.DEFAULT_ATTEMPTS` partial shortcuts, deterministic) on a cleared
         path ``(K, dof)``, kept at ``K`` knots by repeating its last one (the goal): every segment of the
-        result is one the pass checked, or none (a repeated knot), so its verdict is the pass's."""
+        result is one the pass checked, or none (a repeated knot), so its verdict is the pass's. A path
+        the pass does not shorten is handed back as it was."""
         from ..collision.shortcut import shorten
 
         K = path.shape[0]
         short = shorten(self._np_body, nscene, path, cap=K, max_travel=CHECK_TRAVEL)
+        before, after = (float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) for p in (path, short))
+        if after >= before * (1.0 - 1e-9):  # nothing shortened (a straight line stays at its knots)
+            return path
         if short.shape[0] < K:
             short = np.concatenate((short, np.repeat(short[-1:], K - short.shape[0], axis=0)))
         return short

@@ -65,7 +65,9 @@ def planner_paths(
     }
     if load_target_paths(problems, robot.name, "planner", knots, want) is not None:
         return target_paths_file(problems, "planner", knots)
-    planner = Planner.load(folder, robot=robot, body=body)
+    # The stages' own paths, not shortened: the network proposes smooth bends, and learns those better
+    # than the corners a shortcut leaves.
+    planner = Planner.load(folder, robot=robot, body=body, shortcut=False)
     options = {"refine_steps": 0} if stages == "fixed" else {}
     paths = np.zeros((len(pset), knots + 1, robot.dof))
     found = np.zeros(len(pset), dtype=bool)

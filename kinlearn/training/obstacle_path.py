@@ -233,8 +233,10 @@ EXPERT_ITERATIONS = 20000
 def expert_paths(
     problems: str | Path, robot: Robot, knots: int, progress=None
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """The compiled RRT-Connect's path of every problem of the set in ``problems`` (``.npz``), shortcut
-    and resampled to ``knots + 1`` points by arc length: ``(paths (N, knots + 1, dof) float64, found (N,)
+    """The compiled RRT-Connect's path of every problem of the set in ``problems`` (``.npz``), its vertices
+    skipped where a straight segment is free (no partial shortcuts: a target hugging the obstacles'
+    corners pulls against the clearance the loss asks for) and resampled to ``knots + 1`` points by arc
+    length: ``(paths (N, knots + 1, dof) float64, found (N,)
     bool)``. Each problem gets :data:`EXPERT_ITERATIONS` iterations with its index as the seed (no time
     limit: the same paths everywhere), searching the problem's joint box as the planner does
     (:meth:`~kinlearn.collision.BodySpheres.joint_box`). Made once and cached beside the set (the
@@ -265,6 +267,7 @@ def expert_paths(
         path, _, _ = rrt_connect(
             body, kernel.KernelScene.of(scene.to(torch.float64)), start.double().numpy(), goal.double().numpy(),
             lo[i], hi[i], time_limit=math.inf, seed=i, max_iterations=EXPERT_ITERATIONS,
+            shortcut_attempts=0,
         )  # fmt: skip
         if path is not None:
             paths[i], found[i] = resample(path, knots + 1), True
