@@ -88,10 +88,10 @@ def _local_to_world(prim, local: np.ndarray) -> np.ndarray:
 
 
 def test_dispatch_table_holds_every_kind():
-    assert set(KINDS) == {"sphere", "box", "cylinder", "plane"}
+    assert set(KINDS) == {"sphere", "box", "cylinder", "capsule", "plane"}
     for name, kind in KINDS.items():
         assert kind.kind == name and len(kind.pad) == kind.width
-    assert {k.table for k in SCENE_KINDS} == {"spheres", "boxes", "cylinders"}
+    assert {k.table for k in SCENE_KINDS} == {"spheres", "boxes", "cylinders", "capsules"}
 
 
 def test_sphere_sphere_and_plane_match_coal():
