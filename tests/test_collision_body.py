@@ -3,6 +3,7 @@ cover, the self-collision pairs and the travel bound used by the dense path chec
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -95,8 +96,11 @@ def test_bad_joints_and_unknown_robot(robot):
         body(torch.zeros(6))
     with pytest.raises(NonFiniteError):
         body(torch.full((7,), math.nan))
+    myarm = (
+        Path(__file__).resolve().parents[1] / "examples" / "data" / "myarm.urdf"
+    )  # a URDF alone, no spheres
     with pytest.raises(RobotDescriptionError, match="no collision sphere model"):
-        body_spheres(load_robot("xarm7"))
+        body_spheres(load_robot(myarm, "tool0"))
 
 
 def test_base_cover_contains_the_cylinder(robot):
