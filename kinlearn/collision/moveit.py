@@ -597,9 +597,13 @@ def primitives_to_moveit(
         elif isinstance(p, Cylinder):
             T[:3, :3], T[:3, 3] = np.reshape(p.rotation, (3, 3)), p.centre
             prim = {"type": CYLINDER, "dimensions": [2 * p.half_length, p.radius]}
-        else:  # the floor: a slab under its height
+        elif isinstance(p, Plane):  # the floor: a slab under its height
             T[:3, 3] = (0.0, 0.0, p.offset - FLOOR_SLAB[2] / 2)
             prim = {"type": BOX, "dimensions": list(FLOOR_SLAB)}
+        else:
+            raise SceneFormatError(
+                f"a MoveIt scene holds spheres, boxes, cylinders and cones, no {p.kind}: {p!r} cannot be written"
+            )
         kind = "floor" if isinstance(p, Plane) else p.kind
         objects.append(
             {
