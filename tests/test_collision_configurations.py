@@ -21,7 +21,9 @@ def scene(rng: np.random.Generator) -> Scene:
     R = R * np.sign(np.linalg.det(R))
     boxes = [[*rng.uniform((0.3, -0.4, 0.1), (0.7, 0.4, 0.8)), 0.1, 0.05, 0.2, *R.ravel()]]
     cylinders = [[*rng.uniform((0.3, -0.4, 0.1), (0.7, 0.4, 0.8)), 0.05, 0.15, *R.T.ravel()]]
-    spheres = np.concatenate([rng.uniform((0.2, -0.5, 0.1), (0.8, 0.5, 0.9), (3, 3)), np.full((3, 1), 0.08)], 1)
+    spheres = np.concatenate(
+        [rng.uniform((0.2, -0.5, 0.1), (0.8, 0.5, 0.9), (3, 3)), np.full((3, 1), 0.08)], 1
+    )
     return Scene(spheres=spheres, boxes=boxes, cylinders=cylinders, floor=0.0)
 
 
