@@ -167,7 +167,12 @@ def test_self_collision_pairs(robot, dense):
 
 def test_floor_mask_and_data_file_name(robot):
     body = body_spheres(robot)
-    assert torch.equal(body.floor_mask, body.link > 0)
+    # the floor spares what no joint raises or lowers: the base, and link 1, which turns about a vertical axis
+    assert torch.equal(body.floor_mask, body.link > 1)
+    z = body(robot.sample(50, torch.Generator().manual_seed(2), dtype=torch.float64))[..., 2]
+    fixed = body.link <= 1
+    assert torch.allclose(z[:, fixed], z[:1, fixed].expand(50, -1), atol=1e-6)
+    assert (z[:, body.link == 2].std(0) > 1e-3).all()
     raw = json.loads((robot.urdf_path.parent / SPHERE_FILE).read_text())
     assert raw["robot"] == "iiwa14"
 

@@ -3,8 +3,8 @@
 The planners check with spheres (:class:`~kinlearn.collision.BodySpheres`); this module asks the
 question again of the geometry the URDF itself gives, with coal (which ships with pinocchio): each
 link's ``<collision>`` meshes and primitives, as pinocchio places them, against the scene's
-primitives as coal shapes (the floor a half-space, which the base is exempt from, as in the sphere
-body) and against each other (link pairs two or more apart, less the pairs the robot's sphere model
+primitives as coal shapes (the floor a half-space, which the base and what no joint raises or lowers
+are exempt from, as in the sphere body) and against each other (link pairs two or more apart, less the pairs the robot's sphere model
 leaves out: an SRDF's, or pairs touching in every configuration). It is slower and does not look
 between the configurations it is given: :func:`mesh_check` walks each path segment in steps of at
 most ``max_step`` rad per joint.
@@ -115,6 +115,9 @@ class MeshBody:
                 for o in self.geom.geometryObjects
             ]
         )
+        from .body import floor_applies
+
+        self.on_floor = floor_applies(robot, np.maximum(self.link, 0))  # as the sphere body: not the mount
         # kinlearn's joint vector → pinocchio's configuration
         q0 = pin.neutral(self.model)
         lo, hi = self.model.lowerPositionLimit, self.model.upperPositionLimit
@@ -208,7 +211,7 @@ class MeshBody:
                 if self.link[k] < 0:
                     continue
                 tf = coal.Transform3s(M.rotation, M.translation)
-                if floor is not None and self.link[k] > 0 and c[2] - self.bound[k][1] < floor:
+                if floor is not None and self.on_floor[k] and c[2] - self.bound[k][1] < floor:
                     hs = coal.Halfspace(np.array([0.0, 0.0, 1.0]), floor)
                     self._res.clear()
                     if coal.collide(o.geometry, tf, hs, coal.Transform3s(), self._req, self._res):
