@@ -65,7 +65,15 @@ def _excluded_pairs(robot: Robot) -> set[tuple[int, int]]:
     if path is None:
         return set()
     rule = json.loads(path.read_text()).get("self_collision", {})
-    return {tuple(sorted(int(v) for v in p)) for p in rule.get("excluded_link_pairs", [])}
+    pairs = rule.get("excluded_link_pairs", [])
+    why = rule.get("excluded_because", ["given"] * len(pairs))
+    # pairs left out because the meshes never met in sampled configurations stay checked here: this is the
+    # check that says whether they ever do
+    return {
+        tuple(sorted(int(v) for v in p))
+        for p, w in zip(pairs, why, strict=False)
+        if not w.startswith("never")
+    }
 
 
 class MeshBody:
@@ -96,7 +104,10 @@ class MeshBody:
         self.model = pin.buildModelFromUrdf(str(path))
         try:
             self.geom = pin.buildGeomFromUrdf(
-                self.model, str(path), pin.GeometryType.COLLISION, package_dirs=_package_dirs(package_dirs)
+                self.model,
+                str(path),
+                pin.GeometryType.COLLISION,
+                package_dirs=_package_dirs((*package_dirs, path.parent)),
             )
         except (RuntimeError, ValueError) as exc:
             raise RobotDescriptionError(
@@ -153,6 +164,36 @@ class MeshBody:
             c = 0.5 * (np.asarray(g.aabb_local.min_) + np.asarray(g.aabb_local.max_))
             r = 0.5 * float(np.linalg.norm(np.asarray(g.aabb_local.max_) - np.asarray(g.aabb_local.min_)))
             self.bound.append((c, r))
+
+    def touching_link_pairs(self, q) -> np.ndarray:
+        """``(N, P)`` bool over :attr:`self_pairs`' chain-link pairs (``self.pair_links``): which touch in each
+        configuration ``q (N, dof)``, by the meshes."""
+        pin, coal = _modules()
+        q = np.asarray(q, dtype=np.float64).reshape(-1, self.robot.dof)
+        links = sorted({(int(self.link[a]), int(self.link[b])) for a, b in self.self_pairs})
+        self.pair_links = links
+        col = {lk: i for i, lk in enumerate(links)}
+        out = np.zeros((len(q), len(links)), dtype=bool)
+        objs = self.geom.geometryObjects
+        for n, qn in enumerate(q):
+            pin.updateGeometryPlacements(self.model, self.data, self.geom, self.gdata, self.configuration(qn))
+            places = self.gdata.oMg
+            for a, b in self.self_pairs:
+                k = col[(int(self.link[a]), int(self.link[b]))]
+                if out[n, k]:
+                    continue
+                Ma, Mb = places[a], places[b]
+                ca = Ma.rotation @ self.bound[a][0] + Ma.translation
+                cb = Mb.rotation @ self.bound[b][0] + Mb.translation
+                if np.linalg.norm(ca - cb) > self.bound[a][1] + self.bound[b][1]:
+                    continue
+                self._res.clear()
+                out[n, k] = coal.collide(
+                    objs[a].geometry, coal.Transform3s(Ma.rotation, Ma.translation),
+                    objs[b].geometry, coal.Transform3s(Mb.rotation, Mb.translation),
+                    self._req, self._res,
+                )  # fmt: skip
+        return out
 
     def configuration(self, q: np.ndarray) -> np.ndarray:
         """Pinocchio's configuration for kinlearn's joints ``q (dof,)``."""

@@ -27,8 +27,10 @@ surface), so covering spheres are centred on the surface and half of each lies o
 centres inside the solid and a cost in excess volume choose spheres that sit within the link.
 
 Self-collision: sphere pairs on adjacent links are never checked (the body's rule), and link pairs
-to leave out are taken from an SRDF's ``disable_collisions`` when one is given and from the fitted
-spheres themselves (link pairs whose spheres touch in every sampled configuration).
+to leave out are taken from an SRDF's ``disable_collisions`` when one is given, from the fitted
+spheres themselves (link pairs whose spheres touch in every sampled configuration) and from the meshes
+(link pairs whose meshes touch in none, as an SRDF generator finds its "Never" pairs: fitted spheres
+are fatter than the meshes, and near a joint they may overlap where the meshes never do).
 
 :func:`write_spherized_urdf` writes the spheres in the format of the shipped spherized URDFs (one
 ``<collision><geometry><sphere>`` per sphere, in the frame of its chain link; the rest of the URDF
@@ -75,7 +77,9 @@ class SpherizeConfig:
     ``sphere_price``: the cost of one more sphere, as a share of the link's solid volume (higher: fewer,
     larger spheres); ``sweep``: positions a joint off the chain is swept over; ``tolerance`` (m): how far
     outside a sphere a checked point may lie and count as covered in :func:`coverage`'s report;
-    ``samples``: configurations the always-touching link pairs are found from.
+    ``samples``: configurations the always-touching link pairs are found from (by the spheres) and, with
+    ``never``, the link pairs whose collision meshes never touch (by coal: what an SRDF generator leaves
+    out as "Never"; the mesh check keeps checking them).
     """
 
     fit_points: int = 3000
@@ -87,6 +91,7 @@ class SpherizeConfig:
     sweep: int = 9
     tolerance: float = 0.002
     samples: int = 2000
+    never: bool = True
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -585,6 +590,15 @@ def spherize(
                 excluded[(min(ia, ib), max(ia, ib))] = "srdf"
     for pair in _always_touching(robot, spheres, config.samples, config.seed):
         excluded.setdefault(pair, "always touching")
+    if config.never:  # as an SRDF generator does: pairs whose meshes never met in the sampled configurations
+        from .mesh import MeshBody
+
+        mesh = MeshBody(robot, urdf, package_dirs, excluded_link_pairs=())
+        q = robot.sample(config.samples, torch.Generator().manual_seed(config.seed + 1), dtype=torch.float64)
+        met = mesh.touching_link_pairs(q.numpy()).any(0)
+        for pair, ever in zip(mesh.pair_links, met, strict=True):
+            if not ever:
+                excluded.setdefault(pair, f"never touching (meshes, {config.samples} configurations)")
     pairs = sorted(excluded)
     return SphereFit(
         robot.name,
