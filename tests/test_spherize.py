@@ -120,6 +120,9 @@ def test_srdf_pairs_are_left_out_of_self_collision(arm, tmp_path):
     fit = spherize(robot, srdf=srdf, config=FAST)
     assert (0, 3) in fit.excluded_link_pairs
     assert fit.why[fit.excluded_link_pairs.index((0, 3))] == "srdf"
+    # every other pair two apart meets somewhere in the joint range (link 2 swings down to the base, link 3
+    # folds back onto link 1): none is left out as never touching
+    assert fit.excluded_link_pairs == [(0, 3)]
     model = write_sphere_model(fit, robot, tmp_path)
     try:
         body = body_spheres(register_robot("toy_srdf", path, "tool", spheres=model))
@@ -175,3 +178,27 @@ def test_paths_resolve(arm):
 
     here = Path(__file__)
     assert resolve_mesh_path(here.name, here) == here
+
+
+def test_pairs_whose_meshes_never_meet_are_left_out_but_the_mesh_check_keeps_them(tmp_path):
+    from kinlearn.collision.mesh import MeshBody
+
+    narrow = tmp_path / "narrow.urdf"  # the shoulder and elbow barely move: links two apart never meet
+    narrow.write_text(
+        ARM.replace('lower="-1.8" upper="1.8"', 'lower="-0.3" upper="0.3"').replace(
+            'lower="-2.5" upper="2.5"', 'lower="-0.5" upper="0.5"'
+        )
+    )
+    robot = load_robot(narrow, "tool")
+    fit = spherize(robot, config=FAST)
+    assert (0, 2) in fit.excluded_link_pairs
+    assert fit.why[fit.excluded_link_pairs.index((0, 2))].startswith("never touching")
+    model = write_sphere_model(fit, robot, tmp_path)
+    try:
+        mine = register_robot("toy_narrow", narrow, "tool", spheres=model)
+        links = body_spheres(mine).link[body_spheres(mine).pairs].sort(dim=1).values.tolist()
+        assert [0, 2] not in links
+        mesh = MeshBody(mine)
+        assert (0, 2) in {tuple(sorted((int(mesh.link[a]), int(mesh.link[b])))) for a, b in mesh.self_pairs}
+    finally:
+        unregister_robot("toy_narrow")
