@@ -442,7 +442,17 @@ def _run_validate(args: argparse.Namespace) -> int:
 #: Modules holding further subcommands; each registers its commands with
 #: :func:`~kinlearn.cli.common.register_subcommand` (or has a ``register`` function added here). Imported
 #: when the full parser is built.
-SUBCOMMAND_MODULES = ("tm", "plan", "train_planners", "evaluate", "export", "body", "identify", "view", "onboard")
+SUBCOMMAND_MODULES = (
+    "tm",
+    "plan",
+    "train_planners",
+    "evaluate",
+    "export",
+    "body",
+    "identify",
+    "view",
+    "onboard",
+)
 
 #: Every command with its one-line help, in the parser's order: what ``kinlearn --help`` lists without
 #: importing the commands' modules (torch among them). ``tests/test_lazy_imports.py`` holds it to the

@@ -201,7 +201,9 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
     if args.points is None and (
         args.camera_pose is not None or args.point_radius is not None or args.self_filter or args.drop_nan
     ):
-        raise ConfigError("--camera-pose, --point-radius, --self-filter and --drop-nan describe --points: give it too")
+        raise ConfigError(
+            "--camera-pose, --point-radius, --self-filter and --drop-nan describe --points: give it too"
+        )
     if args.points is not None:
         from ..collision.scene import Scene
 
@@ -214,7 +216,9 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
             primitives=obstacles,
         )
     if args.deadline is not None and obstacles is None:
-        raise ConfigError("--deadline bounds planning around obstacles: give --obstacles, --scene or --points too")
+        raise ConfigError(
+            "--deadline bounds planning around obstacles: give --obstacles, --scene or --points too"
+        )
     if args.no_retreat and obstacles is None:
         raise ConfigError(
             "--no-retreat leaves out a stage of planning around obstacles: give --obstacles, --scene or --points too"

@@ -435,7 +435,9 @@ class Planner(ObstacleStages):
                     retreated = branches  # the later stages start from its free retreats
                 if refine_steps is not None and steps == 0 and deadline is None:  # no later stage runs
                     self._explain(q[:1], q[1:], _NOT_FREE, [packed], stacklevel=3)
-                    return self._batch1_plan(q, ef, paths[0, pick[0]], "none", dtype, packed, scene, free=False)
+                    return self._batch1_plan(
+                        q, ef, paths[0, pick[0]], "none", dtype, packed, scene, free=False
+                    )
         problem, dtype, device = self._problem(start, goal, goal_position, obstacles)
         return self._plan(
             problem, steps, refine_steps is None, strict, dtype, device, timer, stage1, retreated
@@ -875,7 +877,11 @@ def _robot(robot: str | Robot | None, name: str) -> Robot:
 def _shipped_folder(robot: str) -> Path:
     """The folder of the planner kinlearn ships for ``robot`` (a ConfigError for any other arm)."""
     path = DEFAULT_CHECKPOINTS / robot
-    own = getattr(load_robot(robot), "planner_dir", None) if robot in ROBOTS and robot not in BUILTIN_ROBOTS else None
+    own = (
+        getattr(load_robot(robot), "planner_dir", None)
+        if robot in ROBOTS and robot not in BUILTIN_ROBOTS
+        else None
+    )
     if own is not None:  # an onboarded arm (kinlearn.training.onboard.load_onboarded): its own planner folder
         return Path(own)
     # Only kinlearn's own arms ship planners: a registered arm never gets another arm's.
