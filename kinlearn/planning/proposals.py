@@ -14,9 +14,8 @@ refining — with each path's joint-space length and the order of the candidates
 A plan's stage 1 is one call, :meth:`CompiledObstacleModel.first_free`: the straight line checked
 first (:func:`~kinlearn.collision.kernel.first_free_boxed`), and only where it collides the network and
 its candidates' check, with no Python between them. The network's arithmetic is float32 as torch's (its
-products through BLAS, ``np.dot``), the knots float64. Where the same arithmetic ran as NumPy operations
-(before stop 41), the proposals for one problem took 323 / 384 µs on the panda's / iiwa14's held-out problems, compiled 124 / 167 µs (one
-process, by turns; most of what is left is reading the trunk's weights, about 1.4 MB).
+products through BLAS, ``np.dot``), the knots float64. Compiled, the proposals cost a fraction of the
+same arithmetic as NumPy operations; most of what is left is reading the trunk's weights (about 1.4 MB).
 
 numba is imported with this module, which the planner imports on its first plan among obstacles
 (:mod:`kinlearn.collision.kernel` is imported there too); ``cache=True`` keeps the machine code on disk.
