@@ -211,6 +211,7 @@ def main() -> None:
     ap.add_argument("--per-family", type=int, default=10)
     ap.add_argument("--points", type=int, default=20000)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--result", default="onboard_planning", help="the planning figures' result name")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     out = RUNS / "onboard"
@@ -322,7 +323,7 @@ def main() -> None:
         )
     if figures:
         write_result(
-            "onboard_planning",
+            args.result,
             figures,
             title="Planning with arms whose spheres were fitted, checked against their meshes",
             notes="Plans called successful checked again against the URDF's collision meshes (coal).",
