@@ -27,7 +27,7 @@ from ..body.robot import Robot, _example_robot_data_dir
 from ..errors import MissingDependencyError, RobotDescriptionError, ShapeError
 from .geometry import Box, Cylinder, Sphere
 
-__all__ = ["MeshBody", "judge_meshes", "mesh_check"]
+__all__ = ["MeshBody", "chain_link_of", "judge_meshes", "mesh_check"]
 
 
 def _modules():
@@ -76,6 +76,25 @@ def _excluded_pairs(robot: Robot) -> set[tuple[int, int]]:
     }
 
 
+def chain_link_of(robot: Robot, root: ET.Element, link: str) -> int | None:
+    """The chain link (0 = base) a URDF link is carried with, up through fixed joints and joints off the
+    chain (None: above the base)."""
+    joints_by_child = {el.find("child").get("link"): el for el in root.findall("joint")}
+    index = {j.name: k + 1 for k, j in enumerate(robot.joints)}
+    first = next(el for el in root.findall("joint") if el.get("name") == robot.joints[0].name)
+    base = first.find("parent").get("link")
+    cur = link
+    while True:
+        if cur == base:
+            return 0
+        el = joints_by_child.get(cur)
+        if el is None:
+            return None
+        if el.get("name") in index:
+            return index[el.get("name")]
+        cur = el.find("parent").get("link")  # fixed, or moving off the chain: its spheres go up the tree
+
+
 class MeshBody:
     """The robot's URDF collision geometry in coal, posed by pinocchio from kinlearn's joint vector.
 
@@ -95,8 +114,6 @@ class MeshBody:
         self_collision: bool = True,
     ):
         pin, coal = _modules()
-        from .spherize import _srdf_link_index
-
         path = Path(urdf) if urdf is not None else robot.urdf_path
         if path is None:
             raise RobotDescriptionError(f"{robot.name} has no URDF file to read collision meshes from")
@@ -120,9 +137,7 @@ class MeshBody:
         root = ET.fromstring(path.read_bytes())
         self.link = np.array(
             [
-                -1
-                if (k := _srdf_link_index(robot, root, self.model.frames[o.parentFrame].name)) is None
-                else k
+                -1 if (k := chain_link_of(robot, root, self.model.frames[o.parentFrame].name)) is None else k
                 for o in self.geom.geometryObjects
             ]
         )

@@ -52,6 +52,7 @@ import torch
 
 from ..body.robot import Robot, _example_robot_data_dir, _origin, validate_urdf
 from ..errors import ConfigError, MissingDependencyError, RobotDescriptionError
+from .mesh import MeshBody, chain_link_of
 
 __all__ = [
     "LinkGeometry",
@@ -519,24 +520,6 @@ def srdf_disabled_links(srdf: str | Path) -> list[tuple[str, str]]:
     return [(el.get("link1"), el.get("link2")) for el in root.iter("disable_collisions")]
 
 
-def _srdf_link_index(robot: Robot, root: ET.Element, link: str) -> int | None:
-    """The chain link a URDF link is folded onto through fixed joints (None: off the chain)."""
-    joints_by_child = {el.find("child").get("link"): el for el in root.findall("joint")}
-    index = {j.name: k + 1 for k, j in enumerate(robot.joints)}
-    first = next(el for el in root.findall("joint") if el.get("name") == robot.joints[0].name)
-    base = first.find("parent").get("link")
-    cur = link
-    while True:
-        if cur == base:
-            return 0
-        el = joints_by_child.get(cur)
-        if el is None:
-            return None
-        if el.get("name") in index:
-            return index[el.get("name")]
-        cur = el.find("parent").get("link")  # fixed, or moving off the chain: its spheres go up the tree
-
-
 def _always_touching(robot: Robot, spheres: np.ndarray, samples: int, seed: int) -> list[tuple[int, int]]:
     """Link pairs (two or more apart) whose spheres touch in every one of ``samples`` configurations."""
     from .body import BodySpheres
@@ -585,14 +568,12 @@ def spherize(
         path = Path(urdf) if urdf is not None else robot.urdf_path
         root = ET.fromstring(path.read_bytes() if path is not None else robot.urdf)
         for a, b in srdf_disabled_links(srdf):
-            ia, ib = _srdf_link_index(robot, root, a), _srdf_link_index(robot, root, b)
+            ia, ib = chain_link_of(robot, root, a), chain_link_of(robot, root, b)
             if ia is not None and ib is not None and abs(ia - ib) >= 2:
                 excluded[(min(ia, ib), max(ia, ib))] = "srdf"
     for pair in _always_touching(robot, spheres, config.samples, config.seed):
         excluded.setdefault(pair, "always touching")
     if config.never:  # as an SRDF generator does: pairs whose meshes never met in the sampled configurations
-        from .mesh import MeshBody
-
         mesh = MeshBody(robot, urdf, package_dirs, excluded_link_pairs=())
         q = robot.sample(config.samples, torch.Generator().manual_seed(config.seed + 1), dtype=torch.float64)
         met = mesh.touching_link_pairs(q.numpy()).any(0)
