@@ -325,7 +325,14 @@ def main() -> None:
         write_result(
             args.result,
             figures,
-            title="Planning with arms whose spheres were fitted, checked against their meshes",
+            title="Planning with fitted sphere bodies, checked against the meshes: "
+            + ", ".join(
+                [
+                    *args.plan,
+                    *(d.name for d in args.onboarded),
+                    *(f"{a} (shipped and fitted)" for a in args.compare),
+                ]
+            ),
             notes="Plans called successful checked again against the URDF's collision meshes (coal).",
             threads=args.threads,
         )
