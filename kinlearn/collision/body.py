@@ -186,16 +186,18 @@ def _axis_distances(robot: Robot, link: np.ndarray, local: np.ndarray) -> np.nda
     return out
 
 
-def floor_applies(robot: Robot, link: np.ndarray) -> np.ndarray:
-    """``(M,)`` bool: the spheres on links ``link`` that the floor applies to. Not the base's (the base
-    stands on the floor), nor link 1's where the first joint turns about a vertical axis: no joint changes
-    their height, so they are part of the mount as the base is (a fitted shoulder's spheres may reach a
-    few mm below the base plane; checked against the floor they would make every configuration collide)."""
+def floor_applies(robot: Robot, link: np.ndarray, local: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """``(M,)`` bool: which spheres (on links ``link``, centres ``local (M, 3)`` in their link's frame, radii
+    ``(M,)``) the floor applies to. Not the base's (the base stands on the floor), nor those of link 1 that
+    reach below the base plane (z = 0) where the first joint turns about a vertical axis: no joint changes
+    their height, so they would make every configuration collide; they rest on the mount as the base does
+    (a fitted shoulder's spheres may bulge a few mm below the plane the shoulder stands on)."""
     link = np.asarray(link)
     out = link > 0
     first = robot.joints[0]
     if first.kind == "revolute" and abs(abs(float((first.T_prev[:3, :3] @ first.axis)[2])) - 1.0) < 1e-9:
-        out &= link != 1
+        z = (np.asarray(local, dtype=np.float64) @ first.T_prev[:3, :3].T + first.T_prev[:3, 3])[:, 2]
+        out &= ~((link == 1) & (z - np.asarray(radii, dtype=np.float64) < 0.0))
     return out
 
 
@@ -205,7 +207,7 @@ class BodySpheres(nn.Module):
     Buffers (move with ``.to()``): ``local`` ``(M, 3)`` centres in their link's frame, ``radii``
     ``(M,)``, ``link`` ``(M,)`` (0 = base, k = the link joint k moves), ``pairs`` ``(P, 2)`` the sphere
     pairs checked for self-collision, ``floor_mask`` ``(M,)`` the spheres the floor applies to (all but
-    those no joint raises or lowers, :func:`floor_applies`: the base stands on it), ``lever`` ``(M, dof)`` metres a sphere can travel per radian of
+    those resting on the mount, :func:`floor_applies`: the base stands on it), ``lever`` ``(M, dof)`` metres a sphere can travel per radian of
     each joint at most. Differentiable in the joints; dtype and device of the output follow ``q``.
     ``limits``: the joint limits ``(lower, upper)`` of the model the spheres were read from, where it gives
     the joints a narrower range than the robot's own (default: the robot's); :attr:`limits` holds them
@@ -265,7 +267,9 @@ class BodySpheres(nn.Module):
         self.register_buffer("radii", torch.as_tensor(spheres[:, 4]))
         self.register_buffer("link", torch.as_tensor(link))
         self.register_buffer("pairs", torch.as_tensor(np.asarray(pairs, dtype=np.int64).reshape(-1, 2)))
-        self.register_buffer("floor_mask", torch.as_tensor(floor_applies(robot, link)))
+        self.register_buffer(
+            "floor_mask", torch.as_tensor(floor_applies(robot, link, spheres[:, 1:4], spheres[:, 4]))
+        )
         self.register_buffer("lever", torch.as_tensor(_lever_arms(robot, link, spheres[:, 1:4])))
         self._reach: float | None = None
         # Fast path: spheres sorted base first; a moving sphere's centre is folded by its joint's axis

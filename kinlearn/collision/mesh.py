@@ -143,7 +143,6 @@ class MeshBody:
         )
         from .body import floor_applies
 
-        self.on_floor = floor_applies(robot, np.maximum(self.link, 0))  # as the sphere body: not the mount
         # kinlearn's joint vector → pinocchio's configuration
         q0 = pin.neutral(self.model)
         lo, hi = self.model.lowerPositionLimit, self.model.upperPositionLimit
@@ -179,6 +178,18 @@ class MeshBody:
             c = 0.5 * (np.asarray(g.aabb_local.min_) + np.asarray(g.aabb_local.max_))
             r = 0.5 * float(np.linalg.norm(np.asarray(g.aabb_local.max_) - np.asarray(g.aabb_local.min_)))
             self.bound.append((c, r))
+        objs = self.geom.geometryObjects
+        self.on_floor = floor_applies(  # as the sphere body: not what rests on the mount
+            robot,
+            np.maximum(self.link, 0),
+            np.array(
+                [
+                    o.placement.rotation @ c + o.placement.translation
+                    for o, (c, _) in zip(objs, self.bound, strict=True)
+                ]
+            ),
+            np.array([r for _, r in self.bound]),
+        )
 
     def touching_link_pairs(self, q) -> np.ndarray:
         """``(N, P)`` bool over :attr:`self_pairs`' chain-link pairs (``self.pair_links``): which touch in each
