@@ -9,7 +9,7 @@ from test_user_robot import URDF
 
 import kinlearn
 from kinlearn.body.robot import register_robot, unregister_robot
-from kinlearn.errors import ConfigError, DTypeError, RobotDescriptionError
+from kinlearn.errors import ConfigError, DTypeError, RobotDescriptionError, UnknownRobotError
 
 ELBOW = '<limit lower="-2.2" upper="2.2" velocity="2.5" effort="10"/>'
 
@@ -121,14 +121,11 @@ def test_a_registered_arm_never_plans_with_another_arms_planner(tmp_path):
 
 
 def test_a_sphere_urdf_goes_through_the_same_validator(tmp_path):
-    from kinlearn.collision import body_spheres
-
     path, spheres = tmp_path / "arm.urdf", tmp_path / "arm_spheres.urdf"
     path.write_text(URDF)
     spheres.write_text(BROKEN["duplicate link"][0])
-    robot = register_robot("arm", path, "tool", spheres=spheres)
-    try:
-        with pytest.raises(RobotDescriptionError, match="the sphere URDF: two links are named 'l3'"):
-            body_spheres(robot)
-    finally:
-        unregister_robot("arm")
+    # refused where it is registered, by the same validator, naming the file
+    with pytest.raises(RobotDescriptionError, match=r"the sphere URDF .*: two links are named 'l3'"):
+        register_robot("arm", path, "tool", spheres=spheres)
+    with pytest.raises(UnknownRobotError):  # nothing half-registered
+        kinlearn.load_robot("arm")

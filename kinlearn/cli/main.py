@@ -501,7 +501,9 @@ COMMANDS = (
     ),
     (
         "export-urdf",
-        "Write an identified chain (a run of `kinlearn identify`, or its chain.pt) as a URDF whose forward kinematics equal the chain's; checked through Pinocchio before it is written.",
+        "Write an identified chain (a run of `kinlearn identify`, or its chain.pt) as a URDF whose forward "
+        "kinematics equal the chain's: written to a temporary file, checked through Pinocchio, then renamed "
+        "onto --out (never replaced without --overwrite).",
     ),
     (
         "view",

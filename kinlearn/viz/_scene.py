@@ -124,7 +124,13 @@ def plan_scene(
             )
         if any(t is not None for t in (spheres, boxes, cylinders)):
             raise ObstacleError("give the obstacles as scene= or as spheres=/boxes=/cylinders=, not both")
-        spheres, boxes, cylinders = (rows for _, rows, _ in scene.tables(live=True))
+        tables = {kind.kind: rows for kind, rows, _ in scene.tables(live=True)}
+        undrawn = [k for k, rows in tables.items() if k not in ("sphere", "box", "cylinder") and len(rows)]
+        if undrawn:
+            raise ObstacleError(
+                f"the views draw spheres, boxes and cylinders; this scene also holds {', '.join(undrawn)}"
+            )
+        spheres, boxes, cylinders = tables["sphere"], tables["box"], tables["cylinder"]
     if boxes is not None and np.shape(boxes)[-1:] == (6,):
         b6 = _array(boxes, 6, "boxes", "[centre x, y, z, half extents x, y, z] in metres", obstacle=True)
         boxes = np.concatenate((b6, np.tile(IDENTITY, (len(b6), 1))), axis=1)
