@@ -53,8 +53,9 @@ def _ball_on_cut(iiwa, ibody, path: np.ndarray) -> Scene:
     plain = time_parameterize(iiwa, path)
     poly = ibody(torch.from_numpy(_dense(path)), validate=False).numpy()  # (P, M, 3)
     cut = ibody(torch.tensor(plain.q), validate=False).numpy()  # (K, M, 3)
-    # per sample and sphere: the distance to every polyline sphere centre
-    far = np.linalg.norm(cut[:, :, None, None, :] - poly[None, None], axis=-1).min(axis=(2, 3))
+    # per sample and sphere: the distance to the nearest polyline sphere centre (sample by sample)
+    flat = poly.reshape(-1, 3)
+    far = np.stack([np.linalg.norm(c[:, None, :] - flat[None], axis=-1).min(axis=1) for c in cut])
     k, m = np.unravel_index(int(np.argmax(far)), far.shape)
     centre = cut[k, m]
     radii = ibody.radii.numpy()
