@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..checks import as_real, check_finite, check_last_dim
+from ..checks import as_real, broadcast_shapes, check_finite, check_last_dim
 from ..errors import ConfigError, ShapeError
 from .body import BodySpheres
 from .distance import body_obstacle_distance, self_collision_distance
@@ -52,8 +52,8 @@ class PathCheck:
 
 def _scene_for(scene: Scene, batch: torch.Size, what: str) -> Scene:
     try:
-        shape = torch.broadcast_shapes(scene.batch_shape, batch)
-    except RuntimeError as exc:
+        shape = broadcast_shapes(scene.batch_shape, batch)
+    except ValueError as exc:
         raise ShapeError(
             f"the scene's batch shape {tuple(scene.batch_shape)} does not broadcast against {what} {tuple(batch)}"
         ) from exc

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import torch
 
+from ..checks import broadcast_shapes
 from .geometry import KINDS, SCENE_KINDS, Box, Cylinder, Sphere, safe_sqrt
 from .scene import _FIELDS, Scene, _axis_aligned
 
@@ -133,7 +134,7 @@ def _per_sphere_primitives(
 ) -> torch.Tensor:
     if floor_mask is not None:
         floor_mask = floor_mask.to(centres.device)
-    batch = torch.broadcast_shapes(centres.shape[:-2], scene.batch_shape)
+    batch = broadcast_shapes(centres.shape[:-2], scene.batch_shape)
     n = batch.numel()
     M = centres.shape[-2]
     if n <= CHUNK:

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..checks import broadcast_shapes
 from ..errors import DatasetError, ObstacleError, PointCloudError, ShapeError
 from ..io import load_npz, save_npz
 from .geometry import IDENTITY, SCENE_KINDS, Plane, Primitive, check_rotations
@@ -98,8 +99,8 @@ def _check_mask(mask: torch.Tensor | None, table: torch.Tensor, what: str) -> to
             f"{what} must have one entry per obstacle ({table.shape[-2]}), got {tuple(mask.shape)}"
         )
     try:
-        torch.broadcast_shapes(mask.shape, table.shape[:-1])
-    except RuntimeError as exc:
+        broadcast_shapes(mask.shape, table.shape[:-1])
+    except ValueError as exc:
         raise ObstacleError(
             f"{what} of shape {tuple(mask.shape)} does not match obstacles of shape {tuple(table.shape)}"
         ) from exc
@@ -212,8 +213,8 @@ class Scene:
         if f is not None:
             shapes.append(f.shape)
         try:
-            torch.broadcast_shapes(*shapes)
-        except RuntimeError as exc:
+            broadcast_shapes(*shapes)
+        except ValueError as exc:
             raise ObstacleError(
                 "the scene's batch shapes do not broadcast: "
                 + ", ".join(f"{k} {tuple(v.shape)}" for k, v in tables.items())
@@ -414,7 +415,7 @@ class Scene:
             shapes.append(self.floor.shape)
         if all(t == shapes[0] for t in shapes):  # most scenes (torch's broadcast costs time on every call)
             return torch.Size(shapes[0])
-        return torch.broadcast_shapes(*shapes)
+        return broadcast_shapes(*shapes)
 
     @property
     def num_spheres(self) -> int:
@@ -473,7 +474,7 @@ class Scene:
         n = len(self.batch_shape)
         try:
             return full._map(lambda t, tail: t.reshape(*batch, *t.shape[n:]))
-        except RuntimeError as exc:
+        except ValueError as exc:
             raise ObstacleError(
                 f"cannot reshape a scene of batch {tuple(self.batch_shape)} to {batch}"
             ) from exc

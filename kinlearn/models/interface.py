@@ -19,7 +19,7 @@ from torch import nn
 
 from ..body.robot import Robot, load_robot
 from ..body.state import StateLayout
-from ..checks import check_finite, check_last_dim
+from ..checks import broadcast_shapes, check_finite, check_last_dim
 from ..data.babbling import MAX_STEP
 from ..errors import ConfigError
 
@@ -114,7 +114,7 @@ def _broadcast_pair(x: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, tor
     """Broadcast the leading (batch) dimensions of two ``(..., n)`` tensors."""
     if x.shape[:-1] == y.shape[:-1]:
         return x, y
-    batch = torch.broadcast_shapes(x.shape[:-1], y.shape[:-1])
+    batch = broadcast_shapes(x.shape[:-1], y.shape[:-1])
     return x.expand(*batch, x.shape[-1]), y.expand(*batch, y.shape[-1])
 
 
