@@ -18,6 +18,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "kinlearn"
 #: Each sub-package is one floor; a module's floor is its sub-package's.
 FLOORS: dict[str, int] = {
     "errors": 0, "checks": 0, "io": 0, "runs": 0,  # errors, input checks, files, run directories
+    "memo": 0,  # results of pure computations kept on disk between processes
     "lazy": 0,  # packages whose names are imported when first used
     "polyline": 0,  # the paper's trajectory metrics of a polyline of points
     "body": 1,  # the robot, its kinematics and state layout

@@ -25,6 +25,7 @@ from torch import nn
 from ..body.kinematics import FastKinematics, _snap, _z_to_axis, kinematics
 from ..body.robot import Robot, _bundled_dir
 from ..errors import ConfigError, RobotDescriptionError
+from ..memo import remembered
 
 __all__ = ["SPHERE_FILE", "BodySpheres", "body_spheres", "cover_cylinder", "planning_body", "sphere_sets"]
 
@@ -560,6 +561,10 @@ def urdf_limits(robot: Robot, urdf: str | Path | bytes) -> tuple[np.ndarray, np.
     return lo, hi
 
 
+#: The modules whose code :func:`always_overlapping` runs (a change to them is a new answer).
+_CODE = (__file__, str(Path(__file__).parents[1] / "body" / "kinematics.py"))
+
+
 def always_overlapping(
     robot: Robot,
     spheres: np.ndarray,
@@ -571,13 +576,21 @@ def always_overlapping(
     """Of the sphere ``pairs``, those that overlap in at least ``share`` of ``samples`` uniformly drawn
     configurations (seeded): pairs a self-collision check must leave out, as an SRDF's disabled pairs.
     Returns ``(kept pairs, each pair's overlap share (P,))``."""
-    body = BodySpheres(robot, spheres, np.zeros((0, 2), dtype=np.int64))
-    q = robot.sample(samples, torch.Generator().manual_seed(seed), dtype=torch.float64)
-    with torch.no_grad():
-        c = body(q)
-        p = torch.as_tensor(pairs)
-        gap = (c[:, p[:, 0]] - c[:, p[:, 1]]).norm(dim=-1) - body.radii[p[:, 0]] - body.radii[p[:, 1]]
-        frac = (gap < 0).double().mean(0).numpy()
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+
+    def overlap() -> np.ndarray:
+        body = BodySpheres(robot, spheres, np.zeros((0, 2), dtype=np.int64))
+        q = robot.sample(samples, torch.Generator().manual_seed(seed), dtype=torch.float64)
+        with torch.no_grad():
+            c = body(q)
+            p = torch.as_tensor(pairs)
+            gap = (c[:, p[:, 0]] - c[:, p[:, 1]]).norm(dim=-1) - body.radii[p[:, 0]] - body.radii[p[:, 1]]
+            return (gap < 0).double().mean(0).numpy()
+
+    # the same robot (its URDF's bytes), spheres, pairs and draws give the same shares in every process
+    parts = (robot.urdf, robot.ee_frame, robot.lower, robot.upper, np.asarray(spheres, np.float64), pairs)
+    parts += (samples, seed, torch.__version__)
+    frac = remembered("overlap-shares", parts, overlap, dtype=np.float64, shape=(len(pairs),), code=_CODE)
     return pairs[frac < share], frac
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import weakref
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -13,6 +14,7 @@ import torch
 from ..body.fk import _centres, _chain, _point
 from ..body.jit import jit
 from ..errors import ConfigError, DTypeError, NonFiniteError, ShapeError
+from ..memo import remembered
 from .body import BodySpheres
 
 __all__ = ["BOX_SLACK", "KernelBody", "near_pairs", "proven_apart"]
@@ -372,22 +374,34 @@ def proven_apart(body: KernelBody) -> np.ndarray:
     )
     hit = _APART.get(key)
     if hit is None:
-        qs = lo + (hi - lo) * np.random.default_rng(0).random((_APART_SAMPLES, body.dof))
-        # touching: a distance ≤ 0, i.e. below the smallest positive float
-        touch = _near_pairs(
-            _centres(qs, *body.fk_args()), body.radii, body.pairs, np.nextafter(0.0, 1.0)
-        ).any(0)
-        rates = np.ascontiguousarray(body._item_lever(body.pairs))
-        hit = np.zeros(P, dtype=bool)
-        for p in np.flatnonzero(~touch):
-            a, b = body.pairs[p]
-            found = _apart(
-                body.F, body.prismatic, body.link[a], body.folded[a], body.link[b], body.folded[b],
-                body.radii[a] + body.radii[b], rates[p], lo, hi, _APART_CELLS,
-            )  # fmt: skip
-            hit[p] = found == 1
-        hit.flags.writeable = False
-        _APART[key] = hit
+        parts = (key, _APART_SAMPLES, _APART_CELLS)  # every process proves the same: kept on disk
+
+        def prove() -> np.ndarray:
+            return _prove(body, lo, hi)
+
+        hit = _APART[key] = remembered("pairs-apart", parts, prove, dtype=bool, shape=(P,), code=_CODE)
+    return hit
+
+
+#: The modules whose code the proof runs (a change to them is a new proof).
+_CODE = (__file__, str(Path(__file__).parents[1] / "body" / "fk.py"))
+
+
+def _prove(body: KernelBody, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """:func:`proven_apart`'s work: the samples, then the branch and bound of each pair none touches."""
+    P = len(body.pairs)
+    qs = lo + (hi - lo) * np.random.default_rng(0).random((_APART_SAMPLES, body.dof))
+    # touching: a distance ≤ 0, i.e. below the smallest positive float
+    touch = _near_pairs(_centres(qs, *body.fk_args()), body.radii, body.pairs, np.nextafter(0.0, 1.0)).any(0)
+    rates = np.ascontiguousarray(body._item_lever(body.pairs))
+    hit = np.zeros(P, dtype=bool)
+    for p in np.flatnonzero(~touch):
+        a, b = body.pairs[p]
+        found = _apart(
+            body.F, body.prismatic, body.link[a], body.folded[a], body.link[b], body.folded[b],
+            body.radii[a] + body.radii[b], rates[p], lo, hi, _APART_CELLS,
+        )  # fmt: skip
+        hit[p] = found == 1
     return hit
 
 
