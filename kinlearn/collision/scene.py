@@ -30,6 +30,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -39,6 +40,9 @@ from ..errors import DatasetError, ObstacleError, PointCloudError, ShapeError
 from ..io import load_npz, save_npz
 from .geometry import IDENTITY, SCENE_KINDS, Plane, Primitive, check_rotations
 from .moveit import primitives_from_moveit, primitives_to_moveit
+
+if TYPE_CHECKING:
+    from .cloud import PointCloud
 
 __all__ = ["SCENE_FORMAT", "Scene", "as_scene"]
 
@@ -149,9 +153,9 @@ class Scene:
     floor: torch.Tensor | None = None
     sphere_mask: torch.Tensor | None = None
     box_mask: torch.Tensor | None = None
-    cylinders: torch.Tensor | None = None
+    cylinders: torch.Tensor
     cylinder_mask: torch.Tensor | None = None
-    cloud: object | None = None
+    cloud: PointCloud | None = None
 
     def __init__(
         self,
@@ -185,6 +189,7 @@ class Scene:
                 f"a Scene has no field {sorted(more)[0]!r}; its tables are "
                 + ", ".join(f"{k.table} ({k.kind}_mask)" for k in SCENE_KINDS)
             )
+        checked: dict[str, torch.Tensor] = {}  # every kind's table, an empty one where none was given
         for name, mask_name, kind in _TABLES:
             t = tables[name]
             if t is None:
@@ -196,7 +201,7 @@ class Scene:
                 t = t.to(dtype=dtype, device=device)
             m = _check_mask(masks[mask_name], t, mask_name)
             _check_values(t, m, kind)
-            tables[name], masks[mask_name] = t, m
+            checked[name], masks[mask_name] = t, m
         f = None
         if floor is not None:
             if isinstance(floor, (bool, np.bool_, complex, np.complexfloating)) or (
@@ -208,7 +213,7 @@ class Scene:
             f = _tensor(floor, "floor", dtype, device)
             if not bool(torch.isfinite(f).all()):
                 raise ObstacleError("floor height holds NaN/inf; give a finite height in metres or None")
-        shapes = [t.shape[:-2] for t in tables.values()]
+        shapes = [t.shape[:-2] for t in checked.values()]
         shapes += [m.shape[:-1] for m in masks.values() if m is not None]
         if f is not None:
             shapes.append(f.shape)
@@ -217,7 +222,7 @@ class Scene:
         except ValueError as exc:
             raise ObstacleError(
                 "the scene's batch shapes do not broadcast: "
-                + ", ".join(f"{k} {tuple(v.shape)}" for k, v in tables.items())
+                + ", ".join(f"{k} {tuple(v.shape)}" for k, v in checked.items())
                 + (f", floor {tuple(f.shape)}" if f is not None else "")
             ) from exc
         if cloud is not None:
@@ -227,7 +232,7 @@ class Scene:
                 raise ObstacleError(
                     f"a scene's cloud must be a PointCloud (Scene.from_points), got {type(cloud).__name__}"
                 )
-        for k, v in (*tables.items(), *masks.items(), ("floor", f), ("cloud", cloud)):
+        for k, v in (*checked.items(), *masks.items(), ("floor", f), ("cloud", cloud)):
             object.__setattr__(self, k, v)
 
     @classmethod
@@ -523,9 +528,9 @@ class Scene:
                 rows[i, : t.shape[-2]] = t.to(ref)
                 mask[i, : t.shape[-2]] = True if m is None else m
             fields[name], fields[mask_name] = rows, mask
-        floors = [s.floor for s in scenes]
-        floor = torch.stack([f.to(ref) for f in floors]) if all(f is not None for f in floors) else None
-        if floor is None and any(f is not None for f in floors):
+        floors = [s.floor for s in scenes if s.floor is not None]
+        floor = torch.stack([f.to(ref) for f in floors]) if len(floors) == len(scenes) else None
+        if floor is None and floors:
             raise ObstacleError(
                 "Scene.stack: some scenes have a floor and some do not; give all or none a floor"
             )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Protocol, cast, runtime_checkable
 
 import numpy as np
 import torch
@@ -153,7 +153,7 @@ class Plan:
             ok = ok & within_limits
         if collision_free is not None:
             ok = ok & collision_free
-        fields = dict(
+        return cls(
             goal=goal,
             waypoints=ef[..., 1:-1, :] if waypoints is None else waypoints,
             joints=joints,
@@ -163,8 +163,10 @@ class Plan:
             joint_error=joint_error,
             success=ok,
             collision_free=collision_free,
+            tolerance=tolerance,
+            robot=robot,
+            stage=stage,
         )
-        return cls(**fields, tolerance=tolerance, robot=robot, stage=stage)
 
     @property
     def start(self) -> torch.Tensor:
@@ -334,7 +336,8 @@ def executed_check(body: BodySpheres | None, scene: Scene, max_travel: float = C
     ks = kernel.KernelScene.of(scene if scene.dtype == torch.float64 else scene.to(torch.float64))
 
     def verify(q: np.ndarray) -> np.ndarray:
-        d, s = kernel.clearances(kb, ks, q)
+        # without per_sphere, clearances returns (scene clearance, self clearance) alone
+        d, s = cast("tuple[np.ndarray, np.ndarray]", kernel.clearances(kb, ks, q))
         hit = (d <= 0.0) | (s <= 0.0)
         bad = hit[:-1] | hit[1:]
         free, _, first = kernel.check_paths(kb, q[None], ks, max_travel=max_travel, exact=False)

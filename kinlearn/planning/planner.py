@@ -31,6 +31,7 @@ import math
 import warnings
 from functools import lru_cache
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import torch
@@ -232,7 +233,9 @@ class Planner(ObstacleStages):
         self._lo, self._hi = robot.limits(torch.float64)
         self._lo_np, self._hi_np = self._lo.numpy(), self._hi.numpy()
         self._lo_tol, self._hi_tol = self._lo_np - LIMIT_TOLERANCE, self._hi_np + LIMIT_TOLERANCE
-        dom_lo, dom_hi = tm.domain_lo.double().numpy(), tm.domain_hi.double().numpy()
+        # registered buffers (nn.Module's __getattr__ is typed Tensor | Module)
+        dom_lo = cast(torch.Tensor, tm.domain_lo).double().numpy()
+        dom_hi = cast(torch.Tensor, tm.domain_hi).double().numpy()
         # Inputs are already held within the joint limits: a domain that covers them checks nothing.
         S, J = self.layout.size, self.layout.joints
         covers = all(
@@ -264,8 +267,10 @@ class Planner(ObstacleStages):
         # One verified read says which kind of TM the folder holds and what it records.
         payload = load_checkpoint(run_dir / "tm.pt", kind=None, robot=name)
         if payload["kind"] == JointPathModel.kind:
-            tm, sources = load_path_model(
-                run_dir / "tm.pt", robot=name, with_dependencies=True, payload=payload
+            # with_dependencies: the TM and the paths of the models it records
+            tm, sources = cast(
+                "tuple[JointPathModel, dict[str, Path]]",
+                load_path_model(run_dir / "tm.pt", robot=name, with_dependencies=True, payload=payload),
             )
             fm = load_fm(sources["fm"], robot=tm.robot_name) if "fm" in sources else None
             im = load_im(sources["im"], robot=tm.robot_name) if "im" in sources else None
@@ -286,7 +291,7 @@ class Planner(ObstacleStages):
         return cls(_robot(robot, tm.robot_name), tm, fm, im, **options)
 
     @classmethod
-    def default(cls, robot: str = "iiwa14", **options) -> Planner:
+    def default(cls, robot: str | Robot = "iiwa14", **options) -> Planner:
         """The planner shipped with kinlearn for ``robot`` (one per process, shared); with ``options``
         (as for :meth:`__init__`, e.g. ``retreat=False``) a new one of the same models."""
         if isinstance(robot, Robot):
@@ -515,8 +520,9 @@ class Planner(ObstacleStages):
             return
         self._warm = True
         _load_kernels()
-        if self._retreat_vias() is not None:  # the chain's compiled solver
-            self._retreat_vias().vias((self._lo_np + self._hi_np) / 2)
+        vias = self._retreat_vias()
+        if vias is not None:  # the chain's compiled solver
+            vias.vias((self._lo_np + self._hi_np) / 2)
         _ = self._np_body.boxed  # the proof of the pairs apart: here, not in a plan
         if self.obstacle_tm is not None:
             _ = self._compiled_tm  # the network packed (the plan below compiles its one call)
@@ -600,10 +606,13 @@ class Planner(ObstacleStages):
             if waypoints is not None:
                 waypoints[still] = ef0[still, None]
         lead = tuple(batch)
+        # judge takes float64 arrays as well as tensors (arrays: its fast path); it is annotated Tensor
+        paths = cast(torch.Tensor, joints.reshape(*lead, *joints.shape[1:]))
+        wps = None if waypoints is None else waypoints.reshape(*lead, *waypoints.shape[1:])
         plan = judge(
             problem,
-            joints.reshape(*lead, *joints.shape[1:]),
-            waypoints=None if waypoints is None else waypoints.reshape(*lead, *waypoints.shape[1:]),
+            paths,
+            waypoints=cast("torch.Tensor | None", wps),
             tolerance=self.tolerance,
             body=self.body if free is not None else None,
             collision_free=free,
@@ -623,7 +632,7 @@ class Planner(ObstacleStages):
     # Free space
     # ----------------------------------------------------------------------------------------------
 
-    def _backend(self, n: int) -> _Backend:
+    def _backend(self, n: int) -> type[_Backend]:
         """Where the free-space TM runs for a batch of ``n`` plans: NumPy for a few (no per-operation
         dispatch), torch for many (its batched products are faster there). The one place the batch
         size decides anything (obstacle plans are checked by the compiled kernels at every size)."""
@@ -642,7 +651,7 @@ class Planner(ObstacleStages):
     @torch.no_grad()
     def _waypoint_rollout(self, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
         """The waypoint TM's plan (TM waypoints, IM/FM rollout): joints and waypoints."""
-        net_dtype = self.tm.in_mean.dtype
+        net_dtype = cast(torch.Tensor, self.tm.in_mean).dtype  # a registered buffer
         s0 = torch.from_numpy(np.concatenate((theta0, ef0), -1)).to(net_dtype)
         sT = torch.from_numpy(np.concatenate((thetaT, efT), -1)).to(net_dtype)
         waypoints, actions = self._core(s0, sT)
@@ -654,6 +663,8 @@ class Planner(ObstacleStages):
     def _rollout(self, s0: torch.Tensor, sT: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """TM waypoints and the IM/FM rollout's actions for flat ``(N, S)`` states (network dtype)."""
         waypoints = self.tm(s0, sT)
+        # a waypoint TM's planner holds both (__init__ refuses one without them)
+        assert self.fm is not None and self.im is not None
         _, actions = rectify(
             waypoints,
             s0,
@@ -684,6 +695,7 @@ class Planner(ObstacleStages):
         goals farther than :data:`REACH_BOUND` reaches are a :class:`DomainError`.
         """
         chain = self.chain
+        assert chain is not None  # called for a planner with a chain alone (_reach_position)
         far = np.linalg.norm(target, axis=-1) > REACH_BOUND * self._chain_reach
         if far.any():
             k = int(np.argmax(far))
@@ -745,7 +757,12 @@ class Planner(ObstacleStages):
 
 
 class _Backend:
-    """Where the free-space TM's forward pass runs for a batch size (:meth:`Planner._backend`)."""
+    """Where the free-space TM's forward pass runs for a batch size (:meth:`Planner._backend`): a class
+    whose static :meth:`tm` gives the knots ``(N, T − 1, dof)`` and ef waypoints ``(N, T − 1, 3)``."""
+
+    @staticmethod
+    def tm(planner: Planner, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
 
 
 class _Compiled(_Backend):
@@ -753,7 +770,9 @@ class _Compiled(_Backend):
 
     @staticmethod
     def tm(planner: Planner, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
-        return planner._np_tm(theta0, ef0, thetaT, efT)
+        np_tm = planner._np_tm
+        assert np_tm is not None  # the free-space TM of a joint-path TM's planner alone (_joint_path)
+        return np_tm(theta0, ef0, thetaT, efT)
 
 
 class _Torch(_Backend):
@@ -761,7 +780,7 @@ class _Torch(_Backend):
 
     @staticmethod
     def tm(planner: Planner, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
-        dtype = planner.tm.in_mean.dtype
+        dtype = cast(torch.Tensor, planner.tm.in_mean).dtype  # a registered buffer
         s0 = torch.from_numpy(np.concatenate((theta0, ef0), -1)).to(dtype)
         sT = torch.from_numpy(np.concatenate((thetaT, efT), -1)).to(dtype)
         with torch.no_grad():

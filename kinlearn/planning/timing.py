@@ -203,7 +203,11 @@ class TimedTrajectory:
     def to_json(self, path: str | Path) -> Path:
         """Write :meth:`to_dict` as JSON, atomically; floats round-trip exactly."""
         text = json.dumps(self.to_dict()) + "\n"
-        return atomic_write(path, lambda tmp: tmp.write_text(text))
+
+        def write(tmp: Path) -> None:
+            tmp.write_text(text)
+
+        return atomic_write(path, write)
 
     @classmethod
     def from_json(cls, path: str | Path) -> TimedTrajectory:
@@ -501,7 +505,9 @@ def _piece(robot: Robot, qs: np.ndarray, interpolant: Interpolant, vel, acc, str
         return _linear_piece(qs, vel, acc)
 
 
-def _assemble(pieces: list[_Piece], dt, samples):
+def _assemble(
+    pieces: list[_Piece], dt, samples
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray]:
     """Samples ``(t, q, qd, qdd)`` of the pieces one after the other (at rest between them), and the time
     each knot is passed (the knot shared by two pieces once)."""
     offsets = np.concatenate([[0.0], np.cumsum([p.duration for p in pieces])])
@@ -523,10 +529,12 @@ def _assemble(pieces: list[_Piece], dt, samples):
             continue
         local = np.clip(ts[m] - offsets[i], 0.0, p.duration)
         a, b, c = p.evaluate(local)
-        if q is None:
+        if q is None or qd is None or qdd is None:  # the first piece with samples (made together)
             dof = a.shape[1]
             q, qd, qdd = (np.empty((len(ts), dof)) for _ in range(3))
         q[m], qd[m], qdd[m] = a, b, c
+    # every sample time falls in some piece (the last sample is at the duration): q, qd, qdd are made
+    assert q is not None and qd is not None and qdd is not None
     knot_times = [pieces[0].knot_times]
     knot_times += [p.knot_times[1:] + offsets[i] for i, p in enumerate(pieces) if i > 0]
     return ts, q, qd, qdd, duration, np.concatenate(knot_times)
@@ -604,14 +612,12 @@ def time_parameterize(
     keep = np.concatenate([[True], chord > _DUPLICATE_TOL])
     which = np.cumsum(keep) - 1  # input waypoint → index among the kept ones
     qs = q_in[keep]
-    common = dict(
-        robot=robot.name, joint_names=robot.joint_names, velocity_limits=vel, acceleration_limits=acc
-    )
     if len(qs) == 1:
         zeros = np.zeros((1, robot.dof))
         return TimedTrajectory(
             t=np.zeros(1), q=qs, qd=zeros, qdd=zeros, duration=0.0,
-            waypoint_times=np.zeros(len(q_in)), interpolant="spline", verified=verify is not None, **common,
+            waypoint_times=np.zeros(len(q_in)), interpolant="spline", verified=verify is not None,
+            robot=robot.name, joint_names=robot.joint_names, velocity_limits=vel, acceleration_limits=acc,
         )  # fmt: skip
 
     # The knots: the waypoints, and points added on the polyline's own segments (so every knot and
@@ -668,5 +674,6 @@ def time_parameterize(
     return TimedTrajectory(
         t=ts, q=q, qd=qd, qdd=qdd, duration=duration,
         waypoint_times=knot_times[vertex][which], interpolant=used.pop() if len(used) == 1 else "mixed",
-        verified=verify is not None, **common,
+        verified=verify is not None,
+        robot=robot.name, joint_names=robot.joint_names, velocity_limits=vel, acceleration_limits=acc,
     )  # fmt: skip
