@@ -479,7 +479,7 @@ class Scene:
         n = len(self.batch_shape)
         try:
             return full._map(lambda t, tail: t.reshape(*batch, *t.shape[n:]))
-        except ValueError as exc:
+        except RuntimeError as exc:  # torch's reshape to a shape of another size
             raise ObstacleError(
                 f"cannot reshape a scene of batch {tuple(self.batch_shape)} to {batch}"
             ) from exc
