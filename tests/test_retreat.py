@@ -427,9 +427,7 @@ def test_the_sampler_grows_from_the_retreats_the_stage_found_free(panda, problem
 
     monkeypatch.setattr(rrt, "rrt_connect", spy)
     start, goal, scene = problems.problem(CELL_SIDEWAYS)
-    alone = Planner(
-        panda.robot, panda.tm, panda.fm, panda.im
-    )  # no network: the retreats' transfers are lines
+    alone = Planner(panda.robot, panda.tm, panda.fm, panda.im)  # no network: the transfers are lines
     plan = alone.plan(start, goal, obstacles=scene)
     assert plan.stage == "rrt" and bool(plan.collision_free)  # no deadline: the same every run
     (branches,) = seen
@@ -553,3 +551,25 @@ def test_a_wedged_end_retreats_after_a_wiggle(monkeypatch):
     wiggled = R.RetreatVias.wiggled
     monkeypatch.setattr(R.RetreatVias, "wiggled", lambda self, theta: wiggled(self, theta)[:0])
     assert ur5.plan(start, goal, obstacles=scene, refine_steps=0).stage == "none"
+
+
+@pytest.mark.parametrize("index", [CELL_STRAIGHT, CELL_ACROSS])
+def test_sample_first_runs_the_sampler_before_the_retreat_stage(problems, index):
+    """Default plan() (a sampler budget, no deadline) on cells the learned stage leaves colliding: the
+    retreat stage clears them; with sample_first=True the sampler does, before the retreat stage runs,
+    deterministically, except under a deadline (the retreat stage first). Every plan is judged alike."""
+    later = Planner.load(DEFAULT_CHECKPOINTS / "panda")
+    first = Planner.load(DEFAULT_CHECKPOINTS / "panda", sample_first=True)
+    start, goal, scene = problems.problem(index)
+    a, b = first.plan(start, goal, obstacles=scene), later.plan(start, goal, obstacles=scene)
+    assert a.stage == "rrt" and b.stage == "retreat"
+    assert bool(a.success) and bool(b.success) and bool(a.collision_free)
+    assert torch.equal(a.joints, first.plan(start, goal, obstacles=scene).joints)
+    assert first.plan(start, goal, obstacles=scene, deadline=30.0).stage == "retreat"
+
+
+def test_sample_first_is_a_bool():
+    from kinlearn.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="sample_first"):
+        Planner.load(DEFAULT_CHECKPOINTS / "panda", sample_first="yes")

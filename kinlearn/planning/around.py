@@ -62,7 +62,7 @@ class ObstacleStages:
 
     It reads what the planner holds: ``robot``, the limits ``_lo_np``/``_hi_np``, the obstacle network
     (``obstacle_tm``, packed for the compiled proposals on first use), the identified ``chain``, the given body
-    (``_body``), ``retreat``, and the caches ``_body64``, ``_np_body_cache``, ``_compiled_cache``, ``_vias`` and
+    (``_body``), ``retreat``, ``sample_first``, and the caches ``_body64``, ``_np_body_cache``, ``_compiled_cache``, ``_vias`` and
     ``_wide_robot`` its ``__init__`` sets to None.
     """
 
@@ -215,7 +215,8 @@ class ObstacleStages:
         still colliding: the optimiser from the least colliding proposal (:meth:`_refine`), kept if the
         dense check finds it free. Stage 4 (a ``deadline``, or an iteration budget ``iterations``), for
         those still colliding, one after the other while time is left: the compiled RRT-Connect
-        (:meth:`_sample`). Each plan is its problem's alone: proposals are made as at batch 1, the
+        (:meth:`_sample`). With a budget and no deadline the retreat stage runs after the sampler instead,
+        on what its budget left (:meth:`_samples_first`). Each plan is its problem's alone: proposals are made as at batch 1, the
         optimiser starts from the very path a batch-1 plan starts from, and paths of other lengths (the
         retreat stage's, the sampler's) are brought to the batch's longest by splitting segments (the
         same polylines, checked again). ``first``: stage 1's ``(paths, pick, free)`` for these very
@@ -237,18 +238,10 @@ class ObstacleStages:
 
         found: dict[int, tuple[np.ndarray, str]] = {}  # paths of other lengths, joined at the end
         branches: dict[int, tuple] = {}  # each problem's free retreats, the sampler's first branches
-        if self._retreat_vias() is not None:
-            for i in np.flatnonzero(~free):
-                if retreated is not None:  # run by the batch-1 entry already, clearing nothing
-                    branches[int(i)] = retreated
-                    continue
-                if _retreat_over(deadline, self.retreat_share):
-                    break
-                path, branches[int(i)] = self._retreat(theta0[i], thetaT[i], packed[i], steps, deadline)
-                if path is not None:
-                    found[int(i)] = (path, "retreat")
-        open_ = ~free
-        open_[list(found)] = False  # the problems no stage has cleared yet
+        open_ = ~free  # the problems no stage has cleared yet
+        first_sampled = self._samples_first(deadline, iterations)
+        if not first_sampled:
+            self._retreat_open(theta0, thetaT, packed, open_, steps, deadline, found, branches, retreated)
         if steps:
             for i in np.flatnonzero(open_):
                 if deadline.expired(DEADLINE_RESERVE):
@@ -274,6 +267,9 @@ class ObstacleStages:
                 )
                 if path is not None:
                     found[int(i)] = (path, "rrt")
+                    open_[i] = False
+        if first_sampled:  # what the sampler's budget left: the retreat stage, last
+            self._retreat_open(theta0, thetaT, packed, open_, steps, deadline, found, branches, retreated)
         if found:
             # Every plan at the knots of the longest: a later stage's path as it is where later stages
             # replaced every proposal (a batch-1 plan), else at least at the proposals' knots.
@@ -292,6 +288,32 @@ class ObstacleStages:
         if not free.all():  # the user's plan() is four calls up
             self._explain(theta0, thetaT, free, packed, stacklevel=5)
         return self._shorten_free(out, free, packed), free, stage
+
+    def _samples_first(self, deadline: Deadline, iterations: int) -> bool:
+        """Whether the sampler runs before the retreat stage: with a budget of iterations and no deadline,
+        where the planner asks for it (``Planner(sample_first=True)``; ``benchmarks/stage_order.py``
+        measures both orders)."""
+        return self.sample_first and iterations > 0 and deadline.seconds is None
+
+    def _retreat_open(
+        self, theta0, thetaT, packed: list, open_: np.ndarray, steps: int, deadline: Deadline, found: dict,
+        branches: dict, retreated: tuple | None,
+    ) -> None:  # fmt: skip
+        """The retreat stage on the problems still ``open_`` (cleared ones added to ``found`` and closed;
+        each problem's free retreats kept in ``branches``, the sampler's first branches); ``retreated``:
+        the batch-1 entry ran it on its one problem already, clearing nothing (not run again)."""
+        if self._retreat_vias() is None:
+            return
+        for i in np.flatnonzero(open_):
+            if retreated is not None:
+                branches[int(i)] = retreated
+                continue
+            if _retreat_over(deadline, self.retreat_share):
+                break
+            path, branches[int(i)] = self._retreat(theta0[i], thetaT[i], packed[i], steps, deadline)
+            if path is not None:
+                found[int(i)] = (path, "retreat")
+                open_[i] = False
 
     def _shorten_free(self, paths: np.ndarray, free: np.ndarray, packed: list) -> np.ndarray:
         """The shortcut stage on every cleared plan of ``paths (N, K, dof)`` (:meth:`_shortened`)."""

@@ -125,6 +125,7 @@ class Planner(ObstacleStages):
         retreat: bool = True,
         retreat_share: float | None = None,
         shortcut: bool = True,
+        sample_first: bool = False,
     ):
         """``fm``/``im``: needed by a waypoint TM, and by a planner without ``chain`` for end-effector
         position goals.
@@ -148,6 +149,12 @@ class Planner(ObstacleStages):
         trajectory optimiser (:func:`kinlearn.planning.obstacle_baselines.trajectory_optimiser`) from the least
         colliding one, kept if the dense check then finds it free (0: none; the plan's time stays
         bounded either way).
+
+        ``sample_first``: with the default sampling budget (no deadline, no ``refine_steps`` given), send a
+        problem the learned proposals leave colliding to the compiled RRT-Connect next and to the retreat
+        stage only where the sampler's budget runs out. Measured against the default (retreat first) by
+        ``benchmarks/stage_order.py``: about the same median, a lower p99 where the retreat stage often
+        fails (the panda's), and longer paths where the orders differ (the retreat stage's are shorter).
 
         ``shortcut``: every plan a stage cleared among obstacles is shortened by the shortcut stage
         (:mod:`kinlearn.collision.shortcut`: deterministic, a fixed budget, checked densely; the path
@@ -219,6 +226,9 @@ class Planner(ObstacleStages):
         if not isinstance(retreat, bool):
             raise ConfigError(f"retreat must be True or False, got {retreat!r}")
         self.retreat = retreat
+        if not isinstance(sample_first, bool):
+            raise ConfigError(f"sample_first must be True or False, got {sample_first!r}")
+        self.sample_first = sample_first
         if retreat_share is None:
             retreat_share = _retreat_share(robot.name)
         self.retreat_share = as_real(
@@ -433,7 +443,13 @@ class Planner(ObstacleStages):
                 paths, pick, free = stage1
                 if free[0]:  # stage 1 cleared it: no Problem made
                     return self._batch1_plan(q, ef, paths[0, pick[0]], "learned", dtype, packed, scene)
-                if self._retreat_vias() is not None and not _retreat_over(timer, self.retreat_share):
+                sampling = refine_steps is None and deadline is None  # the default budget of iterations
+                retreat_now = not (sampling and self.sample_first)  # else after the sampler (_plan_around)
+                if (
+                    retreat_now
+                    and self._retreat_vias() is not None
+                    and not _retreat_over(timer, self.retreat_share)
+                ):
                     path, branches = self._retreat(q[0], q[1], packed, steps, timer)
                     if path is not None:  # the retreat stage cleared it: no Problem made either
                         return self._batch1_plan(q, ef, path, "retreat", dtype, packed, scene)

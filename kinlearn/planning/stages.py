@@ -14,6 +14,10 @@ An obstacle plan is made in up to four stages, each run only when the earlier on
                iterations (:data:`~kinlearn.planning.planner.DEFAULT_RRT_ITERATIONS`).
 =============  ====================================================================================
 
+``Planner(sample_first=True)`` runs the sampler right after the learned stage where a budget of iterations is
+set (no deadline), and the retreat stage only on what the sampler's budget left: a shorter tail where the
+retreat stage often fails, longer paths where the two orders differ (``benchmarks/stage_order.py``).
+
 ``plan.stage`` names the stage a plan came from; ``"none"`` marks a plan none of them cleared (it is
 flagged: ``collision_free`` False, ``success`` False). ``refine_steps=k`` without a deadline asks for fixed time: the
 first two stages and k refinement steps, no sampling. Without a deadline every stage is a fixed amount
@@ -35,7 +39,8 @@ from ..errors import ConfigError
 
 __all__ = ["RETREAT_SHARE", "RETREAT_SHARES", "STAGES", "Deadline", "densify", "retreat_share"]
 
-#: The stages a plan can come from, in the order they run; "none" when none cleared the obstacles.
+#: The stages a plan can come from, in the order they run (``Planner(sample_first=True)`` swaps the retreat
+#: stage and the sampler); "none" when none cleared the obstacles.
 STAGES: tuple[str, ...] = ("learned", "retreat", "refine", "rrt", "none")
 #: Time (s) kept back from a deadline for the work after a stage: judging, packing the plan.
 DEADLINE_RESERVE = 0.002
