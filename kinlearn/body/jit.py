@@ -40,6 +40,7 @@ SOURCES = (
     "collision/kernel_scene.py",
     "collision/probe.py",
     "collision/walk.py",
+    "planning/inference.py",
     "planning/judge.py",
 )
 

@@ -36,6 +36,7 @@ from typing import cast
 import numpy as np
 import torch
 
+from ..body.fk import KernelChain
 from ..body.kinematics import kinematics
 from ..body.robot import BUILTIN_ROBOTS, ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
@@ -59,9 +60,9 @@ from ..models.obstacle_path import ObstaclePathModel, load_obstacle_model
 from ..models.rollout import rectify
 from ..models.trajectory import TrajectoryModel, load_trajectory_model
 from .around import ObstacleStages, _kernel, _load_kernels, _retreat_over
-from .inference import NumpyPathModel
+from .inference import CompiledPathModel
 from .judge import judge, verdict_small
-from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, Plan, Tolerance
+from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, START_TOLERANCE, Plan, Tolerance
 from .retreat import RetreatVias
 from .stages import Deadline
 from .stages import retreat_share as _retreat_share
@@ -193,7 +194,7 @@ class Planner(ObstacleStages):
             if m is not None:
                 m.validate_inputs = False
         self.kin = kinematics(robot)
-        self._np_tm = NumpyPathModel(tm) if isinstance(tm, JointPathModel) else None
+        self._path_kernel = CompiledPathModel(tm) if isinstance(tm, JointPathModel) else None
         if obstacle_tm is not None:
             if not isinstance(obstacle_tm, ObstaclePathModel):
                 raise ConfigError(
@@ -431,6 +432,15 @@ class Planner(ObstacleStages):
         :class:`~kinlearn.errors.CollidingEndWarning`, which names the problems and says where the scene
         overlaps the robot's fixed base.
         """
+        if (
+            obstacles is None
+            and goal_position is None
+            and self._path_kernel is not None
+            and self._domain is None
+        ):
+            lean = self._batch1_free(start, goal)  # one free-space problem as two joint vectors
+            if lean is not None:
+                return lean
         if obstacles is not None or getattr(start, "obstacles", None) is not None:
             self.warm_up()  # once, before the clock starts: no deadline is spent loading kernels
         timer = Deadline(deadline)  # started before the input is checked: the caller's time
@@ -465,6 +475,44 @@ class Planner(ObstacleStages):
         )
 
     __call__ = plan
+
+    def _batch1_free(self, start, goal) -> Plan | None:
+        """The batch-1 entry of a free-space plan, for the most common call: one problem given as joint
+        vectors ``(dof,)`` (float tensors on the CPU or float arrays, as :meth:`_batch1` reads them), planned
+        by a joint-path TM whose domain covers the limits: the ends checked and FK'd, the network, the
+        knots and the verdict in one compiled call
+        (:meth:`~kinlearn.planning.inference.CompiledPathModel.free_plan`), the same arithmetic as the
+        general path's, so the same plan to the bit. None for any other input, or ends outside the limits
+        or not apart: the general path checks (and explains) or plans them."""
+        dof = self.robot.dof
+        a, b = _joint_vector(start, dof), _joint_vector(goal, dof)
+        if a is None or b is None:
+            return None
+        (a, da), (b, db) = a, b
+        path_kernel = self._path_kernel
+        assert path_kernel is not None  # the caller's condition
+        tols = (LIMIT_TOLERANCE, START_TOLERANCE, self.tolerance.position, self.tolerance.joints)
+        out = path_kernel.free_plan(
+            np.concatenate((a, b)).reshape(2, dof), self._chain_kernel, ZERO_MOVE, tols
+        )
+        if out is None:
+            return None
+        joints, ef, waypoints, states, scores, ok = out
+        t = torch.from_numpy
+        plan = Plan(
+            goal=t(states[1]), waypoints=t(waypoints), joints=t(joints), ef=t(ef), target=t(states[1, dof:]),
+            goal_error=t(scores[0, 0, ...]), joint_error=t(scores[1, 0, ...]), success=t(ok[0, ...]),
+            collision_free=None, tolerance=self.tolerance, robot=self.robot.name, stage="learned",
+        )  # fmt: skip
+        dtype = torch.promote_types(da, db)
+        if dtype == torch.float64:
+            return plan
+        return _as_output(plan, dtype, _CPU, self._lo_np, self._hi_np)
+
+    @property
+    def _chain_kernel(self) -> KernelChain:
+        """The robot's FK packed for the kernels (:meth:`KernelChain.of`: made once per robot)."""
+        return KernelChain.of(self.robot)
 
     def _batch1(self, start, goal, obstacles, steps: int) -> tuple | None:
         """The batch-1 entry of a plan among obstacles, for the most common call, one problem given as
@@ -610,7 +658,7 @@ class Planner(ObstacleStages):
             joints, free, stage = self._plan_around(
                 theta0, ef0, thetaT, efT, scene, steps, deadline, iterations, first, retreated
             )
-        elif self._np_tm is not None:
+        elif self._path_kernel is not None:
             joints, waypoints = self._joint_path(theta0, ef0, thetaT, efT)
         else:
             joints, waypoints = self._waypoint_rollout(theta0, ef0, thetaT, efT)
@@ -699,7 +747,7 @@ class Planner(ObstacleStages):
         Plans stay the same up to floating-point rounding; returns ``self``. The joint-path TM needs no
         compiling: it plans in a handful of NumPy operations.
         """
-        if self._np_tm is None:
+        if self._path_kernel is None:
             self._core = torch.compile(self._rollout, dynamic=False, **options)
         return self
 
@@ -782,13 +830,14 @@ class _Backend:
 
 
 class _Compiled(_Backend):
-    """A few plans: the TM in NumPy (no per-operation dispatch)."""
+    """A few plans: the TM compiled (:class:`~kinlearn.planning.inference.CompiledPathModel`: no
+    per-operation dispatch)."""
 
     @staticmethod
     def tm(planner: Planner, theta0, ef0, thetaT, efT) -> tuple[np.ndarray, np.ndarray]:
-        np_tm = planner._np_tm
-        assert np_tm is not None  # the free-space TM of a joint-path TM's planner alone (_joint_path)
-        return np_tm(theta0, ef0, thetaT, efT)
+        path_kernel = planner._path_kernel
+        assert path_kernel is not None  # the free-space TM of a joint-path TM's planner alone (_joint_path)
+        return path_kernel(theta0, ef0, thetaT, efT)
 
 
 class _Torch(_Backend):

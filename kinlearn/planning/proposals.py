@@ -26,41 +26,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import torch
 
 from ..body.jit import jit
 from ..collision.kernel import checked_tips, first_free_boxed
 from ..errors import NonFiniteError
 from ..models.obstacle_path import ObstaclePathModel
-from .inference import _arr, _folded_mlp
+from .inference import _arr, mlp, packed_mlp
 
 __all__ = ["CompiledObstacleModel"]
 
 _jit = jit()  # stamped with the kernels it calls: their edits recompile it (kinlearn.body.jit)
-
-
-def _packed_mlp(seq: torch.nn.Sequential, mean, std, rows: int | None = None):
-    """The Linear layers of ``seq`` (the standardisation folded in: :func:`~kinlearn.planning.inference._folded_mlp`)
-    as float32 tuples for the kernels: weights ``(in, out)`` and biases ``(1, out)``, contiguous."""
-    weights, biases = _folded_mlp(seq, mean, std, np.float32, rows=rows)
-    return tuple(np.ascontiguousarray(w) for w in weights), tuple(
-        np.ascontiguousarray(b[None]) for b in biases
-    )
-
-
-@_jit
-def _mlp(h, weights, biases, silu, last_active):
-    """The MLP on ``h (N, in)`` float32: every layer but the last followed by the activation (SiLU, else
-    tanh), the last too if ``last_active``."""
-    last = len(weights) - 1
-    for k in range(len(weights)):
-        h = np.dot(h, weights[k]) + biases[k]
-        if k < last or last_active:
-            for i in range(h.shape[0]):
-                for j in range(h.shape[1]):
-                    v = h[i, j]
-                    h[i, j] = v / (np.float32(1.0) + np.exp(-v)) if silu else np.tanh(v)
-    return h
 
 
 @_jit
@@ -89,7 +64,7 @@ def _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, t
                 for j in range(3):
                     p[o, columns + j] = rows[i, j] - f[j]
                     p[o, columns + 3 + j] = rows[i, j] - t[j]
-        h = _mlp(p, enc_w, enc_b, silu, True)
+        h = mlp(p, enc_w, enc_b, silu, True)
         for r in range(2):
             for j in range(emb_size):
                 m = h[r * P, j]
@@ -111,7 +86,7 @@ def _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, t
         o += 2
         for j in range(emb_size):
             x[r, o + j] = emb[r, j]
-    return _mlp(x, trunk_w, trunk_b, silu, False).astype(np.float64)
+    return mlp(x, trunk_w, trunk_b, silu, False).astype(np.float64)
 
 
 @_jit
@@ -287,9 +262,9 @@ class CompiledObstacleModel:
     def __init__(self, tm: ObstaclePathModel):
         self.silu = tm.config.activation == "silu"
         in_scale, prim_scale = tm.input_scales  # a feature that never varied in training held at its mean
-        self.enc_w, self.enc_b = _packed_mlp(tm.encoder, tm.prim_mean, prim_scale)
+        self.enc_w, self.enc_b = packed_mlp(tm.encoder, tm.prim_mean, prim_scale)
         # Only the problem features are standardised; the pooled scene embedding follows them.
-        self.trunk_w, self.trunk_b = _packed_mlp(tm.trunk, tm.in_mean, in_scale, rows=tm.n_problem_features)
+        self.trunk_w, self.trunk_b = packed_mlp(tm.trunk, tm.in_mean, in_scale, rows=tm.n_problem_features)
         c = tm.config
         self.C, self.modes, self.dof = c.candidates, c.modes, c.dof
         self.half_range = np.ascontiguousarray(_arr(tm.half_range).reshape(-1))
