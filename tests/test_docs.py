@@ -78,15 +78,15 @@ TINY_DEFAULTS = {
 
 #: Literal replacements in a file's Python, (text, tiny text); each must occur in that file.
 TINY_PYTHON: dict[str, list[tuple[str, str]]] = {
-    "docs/usage.md": [
+    "docs/training.md": [
         ("EndpointConfig(n=2000, seed=0)", "EndpointConfig(n=200, seed=0)"),
         ("pairs.split(1500)", "pairs.split(150)"),
         ("epochs=10)", "epochs=1)"),
-        ("walkers=1000, steps=300", "walkers=50, steps=40"),
-        (
-            "time_parameterize(robot, plan.joints, dt=1 / 20)",
-            "time_parameterize(robot, plan.joints, dt=1 / 4)",
-        ),
+    ],
+    "docs/planning.md": [
+        ("plan.timed(dt=1 / 20)", "plan.timed(dt=1 / 4)"),
+    ],
+    "docs/baselines.md": [
         (
             'model_error_sweep("iiwa14", n_goals=2000, seeds=(0, 1, 2), progress=True)',
             'model_error_sweep("iiwa14", n_goals=8, seeds=(0,), levels=((0.02, 1.0),), calibration_samples=1000)',
@@ -110,7 +110,7 @@ PREREQUISITES: dict[str, list[str]] = {}
 
 #: Per file: names a block leaves to the reader (their own arrays), defined before the file's blocks.
 READER_NAMES = {
-    "docs/usage.md": """
+    "docs/planning.md": """
 import torch as _torch
 _robot = kinlearn.load_robot("iiwa14")
 start_joints, goal_joints = _robot.sample(2, _torch.Generator().manual_seed(0), dtype=_torch.float64)
