@@ -1,21 +1,21 @@
-"""The arm's collision body as spheres fixed to its links, placed by the fast forward kinematics.
-
-The sphere numbers live in ``robots/<robot>/collision_spheres.json`` (see ``robots/README.md`` for
-where each comes from). Two sets exist for the iiwa14, both Drake's published sphere models: the
-``sparse`` set (12 spheres on links 1–7, the base cylinder covered by 6 spheres, 18 in all) and the
-``dense`` set (46 spheres, 4 of them on the base).
+"""The arm's collision body as spheres fixed to its links, placed by the fast forward kinematics, and
+the bodies a robot has.
 
 :class:`BodySpheres` maps joints ``(..., dof)`` to world (base-frame) sphere centres ``(..., M, 3)``,
 batched and differentiable; it also carries each sphere's radius and link, the sphere pairs checked
 for self-collision, which spheres the floor applies to, and a bound on how far each sphere can travel
-per radian of each joint (used by the dense path check).
+per radian of each joint (used by the dense path check; the bounds: :mod:`kinlearn.collision.body_bounds`).
+
+:func:`body_spheres` builds a robot's body from its sphere model or spherized URDF (read by
+:mod:`kinlearn.collision.sphere_models`, whose names are importable from here too), with the sphere pairs
+its self-collision check takes: pairs on links at least two apart (:func:`_default_pairs`), less the link
+pairs the model excludes and the pairs that overlap almost everywhere (:func:`always_overlapping`).
+:func:`planning_body` is the body a planner checks its plans with.
 """
 
 from __future__ import annotations
 
 import json
-import math
-from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -23,183 +23,23 @@ import torch
 from torch import nn
 
 from ..body.kinematics import FastKinematics, _snap, _z_to_axis, kinematics
-from ..body.robot import Robot, _bundled_dir
+from ..body.robot import Robot
 from ..errors import ConfigError, RobotDescriptionError
 from ..memo import remembered
+from .body_bounds import _axis_distances as _axis_distances
+from .body_bounds import _lever_arms, _travel, floor_applies
+from .sphere_models import (
+    SPHERE_FILE,
+    _model_path,
+    _read_model,
+    cover_cylinder,
+    sphere_sets,
+    urdf_limits,
+    urdf_spheres,
+)
+from .sphere_models import SPHERE_FORMAT as SPHERE_FORMAT
 
 __all__ = ["SPHERE_FILE", "BodySpheres", "body_spheres", "cover_cylinder", "planning_body", "sphere_sets"]
-
-#: File name of a robot's sphere model inside its folder of the bundled ``robots/``.
-SPHERE_FILE = "collision_spheres.json"
-SPHERE_FORMAT = 1
-
-
-def cover_cylinder(
-    centre: tuple[float, float, float],
-    radius: float,
-    length: float,
-    ring: int = 6,
-    ring_radius: float = 0.054,
-) -> np.ndarray:
-    """Spheres ``(ring, 4)`` [x, y, z, r] that together contain a z-axis cylinder.
-
-    One ring of ``ring`` equal spheres in the cylinder's mid-plane, centres ``ring_radius`` from its
-    axis. Each sphere contains the full-height column over a disc of radius
-    c = sqrt(R² + d² − 2 R d cos(π/ring)) around its centre (R the cylinder's radius, d the ring
-    radius): neighbouring discs then meet on the cylinder's rim, and for d ≤ R / (2 cos(π/ring)) the
-    ring also covers the axis. The sphere radius is sqrt(c² + (length/2)²), rounded up to 1e-5 m.
-    """
-    R, d, h = float(radius), float(ring_radius), float(length) / 2.0
-    half = math.pi / ring
-    if not (ring >= 3 and 0.0 < d <= R / (2.0 * math.cos(half))):
-        raise ConfigError(
-            f"a ring of {ring} spheres at {d} m from the axis cannot cover a cylinder of radius {R} m; "
-            f"use ring >= 3 and 0 < ring_radius <= {R / (2.0 * math.cos(half)):.4g}"
-        )
-    c = math.sqrt(R * R + d * d - 2.0 * R * d * math.cos(half))
-    rho = math.ceil(math.sqrt(c * c + h * h) * 1e5) / 1e5
-    k = np.arange(ring)
-    out = np.empty((ring, 4))
-    out[:, 0] = centre[0] + d * np.cos(2 * half * k)
-    out[:, 1] = centre[1] + d * np.sin(2 * half * k)
-    out[:, 2] = centre[2]
-    out[:, 3] = rho
-    return out
-
-
-@cache
-def _read_model(path: str) -> dict:
-    return json.loads(Path(path).read_text())
-
-
-def _model_path(robot: Robot) -> Path:
-    return _bundled_dir() / robot.name / SPHERE_FILE
-
-
-def sphere_sets(robot: Robot) -> dict:
-    """The raw sphere model of ``robot`` as read from its JSON file (see ``robots/README.md``)."""
-    path = _model_path(robot)
-    if not path.is_file():
-        raise RobotDescriptionError(
-            f"robot {robot.name!r} has no collision sphere model (no {SPHERE_FILE} in its folder of "
-            f"kinlearn's robots/); sphere bodies exist for: {', '.join(_robots_with_spheres())}"
-        )
-    model = _read_model(str(path))
-    if model.get("format") != SPHERE_FORMAT or model.get("robot") != robot.name:
-        raise RobotDescriptionError(
-            f"{path} is not a format-{SPHERE_FORMAT} sphere model of {robot.name!r} "
-            f"(format {model.get('format')!r}, robot {model.get('robot')!r})"
-        )
-    return model
-
-
-def _robots_with_spheres() -> list[str]:
-    root = _bundled_dir()
-    return sorted(p.parent.name for p in root.glob(f"*/{SPHERE_FILE}"))
-
-
-def _travel(robot: Robot) -> list[float]:
-    """Per joint the farthest a prismatic joint moves its child link (its largest |limit|, m); 0 for a
-    revolute joint, which keeps every length."""
-    return [max(abs(j.lower), abs(j.upper)) if j.kind == "prismatic" else 0.0 for j in robot.joints]
-
-
-def _lever_arms(robot: Robot, link: np.ndarray, local: np.ndarray) -> np.ndarray:
-    """``(M, dof)``: an upper bound on sphere m's distance from joint j's axis, over all configurations.
-
-    Joint j (0-based) moves the links after it. For a sphere on the link joint j itself moves, the
-    distance is exact: the sphere's distance from the axis in that link. Further down the chain it is
-    at most (distance of joint j+1's origin from axis j) + (the fixed origin-to-origin offsets from
-    joint j+1 to the joint that moves the sphere's link) + (the sphere's offset in its link), by the
-    triangle inequality (rotations keep lengths); a prismatic joint in between adds its largest
-    displacement. A prismatic joint moves every point by exactly its displacement: lever 1.
-    """
-    F = kinematics(robot, "fast").F  # F[i]: fixed transform before joint i, in frames with the axis on z
-    axes = [_z_to_axis(j.axis) for j in robot.joints]
-    reach = _travel(robot)
-    lever = np.zeros((len(link), robot.dof))
-    for m, (lk, c) in enumerate(zip(link, local, strict=True)):
-        own = lk - 1  # the joint that moves the sphere's link
-        if own < 0:
-            continue
-        folded = axes[own].T @ c  # the centre in joint `own`'s frame, its axis along z
-        for j in range(own + 1):
-            if robot.joints[j].kind == "prismatic":
-                lever[m, j] = 1.0
-            elif j == own:
-                lever[m, j] = float(np.hypot(folded[0], folded[1]))
-            else:
-                chain = sum(float(np.linalg.norm(F[i, :3, 3])) + reach[i] for i in range(j + 2, own + 1))
-                lever[m, j] = (
-                    float(np.hypot(F[j + 1, 0, 3], F[j + 1, 1, 3]))
-                    + reach[j + 1]
-                    + chain
-                    + float(np.linalg.norm(c))
-                )
-    return lever
-
-
-def _axis_distances(robot: Robot, link: np.ndarray, local: np.ndarray) -> np.ndarray:
-    """``(M, dof)``: an upper bound on sphere m's distance from the axis of each joint j that does *not*
-    move it (j ≥ its link; 0 for the joints that do), over all configurations.
-
-    Why: a sphere A on a link before joint j and a sphere B after it change their distance ‖B − A‖, as
-    θ_j turns, at a rate of at most the distance of A from axis j (write B − p = (B − A) + (A − p), p on
-    the axis: ∂‖B − A‖/∂θ_j = û · (ω × (A − p)), û along B − A), as well as at most B's (``lever``). So
-    a self-collision pair moves towards contact no faster than Σ_j |Δθ_j| min(lever_Bj, this_Aj): a
-    pair whose lower sphere sits on the axes between them keeps its distance, however far its upper
-    sphere swings.
-
-    The joint right after the sphere's link: its exact distance from that axis (both fixed in the
-    link). Further down: the largest distance from the next joint's origin as joint j turns it about
-    its axis (exact: ‖(ρ_c + ρ_o, z_c − z_o)‖ in that joint's frame), plus the origin-to-origin offsets
-    on to joint j's origin (triangle inequality; a prismatic joint between adds its reach). A prismatic
-    joint j changes any distance at most by its displacement: 1.
-    """
-    F = kinematics(robot, "fast").F  # F[i]: fixed transform before joint i, in frames with the axis on z
-    axes = [_z_to_axis(j.axis) for j in robot.joints]
-    reach = _travel(robot)
-    dof = robot.dof
-    out = np.zeros((len(link), dof))
-    for m, (lk, c) in enumerate(zip(link, local, strict=True)):
-        lk = int(lk)
-        if lk >= dof:
-            continue
-        own = c if lk == 0 else axes[lk - 1].T @ c  # the centre in its link's frame (frame T_lk)
-        # in joint lk's frame (origin on its axis, axis along z)
-        x = F[lk, :3, :3].T @ (own - F[lk, :3, 3])
-        rho_c = float(np.hypot(x[0], x[1]))
-        far = 0.0  # the largest distance from the next joint's origin, as joint lk moves it
-        if lk + 1 < dof:
-            t = F[lk + 1, :3, 3]
-            far = float(np.hypot(rho_c + np.hypot(t[0], t[1]), x[2] - t[2]))
-            if robot.joints[lk].kind == "prismatic":
-                far = float(np.linalg.norm(x - t)) + reach[lk]
-        for j in range(lk, dof):
-            if robot.joints[j].kind == "prismatic":
-                out[m, j] = 1.0
-            elif j == lk:
-                out[m, j] = rho_c
-            else:
-                out[m, j] = far + sum(
-                    float(np.linalg.norm(F[i + 1, :3, 3])) + reach[i] for i in range(lk + 1, j)
-                )
-    return out
-
-
-def floor_applies(robot: Robot, link: np.ndarray, local: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """``(M,)`` bool: which spheres (on links ``link``, centres ``local (M, 3)`` in their link's frame, radii
-    ``(M,)``) the floor applies to. Not the base's (the base stands on the floor), nor those of link 1 that
-    reach below the base plane (z = 0) where the first joint turns about a vertical axis: no joint changes
-    their height, so they would make every configuration collide; they rest on the mount as the base does
-    (a fitted shoulder's spheres may bulge a few mm below the plane the shoulder stands on)."""
-    link = np.asarray(link)
-    out = link > 0
-    first = robot.joints[0]
-    if first.kind == "revolute" and abs(abs(float((first.T_prev[:3, :3] @ first.axis)[2])) - 1.0) < 1e-9:
-        z = (np.asarray(local, dtype=np.float64) @ first.T_prev[:3, :3].T + first.T_prev[:3, 3])[:, 2]
-        out &= ~((link == 1) & (z - np.asarray(radii, dtype=np.float64) < 0.0))
-    return out
 
 
 class BodySpheres(nn.Module):
@@ -453,112 +293,6 @@ class BodySpheres(nn.Module):
     def radii_like(self, x: torch.Tensor) -> torch.Tensor:
         """The radii ``(M,)`` in ``x``'s dtype and device."""
         return self.radii.to(dtype=x.dtype, device=x.device)
-
-
-def urdf_spheres(robot: Robot, urdf: str | Path | bytes, drop_links: tuple[str, ...] = ()) -> np.ndarray:
-    """The collision spheres of a spherized URDF (one ``<collision><geometry><sphere>`` per sphere) as rows
-    ``[link, x, y, z, r]`` in ``robot``'s link frames, sorted by link (base, 0, first).
-
-    Each sphere's link is walked up the URDF's fixed joints to the nearest link that a joint of
-    ``robot`` moves (matched by joint name; the sphere is folded onto it, its centre carried through
-    the fixed joints' origins), or to the parent of the robot's first joint (the base, 0, expressed in
-    the robot's root frame). Spheres on links in ``drop_links``, or folded through one, are left out
-    (parts the robot's own description does not have: a gripper, a sensor), and so are spheres above the
-    base (a stand). A sphere behind a moving joint that ``robot`` lacks is a
-    :class:`~kinlearn.errors.RobotDescriptionError` naming it.
-    """
-
-    from ..body.robot import _origin, validate_urdf
-
-    data = urdf if isinstance(urdf, bytes) else Path(urdf).read_bytes()
-    root = validate_urdf(data, "the sphere URDF")  # a tree of declared, uniquely named links and joints
-    by_child = {}
-    for el in root.iter("joint"):
-        child, parent = el.find("child"), el.find("parent")
-        if child is None or parent is None:
-            continue
-        by_child[child.get("link")] = (
-            el.get("name"),
-            el.get("type"),
-            parent.get("link"),
-            _origin(el.find("origin"), f"joint {el.get('name')}"),
-        )
-    index = {j.name: k + 1 for k, j in enumerate(robot.joints)}
-    first = next((c for c, (n, *_rest) in by_child.items() if n == robot.joints[0].name), None)
-    if first is None:
-        raise RobotDescriptionError(
-            f"the sphere URDF has no joint {robot.joints[0].name!r}, {robot.name}'s first joint"
-        )
-    base_link, origin1 = by_child[first][2], by_child[first][3]
-    to_root = robot.joints[0].T_prev @ np.linalg.inv(origin1)  # the base link's frame in the robot's root
-    rows = []
-    for link in root.iter("link"):
-        name = link.get("name")
-        for col in link.findall("collision"):
-            sphere = col.find("geometry/sphere")
-            if sphere is None:
-                continue
-            try:
-                r = float(sphere.get("radius"))
-            except (TypeError, ValueError):
-                r = math.nan
-            if not (math.isfinite(r) and r > 0):
-                raise RobotDescriptionError(
-                    f"a collision sphere of link {name!r} has radius {sphere.get('radius')!r}; a radius is a "
-                    "finite number of metres > 0"
-                )
-            T = _origin(col.find("origin"), f"a collision sphere of {name}")
-            cur, k = name, None
-            while True:
-                if cur in drop_links:
-                    break
-                if cur == base_link:
-                    T, k = to_root @ T, 0
-                    break
-                if cur not in by_child:
-                    break  # above the base: not part of the robot
-                jname, jtype, parent, origin = by_child[cur]
-                if jname in index:
-                    k = index[jname]
-                    break
-                if jtype != "fixed":
-                    raise RobotDescriptionError(
-                        f"a collision sphere of link {name!r} sits behind joint {jname!r} ({jtype}), which "
-                        f"{robot.name} does not have; drop the link or fix the joint"
-                    )
-                T, cur = origin @ T, parent
-            if k is not None:
-                rows.append([k, *T[:3, 3], r])
-    if not rows:
-        raise RobotDescriptionError(f"the sphere URDF holds no collision sphere on {robot.name}'s links")
-    out = np.asarray(rows, dtype=np.float64)
-    return out[np.argsort(out[:, 0], kind="stable")]
-
-
-def urdf_limits(robot: Robot, urdf: str | Path | bytes) -> tuple[np.ndarray, np.ndarray]:
-    """The position limits a sphere URDF gives ``robot``'s joints (matched by name): ``(lower, upper)``,
-    float64 ``(dof,)``. A joint the file lacks, or gives no limit, keeps the robot's. (The ur5's file, the
-    standard benchmarks' UR5, limits every joint to ±π, where kinlearn's ur5 turns ±2π; the panda's, MoveIt's
-    panda, is up to 0.07 rad wider than the Franka datasheet's limits of kinlearn's panda.)"""
-    from ..body.robot import validate_urdf
-
-    data = urdf if isinstance(urdf, bytes) else Path(urdf).read_bytes()
-    root = validate_urdf(data, "the sphere URDF")
-    given = {}
-    for el in root.iter("joint"):
-        lim = el.find("limit")
-        if el.get("type") in ("revolute", "prismatic") and lim is not None:
-            try:
-                given[el.get("name")] = (float(lim.get("lower")), float(lim.get("upper")))
-            except (TypeError, ValueError) as exc:
-                raise RobotDescriptionError(
-                    f"joint {el.get('name')!r} of the sphere URDF has an unreadable limit"
-                ) from exc
-    lo, hi = robot.lower.astype(np.float64).copy(), robot.upper.astype(np.float64).copy()
-    for k, j in enumerate(robot.joints):
-        if j.name in given:
-            lo[k], hi[k] = given[j.name]
-    return lo, hi
 
 
 #: The modules whose code :func:`always_overlapping` runs (a change to them is a new answer).
