@@ -80,7 +80,7 @@ TINY_DEFAULTS = {
 TINY_PYTHON: dict[str, list[tuple[str, str]]] = {
     "docs/training.md": [
         ("EndpointConfig(n=2000, seed=0)", "EndpointConfig(n=200, seed=0)"),
-        ("pairs.split(1500)", "pairs.split(150)"),
+        (".split(1500)", ".split(150)"),
         ("epochs=10)", "epochs=1)"),
     ],
     "docs/planning.md": [
