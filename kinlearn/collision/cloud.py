@@ -37,6 +37,7 @@ from here. Bad input raises :class:`~kinlearn.errors.PointCloudError` (a file th
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -68,6 +69,7 @@ __all__ = [
     "cloud_distance",
     "points_in_base",
     "read_points",
+    "sensed_cloud",
     "shadows",
 ]
 
@@ -312,6 +314,36 @@ class PointCloud:
 
     def __repr__(self) -> str:
         return f"PointCloud(points={self.num_points}, radius={self.radius:g} m, resolution={self.resolution:g} m)"
+
+
+def sensed_cloud(
+    points,
+    *,
+    radius: float | None = None,
+    frame=None,
+    resolution: float | None = None,
+    cleaning: Cleaning | None = None,
+    self_filter: tuple | None = None,
+    drop_nonfinite: bool = False,
+    shadow: float = 0.0,
+) -> PointCloud:
+    """The :class:`PointCloud` of sensed ``points`` (an ``(N, 3)`` array or tensor, or a point-cloud file's
+    path): checked, moved into the base frame from the camera's ``frame``, cleaned (``cleaning``,
+    ``self_filter``), its shadows added (``shadow`` m behind each point, seen from ``frame``), with the
+    default radius and resolution where they are None. The arguments are
+    :meth:`~kinlearn.collision.Scene.from_points`', which adds primitives beside the cloud."""
+    if isinstance(points, (str, Path)):
+        points = read_points(points)
+    pts = points_in_base(check_points(points, drop_nonfinite=drop_nonfinite), frame)
+    radius = DEFAULT_RADIUS if radius is None else radius
+    if cleaning is not None or self_filter is not None:
+        pts = clean_points(pts, float(radius), cleaning, self_filter)
+    resolution = DEFAULT_RESOLUTION if resolution is None else resolution
+    if shadow:
+        if frame is None:
+            raise PointCloudError("shadow= needs the camera's pose (frame=): the rays run from it")
+        pts = shadows(pts, points_in_base(np.zeros((1, 3)), frame)[0], float(shadow), float(resolution))
+    return PointCloud(pts, radius, resolution)
 
 
 def _norm(v: torch.Tensor) -> torch.Tensor:

@@ -22,6 +22,11 @@ Any count may be 0. Batch shapes broadcast against each other and against config
 (right-aligned, as in torch); :meth:`Scene.unsqueeze` inserts a batch dimension (for example a time
 axis). :meth:`Scene.from_primitives` builds one scene from typed objects, :meth:`Scene.primitives`
 gives them back.
+
+Every table is checked where a scene is made (:mod:`kinlearn.collision.scene_tables`: widths, masks,
+finite values, sizes, rotations); :meth:`Scene.save` and :meth:`Scene.load` keep a scene in an ``.npz``
+file (:mod:`kinlearn.collision.scene_file`). :func:`as_scene` takes what a planner is given as obstacles,
+a Scene or an array of spheres, as a Scene.
 """
 
 from __future__ import annotations
@@ -36,112 +41,18 @@ import numpy as np
 import torch
 
 from ..checks import broadcast_shapes
-from ..errors import DatasetError, ObstacleError, PointCloudError, ShapeError
-from ..io import load_npz, save_npz
-from .geometry import IDENTITY, SCENE_KINDS, Plane, Primitive, check_rotations
+from ..errors import DatasetError, ObstacleError, ShapeError
+from .geometry import IDENTITY, SCENE_KINDS, Plane, Primitive
 from .moveit import primitives_from_moveit, primitives_to_moveit
+from .scene_file import SCENE_FORMAT, cloud_arrays, cloud_from_arrays, read_scene, write_scene
+from .scene_file import SCENE_FORMATS as SCENE_FORMATS
+from .scene_tables import _FIELDS, _TABLES, _axis_aligned, _check_mask, _check_table, _check_values, _tensor
+from .scene_tables import MAX_METRES as MAX_METRES
 
 if TYPE_CHECKING:
     from .cloud import PointCloud
 
 __all__ = ["SCENE_FORMAT", "Scene", "as_scene"]
-
-#: Version of the scene ``.npz`` layout written by :meth:`Scene.save` (2: oriented boxes, cylinders; a
-#: scene with a point cloud is written as 3, which older readers refuse rather than drop its points).
-SCENE_FORMAT = 2
-#: Scene formats :meth:`Scene.load` reads (1: spheres and axis-aligned boxes; 3: with a point cloud).
-SCENE_FORMATS = (1, 2, 3)
-
-#: Per kind: (table field, mask field, primitive class).
-_TABLES = tuple((k.table, f"{k.kind}_mask", k) for k in SCENE_KINDS)
-#: Every tensor field and its number of trailing (non-batch) dimensions.
-_FIELDS = (
-    *((t, 2) for t, _, _ in _TABLES),
-    ("floor", 0),
-    *((m, 1) for _, m, _ in _TABLES),
-)
-
-
-def _tensor(x, what: str, dtype=None, device=None) -> torch.Tensor:
-    if isinstance(x, torch.Tensor):
-        t = x
-    else:
-        try:
-            t = torch.as_tensor(np.asarray(x, dtype=np.float64))
-        except (TypeError, ValueError) as exc:
-            raise ObstacleError(
-                f"{what} must be a tensor or array of numbers, got {type(x).__name__}"
-            ) from exc
-        if dtype is None:
-            dtype = torch.get_default_dtype()
-    if not (t.is_floating_point() or t.dtype == torch.bool):
-        t = t.to(torch.get_default_dtype())
-    if dtype is not None or device is not None:
-        t = t.to(dtype=dtype or t.dtype, device=device or t.device)
-    return t
-
-
-def _check_table(t: torch.Tensor, width: int, what: str, layout: str) -> None:
-    if not t.is_floating_point():
-        raise ObstacleError(f"{what} must be a floating-point tensor, got {t.dtype}")
-    if t.ndim < 2 or t.shape[-1] != width:
-        raise ObstacleError(
-            f"{what} must have shape (..., n, {width}) with rows {layout}, got {tuple(t.shape)}; "
-            f"one obstacle is a (1, {width}) table"
-        )
-
-
-def _check_mask(mask: torch.Tensor | None, table: torch.Tensor, what: str) -> torch.Tensor | None:
-    if mask is None:
-        return None
-    if not isinstance(mask, torch.Tensor) or mask.dtype != torch.bool:
-        raise ObstacleError(
-            f"{what} must be a bool tensor (True = obstacle present), got {type(mask).__name__}"
-        )
-    if mask.shape[-1:] != table.shape[-2:-1]:
-        raise ObstacleError(
-            f"{what} must have one entry per obstacle ({table.shape[-2]}), got {tuple(mask.shape)}"
-        )
-    try:
-        broadcast_shapes(mask.shape, table.shape[:-1])
-    except ValueError as exc:
-        raise ObstacleError(
-            f"{what} of shape {tuple(mask.shape)} does not match obstacles of shape {tuple(table.shape)}"
-        ) from exc
-    return mask.to(table.device)
-
-
-#: Obstacles' positions and sizes (m) are refused beyond this magnitude.
-MAX_METRES = 1e6
-
-
-def _check_values(table: torch.Tensor, mask: torch.Tensor | None, kind: type[Primitive]) -> None:
-    live = table if mask is None else table[torch.broadcast_to(mask, table.shape[:-1])]
-    if live.numel() == 0:
-        return
-    what = kind.table
-    bad = ~torch.isfinite(live)
-    if bool(bad.any()):
-        raise ObstacleError(f"{what} hold {int(bad.sum())} NaN/inf value(s); all values must be finite")
-    far = live.abs().amax(dim=-1) > MAX_METRES  # beyond it, squared distances overflow in float32
-    if bool(far.any()):
-        worst = float(live.abs().max())
-        raise ObstacleError(
-            f"{what} hold a position or {kind.size_name} of {worst:.6g} m; an obstacle must lie within "
-            f"±{MAX_METRES:g} m of the base (metres, not millimetres?)"
-        )
-    small = live[..., kind.sizes] <= 0
-    if bool(small.any()):
-        worst = float(live[..., kind.sizes].min())
-        raise ObstacleError(f"every {kind.size_name} in {what} must be > 0 (metres), found {worst:.6g}")
-    if kind.rotation_columns is not None:
-        check_rotations(live[..., kind.rotation_columns], what)
-
-
-def _axis_aligned(boxes: torch.Tensor) -> torch.Tensor:
-    """Boxes ``(..., B, 6)`` [centre, half extents] → ``(..., B, 15)`` with the identity rotation."""
-    eye = boxes.new_tensor(IDENTITY).expand(*boxes.shape[:-1], 9)
-    return torch.cat((boxes, eye), dim=-1)
 
 
 @dataclass(frozen=True, eq=False, init=False, repr=False)
@@ -326,29 +237,18 @@ class Scene:
         Raises :class:`~kinlearn.errors.PointCloudError` for points of another shape, NaN rows, no points,
         millimetres or a bad pose, :class:`~kinlearn.errors.PointCloudFileError` for a file it cannot read.
         """
-        from .cloud import (
-            DEFAULT_RADIUS,
-            DEFAULT_RESOLUTION,
-            PointCloud,
-            check_points,
-            clean_points,
-            points_in_base,
-            read_points,
-            shadows,
-        )
+        from .cloud import sensed_cloud
 
-        if isinstance(points, (str, Path)):
-            points = read_points(points)
-        pts = points_in_base(check_points(points, drop_nonfinite=drop_nonfinite), frame)
-        radius = DEFAULT_RADIUS if radius is None else radius
-        if cleaning is not None or self_filter is not None:
-            pts = clean_points(pts, float(radius), cleaning, self_filter)
-        resolution = DEFAULT_RESOLUTION if resolution is None else resolution
-        if shadow:
-            if frame is None:
-                raise PointCloudError("shadow= needs the camera's pose (frame=): the rays run from it")
-            pts = shadows(pts, points_in_base(np.zeros((1, 3)), frame)[0], float(shadow), float(resolution))
-        cloud = PointCloud(pts, radius, resolution)
+        cloud = sensed_cloud(
+            points,
+            radius=radius,
+            frame=frame,
+            resolution=resolution,
+            cleaning=cleaning,
+            self_filter=self_filter,
+            drop_nonfinite=drop_nonfinite,
+            shadow=shadow,
+        )
         if primitives is None:
             base = cls(floor=floor)
         elif isinstance(primitives, Scene):
@@ -561,8 +461,7 @@ class Scene:
             if t is not None:
                 out[name] = t.detach().cpu().double().numpy() if t.is_floating_point() else t.cpu().numpy()
         if self.cloud is not None:
-            out["cloud_points"] = np.array(self.cloud.points)
-            out["cloud_sizes"] = np.array([self.cloud.radius, self.cloud.resolution])
+            out |= cloud_arrays(self.cloud)
         return out
 
     @classmethod
@@ -573,32 +472,17 @@ class Scene:
             a = torch.as_tensor(np.asarray(arrays[key]))
             return a.to(dtype) if a.dtype != torch.bool else a
 
-        cloud = None
-        if "cloud_points" in arrays:
-            from .cloud import PointCloud
-
-            radius, resolution = (float(v) for v in np.asarray(arrays["cloud_sizes"]).reshape(2))
-            cloud = PointCloud(np.asarray(arrays["cloud_points"]), radius, resolution)
-        return cls(**{name: get(name) for name, _ in _FIELDS}, cloud=cloud)
+        return cls(**{name: get(name) for name, _ in _FIELDS}, cloud=cloud_from_arrays(arrays))
 
     def save(self, path: str | Path, robot: str = "") -> Path:
         """Write the scene to ``path`` (``.npz``) atomically; ``robot`` names the robot whose base frame it is in."""
-        version = SCENE_FORMAT if self.cloud is None else 3
-        return save_npz(
-            path, kind="scene", robot=robot, config={"scene_format": version}, arrays=self.arrays()
-        )
+        return write_scene(path, self.arrays(), robot)
 
     @classmethod
     def load(cls, path: str | Path, robot: str | None = None, dtype: torch.dtype = torch.float64) -> Scene:
         """Read a scene written by :meth:`save`. Raises :class:`~kinlearn.errors.DatasetError` for a
         missing or unreadable file, a file of another kind, format or robot, or invalid obstacles."""
-        meta, arrays = load_npz(path, kind="scene", robot=robot)
-        version = meta.get("config", {}).get("scene_format")
-        if version not in SCENE_FORMATS:
-            raise DatasetError(
-                f"{path} holds scene format {version!r}; this kinlearn reads scene formats "
-                f"{', '.join(map(str, SCENE_FORMATS))}"
-            )
+        arrays = read_scene(path, robot)
         try:
             return cls.from_arrays(arrays, dtype)
         except ObstacleError as exc:
