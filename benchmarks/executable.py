@@ -1,10 +1,12 @@
 """What a robot executes among obstacles: kinlearn's timed plans beside a sampler's, checked as executed.
 
     OMP_NUM_THREADS=1 python benchmarks/executable.py [--robots iiwa14 panda ur5] [--n 140] [--rrt-iterations 100000]
+    OMP_NUM_THREADS=1 python benchmarks/executable.py --robots xarm7 z1 --per-family 6 --result executable_onboarded
 
 Per arm and scene family, on the held-out problems of ``benchmarks/data/scene_problems_<arm>.npz``
 (made by ``benchmarks/make_obstacle_problems.py --families scenes``, never trained or tuned on; the
-ur5's with its gripper), at batch 1 on one thread:
+ur5's with its gripper), or, for an arm without such a file (the onboarded xarm7 and z1), on held-out
+problems made for it as ``benchmarks/onboard.py`` makes them, at batch 1 on one thread:
 
 - **kinlearn**: default ``plan()`` (deterministic), then ``plan.timed()`` (the executed motion verified
   against the plan's scene and body, repaired where it leaves the checked corridor);
@@ -27,10 +29,11 @@ from __future__ import annotations
 import argparse
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import torch
-from _common import header, show, write_result
+from _common import RUNS, header, show, write_result
 
 import kinlearn
 from kinlearn import load_robot
@@ -69,8 +72,21 @@ def length(q: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(q, axis=0), axis=1).sum())
 
 
-def run_arm(arm: str, n: int | None, iterations: int, figures: dict) -> dict:
-    problems = ProblemSet.load(f"{DATA}/scene_problems_{arm}.npz", robot=arm)
+def problem_set(arm: str, per_family: int) -> ProblemSet:
+    """The committed held-out problems of ``arm`` where there are (``benchmarks/data``), else held-out problems
+    of the seven families made for it as ``benchmarks/onboard.py`` makes them (held-out seeds, unverified:
+    some may have no solution), kept under ``runs/benchmarks``."""
+    committed = Path(DATA) / f"scene_problems_{arm}.npz"
+    if committed.is_file():
+        return ProblemSet.load(committed, robot=arm)
+    from onboard import heldout
+
+    RUNS.mkdir(parents=True, exist_ok=True)
+    return ProblemSet.load(heldout(load_robot(arm), per_family, RUNS), robot=arm)
+
+
+def run_arm(arm: str, n: int | None, iterations: int, figures: dict, per_family: int = 6) -> dict:
+    problems = problem_set(arm, per_family)
     if n:
         problems = problems[np.linspace(0, len(problems) - 1, min(n, len(problems))).astype(int)]
     robot = load_robot(arm)
@@ -194,6 +210,10 @@ def main() -> None:
         "--n", type=int, default=None, help="problems per arm, spread over the set (default: all)"
     )
     ap.add_argument("--rrt-iterations", type=int, default=100_000, help="the baseline sampler's budget")
+    ap.add_argument(
+        "--per-family", type=int, default=6, help="problems per family for an arm without a committed set"
+    )
+    ap.add_argument("--result", default="executable", help="the result file's name")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
@@ -201,11 +221,12 @@ def main() -> None:
     print(header("Executed trajectories among obstacles (held-out scene problems)", args.threads))
     figures: dict = {}
     for arm in args.robots:
-        figures[f"{arm} summary"] = run_arm(arm, args.n, args.rrt_iterations, figures)
+        figures[f"{arm} summary"] = run_arm(arm, args.n, args.rrt_iterations, figures, args.per_family)
     write_result(
-        "executable",
+        args.result,
         figures,
-        title="Executed trajectories among obstacles",
+        title="Executed trajectories among obstacles"
+        + ("" if args.result == "executable" else f" ({', '.join(args.robots)})"),
         notes=(
             "What a robot executes: plan.timed() of default plans, checked as executed (timed samples "
             "densified to 5 mrad per joint, the torch reference check, > 1 mm deep counts), beside the "
