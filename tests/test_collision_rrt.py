@@ -236,3 +236,139 @@ def test_trees_grown_from_given_branches(wall_problem):
         RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, branches=([nan], []))
     with pytest.raises(ConfigError, match="exceed"):
         RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, max_nodes=2, branches=([path[1:3]], []))
+
+
+#: The sampling options of the low-discrepancy sequences and the dynamic domain, each alone and together.
+SAMPLINGS = [
+    {"sampling": "halton"},
+    {"sampling": "r2"},
+    {"domain": 2.0},
+    {"sampling": "halton", "domain": 1.0, "domain_alpha": 0.3},
+]
+
+
+@pytest.mark.parametrize("options", SAMPLINGS, ids=lambda o: "-".join(f"{k}={v}" for k, v in o.items()))
+def test_every_sampling_same_path_whatever_the_rounds_and_free_by_the_compiled_check(wall_problem, options):
+    """With the sequences and the dynamic domain too, the same seed gives the same path after the same
+    iterations whatever the rounds, another seed another path; the path found is free by the compiled
+    dense check and by the torch one."""
+    robot, body, scene, start, goal = wall_problem
+    kb, ks = K.KernelBody(body), K.KernelScene(scene)
+
+    def solve(rounds, seed):
+        rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=seed, **options)
+        for _ in range(20_000 // rounds):
+            path = rrt.run(rounds)
+            if path is not None:
+                return path, rrt.iterations
+        raise AssertionError("no path")
+
+    a, na = solve(1, 5)
+    b, nb = solve(7, 5)
+    assert np.array_equal(a, b) and na == nb
+    other, _ = solve(3, 6)
+    assert not np.array_equal(a, other)
+    for p in (a, other):
+        assert np.array_equal(p[0], start) and np.array_equal(p[-1], goal)
+        assert (p >= robot.lower).all() and (p <= robot.upper).all()
+        assert K.first_free(kb, p[None], ks, max_travel=0.01) == 0
+        assert bool(check_path(body, torch.from_numpy(p), scene).collision_free)
+
+
+def test_dynamic_domain_radii_shrink_on_failure_and_grow_on_success(wall_problem):
+    """Iteration by iteration (box samples only, ``local=0``): a node's radius is unbounded until an
+    extension from it fails, which sets it to ``domain`` steps; a later failure shrinks it by ``1 − α`` (to
+    ``domain_min`` steps at least), a success grows it by ``1 + α``; only the extended tree's nearest
+    node changes, and new nodes start unbounded. The roots start bounded (by ``domain``), so that the
+    extensions from them show both changes."""
+    robot, body, scene, start, goal = wall_problem
+    kb, ks = K.KernelBody(body), K.KernelScene(scene)
+    alpha = 0.25
+    seen = {"set": 0, "shrunk": 0, "grown": 0}
+    for seed in range(40):  # short steps: many extensions, some into the wall
+        rrt = RrtConnect(
+            kb, ks, start, goal, robot.lower, robot.upper, seed=seed, step=0.4, local=0.0, domain=20.0,
+            domain_min=0.5, domain_alpha=alpha,
+        )  # fmt: skip
+        assert rrt.domain == pytest.approx(8.0) and rrt.domain_min == pytest.approx(0.2)
+        rrt.radius[:, 0] = rrt.domain  # the roots bounded already: their extensions change them
+        for _ in range(2000):
+            before, counts = rrt.radius.copy(), rrt.state[:2].copy()
+            a = int(rrt.state[6] % 2) if counts[0] == counts[1] else int(np.argmin(counts))
+            if rrt.run(1) is not None or rrt.exhausted:
+                break
+            grew = int(rrt.state[a]) > counts[a]
+            changed = np.argwhere(before != rrt.radius)
+            assert len(changed) <= 1
+            for t in (0, 1):  # the nodes added this iteration (and the slots not yet used) are unbounded
+                assert np.isinf(rrt.radius[t, counts[t] :]).all()
+            if len(changed) == 0:
+                continue
+            t, k = changed[0]
+            assert t == a and k < counts[a]
+            old, new = before[t, k], rrt.radius[t, k]
+            if np.isinf(old):
+                assert not grew and new == rrt.domain
+                seen["set"] += 1
+            elif grew:
+                assert new == pytest.approx(old * (1 + alpha), rel=1e-12)
+                seen["grown"] += 1
+            else:
+                assert new == pytest.approx(max(old * (1 - alpha), rrt.domain_min), rel=1e-12)
+                seen["shrunk"] += 1
+        finite = rrt.radius[np.isfinite(rrt.radius)]
+        assert (finite >= rrt.domain_min - 1e-12).all()
+        if min(seen.values()) > 5:
+            break
+    assert min(seen.values()) > 5, seen
+
+
+def test_dynamic_domain_rejects_samples_beyond_the_nearest_nodes_radius(wall_problem):
+    """Box samples farther from their nearest node than its radius are rejected: with the roots' radii
+    tiny, the trees do not grow from box samples (the iterations still count); unbounded, they grow."""
+    robot, body, scene, start, goal = wall_problem
+    kb, ks = K.KernelBody(body), K.KernelScene(scene)
+    for radius, grows in ((1e-6, False), (np.inf, True)):
+        rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=4, local=0.0, domain=1.0)
+        rrt.radius[:, 0] = radius
+        rrt.run(20)
+        assert rrt.iterations == 20 or rrt.found
+        assert (rrt.size > 2) == grows
+
+
+def test_the_sequences_spread_their_samples_evenly():
+    """The Halton and R2 samples of the joint box fill it more evenly than random ones (every joint's
+    range cut into 8 bins: 1024 samples put 128 ± a few in each), shifted or not."""
+    from kinlearn.collision.rrt import _R2, _UNIFORM, _box_sample, _primes, _r2
+
+    lo, hi = -np.arange(1.0, 8.0), np.arange(1.0, 8.0)
+    spread = {}
+    for kind, gen in ((_UNIFORM, _r2(7)), (1, _primes(7)), (_R2, _r2(7))):
+        for shift in (np.zeros(7), np.full(7, 0.3)):
+            state, q = np.zeros(8, dtype=np.int64), np.empty(7)
+            state[2] = 12345
+            pts = np.empty((1024, 7))
+            for i in range(1024):
+                _box_sample(state, kind, gen, shift, lo, hi, q)
+                pts[i] = q
+            assert (pts >= lo).all() and (pts < hi).all()
+            bins = np.floor((pts - lo) / (hi - lo) * 8).astype(int)
+            spread[kind, shift[0]] = max(np.abs(np.bincount(b, minlength=8) - 128).max() for b in bins.T)
+            if kind != _UNIFORM:
+                assert int(state[7]) == 1024  # the sequence's index: one per sample
+    assert spread[_UNIFORM, 0.0] > 8
+    for kind in (1, _R2):
+        assert spread[kind, 0.0] <= 4 and spread[kind, 0.3] <= 4
+    assert _primes(9).tolist() == [2, 3, 5, 7, 11, 13, 17, 19, 23]
+    phi = 1.0 / _r2(1)[0]
+    assert phi == pytest.approx((1 + 5**0.5) / 2)
+
+
+def test_bad_sampling_options_are_refused(wall_problem):
+    robot, body, scene, start, goal = wall_problem
+    args = (K.KernelBody(body), K.KernelScene(scene), start, goal, robot.lower, robot.upper)
+    with pytest.raises(ConfigError, match="sampling"):
+        RrtConnect(*args, sampling="sobol")
+    for name, bad in (("domain", -1.0), ("domain_min", float("nan")), ("domain_alpha", 1.0)):
+        with pytest.raises(ConfigError, match=name):
+            RrtConnect(*args, **{name: bad})

@@ -6,7 +6,9 @@ extends a step of at most ``step`` radians towards a random configuration
 (uniform in the limits, or near its root), the other then greedily connects towards the new node,
 until they meet. The joined
 path is shortened by the shortcut pass every plan goes through (:mod:`kinlearn.collision.shortcut`).
-Every state and motion is checked by the compiled dense check of :mod:`kinlearn.collision.kernel`
+The joint box is sampled uniformly by default; :class:`RrtConnect` also offers low-discrepancy sequences
+(Halton, R2) and dynamic-domain sampling (Yershova et al., ICRA 2005) in their place (``sampling``,
+``domain``). Every state and motion is checked by the compiled dense check of :mod:`kinlearn.collision.kernel`
 (≤ ``max_travel`` of sphere travel between checked configurations, self-collision and the floor
 included), so a path found is free by the same rule every plan is judged by.
 
@@ -26,6 +28,7 @@ an iteration's 10–100.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 
@@ -37,7 +40,7 @@ from ..errors import ConfigError, ShapeError
 from . import kernel
 from .shortcut import DEFAULT_ATTEMPTS, shorten_packed
 
-__all__ = ["ROUND_SECONDS", "TURN", "RrtConnect", "rrt_connect", "warm_up"]
+__all__ = ["DOMAIN_TRIES", "ROUND_SECONDS", "SAMPLINGS", "TURN", "RrtConnect", "rrt_connect", "warm_up"]
 
 _jit = jit(error_model="numpy")
 
@@ -61,8 +64,19 @@ ROUND_SECONDS = 5e-4
 _TRAPPED, _ADVANCED, _REACHED = 0, 1, 2
 #: State slots: the sizes of the two trees (0 rooted at the start, 1 at the goal), the generator's
 #: counter, the connection (its node in tree 0, in tree 1), status (0 growing, 1 found, −1 a tree full),
-#: rounds done (the tree extended alternates with it).
-_N0, _N1, _RNG, _CA, _CB, _STATUS, _ROUND = range(7)
+#: rounds done (the tree extended alternates with it), the index of the low-discrepancy sequence.
+_N0, _N1, _RNG, _CA, _CB, _STATUS, _ROUND, _SEQ = range(8)
+
+#: The samples of the joint box: ``"uniform"`` (counter-based random numbers), ``"halton"`` (the Halton
+#: sequence, prime bases 2, 3, 5, …, one per joint) or ``"r2"`` (the Kronecker sequence of the generalised
+#: golden ratio, Roberts' R_d), the two sequences shifted modulo 1 by a random vector drawn from the seed
+#: (a Cranley–Patterson rotation) so that different seeds give different samples.
+SAMPLINGS = ("uniform", "halton", "r2")
+_UNIFORM, _HALTON, _R2 = range(3)
+
+#: The most box samples one iteration draws while the dynamic domain rejects them; an iteration whose
+#: samples are all rejected extends nothing.
+DOMAIN_TRIES = 64
 
 
 @_jit
@@ -77,6 +91,42 @@ def _uniform(state) -> float:
 
 
 @_jit
+def _radical_inverse(i: int, base: int) -> float:
+    """The van der Corput radical inverse of ``i`` in ``base``: its digits mirrored about the point."""
+    inv = 1.0 / base
+    f, r = inv, 0.0
+    while i > 0:
+        r += (i % base) * f
+        i //= base
+        f *= inv
+    return r
+
+
+@_jit
+def _box_sample(state, kind, gen, shift, lo, hi, q):
+    """A sample of the joint box ``[lo, hi]`` into ``q``: uniform random numbers (``kind`` 0), or the
+    next point of the Halton (1: ``gen`` its bases) or R2 (2: ``gen`` its increments) sequence, its index
+    in ``state[_SEQ]``, shifted modulo 1 by ``shift``."""
+    dof = lo.shape[0]
+    if kind == _UNIFORM:
+        for j in range(dof):
+            q[j] = lo[j] + _uniform(state) * (hi[j] - lo[j])
+        return
+    state[_SEQ] += 1
+    i = state[_SEQ]
+    for j in range(dof):
+        if kind == _HALTON:
+            u = _radical_inverse(i, int(gen[j]))
+        else:
+            u = i * gen[j]
+            u -= math.floor(u)
+        u += shift[j]
+        if u >= 1.0:
+            u -= 1.0
+        q[j] = lo[j] + u * (hi[j] - lo[j])
+
+
+@_jit
 def _free(a, b, seg, max_travel, f, n, s) -> bool:
     for j in range(a.shape[0]):
         seg[0, j], seg[1, j] = a[j], b[j]
@@ -84,11 +134,9 @@ def _free(a, b, seg, max_travel, f, n, s) -> bool:
 
 
 @_jit
-def _extend(nodes, parent, count, t, q, step, seg, max_travel, f, n, s, out):
-    """Extend tree ``t`` (nodes ``nodes[t, :count[t]]``) towards ``q``: (status, new node or −1)."""
-    m = count[t]
-    if m >= nodes.shape[1]:
-        return _TRAPPED, -1
+def _nearest(nodes, t, m, q):
+    """The node of tree ``t`` (its first ``m``) nearest to ``q`` and its squared distance (a linear scan:
+    the motion checks, not this, take an iteration's time)."""
     dof = q.shape[0]
     best, near = np.inf, 0
     for i in range(m):
@@ -98,29 +146,52 @@ def _extend(nodes, parent, count, t, q, step, seg, max_travel, f, n, s, out):
             d += e * e
         if d < best:
             best, near = d, i
+    return near, best
+
+
+@_jit
+def _extend(nodes, parent, count, t, q, step, seg, max_travel, f, n, s, out, near=-1, best=0.0):
+    """Extend tree ``t`` (nodes ``nodes[t, :count[t]]``) towards ``q`` from its nearest node (``near``
+    with squared distance ``best`` where the caller found it): (status, new node or −1, nearest or −1)."""
+    m = count[t]
+    if m >= nodes.shape[1]:
+        return _TRAPPED, -1, -1
+    dof = q.shape[0]
+    if near < 0:
+        near, best = _nearest(nodes, t, m, q)
     dist = math.sqrt(best)
     reached = dist <= step
     scale = 1.0 if reached else step / dist
     for j in range(dof):
         out[j] = nodes[t, near, j] + scale * (q[j] - nodes[t, near, j])
     if not _free(nodes[t, near], out, seg, max_travel, f, n, s):
-        return _TRAPPED, -1
+        return _TRAPPED, -1, near
     nodes[t, m] = out
     parent[t, m] = near
     count[t] = m + 1
-    return (_REACHED if reached else _ADVANCED), m
+    return (_REACHED if reached else _ADVANCED), m, near
 
 
 @_jit
 def _grow(
-    nodes, parent, state, lo, hi, step, local, sigma, local_step, iterations, max_travel, f, n, s, balanced
-):
+    nodes, parent, state, lo, hi, step, local, sigma, local_step, iterations, max_travel, f, n, s, balanced,
+    kind, gen, shift, radius, domain, domain_min, domain_alpha, tries,
+):  # fmt: skip
     """Up to ``iterations`` rounds of RRT-Connect on the trees in ``nodes``/``parent``; a share
-    ``local`` of the samples is drawn near the extended tree's root (Gaussian, ``sigma`` rad per joint).
-    ``balanced``: the smaller tree is extended (in turn when they are equal), else each in turn."""
+    ``local`` of the samples is drawn near the extended tree's root (Gaussian, ``sigma`` rad per joint),
+    the others in the joint box (:func:`_box_sample`: ``kind``, ``gen``, ``shift``).
+    ``balanced``: the smaller tree is extended (in turn when they are equal), else each in turn.
+
+    Dynamic domain (Yershova, Jaillet, Siméon and LaValle, ICRA 2005; the radius adapted as by Jaillet
+    et al., IROS 2005) where ``domain`` > 0: a box sample farther from its nearest node than that node's
+    ``radius`` is rejected and another drawn (at most ``tries``, within the same iteration);
+    an extension that fails sets its nearest node's radius to ``domain`` the first time, then shrinks it
+    by a factor ``1 − domain_alpha`` down to ``domain_min``; one that succeeds grows a finite radius by
+    ``1 + domain_alpha``. New nodes have no bound (an infinite radius)."""
     dof = lo.shape[0]
     count = state[_N0 : _N1 + 1]
     seg, q, new, conn = np.empty((2, dof)), np.empty(dof), np.empty(dof), np.empty(dof)
+    dd = domain > 0.0
     for _ in range(iterations):
         if state[_STATUS] != 0:
             return
@@ -129,33 +200,86 @@ def _grow(
             a = 0 if count[0] < count[1] else 1
         state[_ROUND] += 1
         near = _uniform(state) < local
+        k, best = -1, 0.0
         if near:  # near the root: out of the cell, from under the table
             for j in range(dof):
                 u1, u2 = max(_uniform(state), 1e-300), _uniform(state)
                 g = math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
                 q[j] = min(max(nodes[a, 0, j] + sigma * g, lo[j]), hi[j])
         else:
-            for j in range(dof):
-                q[j] = lo[j] + _uniform(state) * (hi[j] - lo[j])
-        st, i = _extend(
-            nodes, parent, count, a, q, local_step if near else step, seg, max_travel, f, n, s, new
+            accepted = not dd
+            for _try in range(tries if dd else 1):
+                _box_sample(state, kind, gen, shift, lo, hi, q)
+                if not dd:
+                    break
+                k, best = _nearest(nodes, a, count[a], q)
+                r = radius[a, k]
+                if best <= r * r:
+                    accepted = True
+                    break
+            if not accepted:
+                continue
+        st, i, k = _extend(
+            nodes, parent, count, a, q, local_step if near else step, seg, max_travel, f, n, s, new, k, best
         )
+        if dd and k >= 0:
+            r = radius[a, k]
+            if st == _TRAPPED:
+                radius[a, k] = domain if r == np.inf else max(r * (1.0 - domain_alpha), domain_min)
+            elif r != np.inf:
+                radius[a, k] = r * (1.0 + domain_alpha)
         if st == _TRAPPED:
             if count[a] >= nodes.shape[1]:
                 state[_STATUS] = -1
             continue
         b = 1 - a
         while True:
-            st2, k = _extend(nodes, parent, count, b, new, step, seg, max_travel, f, n, s, conn)
+            st2, kb, _near = _extend(nodes, parent, count, b, new, step, seg, max_travel, f, n, s, conn)
             if st2 != _ADVANCED:
                 break
         if st2 == _REACHED:
-            state[_CA], state[_CB] = (i, k) if a == 0 else (k, i)
+            state[_CA], state[_CB] = (i, kb) if a == 0 else (kb, i)
             state[_STATUS] = 1
             return
         if count[b] >= nodes.shape[1]:
             state[_STATUS] = -1
             return
+
+
+_NONE = np.empty(0)
+
+
+@_jit
+def _shift_of(counter: int, dof: int) -> np.ndarray:
+    """``dof`` numbers in [0, 1) of the splitmix64 generator from ``counter``."""
+    state = np.zeros(8, dtype=np.int64)
+    state[_RNG] = counter
+    out = np.empty(dof)
+    for j in range(dof):
+        out[j] = _uniform(state)
+    return out
+
+
+@functools.cache
+def _primes(n: int) -> np.ndarray:
+    """The first ``n`` primes (the Halton sequence's bases, one per joint)."""
+    out: list[int] = []
+    k = 2
+    while len(out) < n:
+        if all(k % p for p in out if p * p <= k):
+            out.append(k)
+        k += 1
+    return np.array(out, dtype=np.float64)
+
+
+@functools.cache
+def _r2(n: int) -> np.ndarray:
+    """The increments of Roberts' R_d sequence in ``n`` dimensions: powers of 1/φ_n, φ_n the root > 1 of
+    x^(n+1) = x + 1 (the golden ratio for n = 1)."""
+    phi = 2.0
+    for _ in range(64):
+        phi = (1.0 + phi) ** (1.0 / (n + 1))
+    return np.array([(1.0 / phi) ** (j + 1) % 1.0 for j in range(n)])
 
 
 class RrtConnect:
@@ -176,6 +300,19 @@ class RrtConnect:
     ``balanced``: extend the smaller tree each round (the trees take turns when equal), not the two in
     turn: a tree stuck in a cell gets the samples until it is out. On the tuning problems (seeds
     3004–3010) it solved more within a budget on every arm and shortened the mean time to a path.
+
+    ``sampling``: how the joint box is sampled (:data:`SAMPLINGS`): ``"uniform"`` random numbers, or the
+    ``"halton"`` or ``"r2"`` low-discrepancy sequence shifted by the seed. ``domain``: dynamic-domain
+    sampling (Yershova, Jaillet, Siméon and LaValle, ICRA 2005) where > 0: a box sample farther from its
+    nearest node than that node's radius (``radius``, rad) is rejected; an extension that fails bounds its
+    node by ``domain`` steps the first time, later ones shrink the bound by ``1 − domain_alpha`` to
+    ``domain_min`` steps, and one that succeeds widens it by ``1 + domain_alpha`` (the adaptive radius of
+    Jaillet, Yershova, LaValle and Siméon, IROS 2005). Both change the samples only: every motion is
+    checked as before, and a seed still fixes the path. Neither is the default: on the tuning problems
+    (seeds 3004–3010, those uniform samples needed over 200 iterations for) and on the held-out ones,
+    neither solved more within the plan's budget nor took less time on every arm (the dynamic domain
+    shortened one arm's searches and lengthened another's, the arms trading places between the two sets;
+    ``benchmarks/sampler_speed.py --compare sampling``).
 
     ``branches``: polylines each tree starts with, ``(start tree's, goal tree's)``, each ``(V, dof)`` from
     its root (the root left out), its segments already found free by the same check: the planner gives
@@ -204,8 +341,20 @@ class RrtConnect:
         local_step: float | None = None,
         balanced: bool = True,
         branches: tuple = ((), ()),
+        sampling: str = "uniform",
+        domain: float = 0.0,
+        domain_min: float = 0.5,
+        domain_alpha: float = 0.1,
     ):
         self.balanced = bool(balanced)
+        if sampling not in SAMPLINGS:
+            raise ConfigError(f"sampling must be one of {SAMPLINGS}, got {sampling!r}")
+        for name, v in (("domain", domain), ("domain_min", domain_min), ("domain_alpha", domain_alpha)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+                raise ConfigError(f"{name} must be a number >= 0, got {v!r}")
+        if domain_alpha >= 1:
+            raise ConfigError(f"domain_alpha must be below 1, got {domain_alpha!r}")
+        self.sampling = sampling
         lo, hi = np.ascontiguousarray(lower, np.float64), np.ascontiguousarray(upper, np.float64)
         q0, q1 = np.ascontiguousarray(start, np.float64), np.ascontiguousarray(goal, np.float64)
         dof = body.dof
@@ -221,16 +370,30 @@ class RrtConnect:
             raise ConfigError(f"local_step must be a number of radians > 0, got {local_step!r}")
         self.lo, self.hi, self.max_travel = lo, hi, float(max_travel)
         self.local, self.sigma = float(local), float(sigma)
+        # the dynamic domain's radii, rad: a failed extension's node gets ``domain`` steps, shrinking to
+        # ``domain_min`` steps (never above the first)
+        self.domain = float(domain) * self.step
+        self.domain_min = min(float(domain_min) * self.step, self.domain)
+        self.domain_alpha = float(domain_alpha)
         # every node lies between the limits, the ends and the branches (checked within the limits)
         self._f, self._n = body.packing_of(np.stack([lo, hi, q0, q1]))
         self._s = scene.packed
         self.nodes = np.empty((2, max_nodes, dof))
         self.parent = np.full((2, max_nodes), -1, dtype=np.int64)
         self.nodes[0, 0], self.nodes[1, 0] = q0, q1
-        self.state = np.zeros(7, dtype=np.int64)
+        # each node's dynamic-domain radius, rad (infinite: unbounded; none without a dynamic domain)
+        self.radius = np.full((2, max_nodes if self.domain > 0 else 0), np.inf)
+        self.state = np.zeros(8, dtype=np.int64)
         self.state[_N0] = self.state[_N1] = 1
         self._graft(branches, dof, lo, hi)
         self.state[_RNG] = (int(seed) * 0x632BE59BD9B4E019) % (1 << 62)
+        self._kind = SAMPLINGS.index(sampling)
+        self._gen = self._shift = _NONE
+        if self._kind != _UNIFORM:
+            self._gen = _primes(dof) if self._kind == _HALTON else _r2(dof)
+            # the sequence's shift: numbers of the seed's generator from a counter of their own (the
+            # search's random numbers stay those of the uniform sampling)
+            self._shift = _shift_of(int(self.state[_RNG]) ^ 0x5DEECE66D, dof)
         self.iterations = 0
         self.valid_ends = all(
             kernel._verdict_packed(q[None], self.max_travel, 0.0, self._f, self._n, self._s)[0] < 0
@@ -283,7 +446,8 @@ class RrtConnect:
             return None
         _grow(
             self.nodes, self.parent, self.state, self.lo, self.hi, self.step, self.local, self.sigma, self.local_step, int(iterations),
-            self.max_travel, self._f, self._n, self._s, self.balanced,
+            self.max_travel, self._f, self._n, self._s, self.balanced, self._kind, self._gen, self._shift,
+            self.radius, self.domain, self.domain_min, self.domain_alpha, DOMAIN_TRIES,
         )  # fmt: skip
         self.iterations = int(self.state[_ROUND])  # those run: a round stops where the trees meet
         if int(self.state[_STATUS]) != 1:
