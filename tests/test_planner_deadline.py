@@ -228,7 +228,7 @@ P.Deadline = Spy
 PL = [P.Planner.default("panda")]
 q = torch.as_tensor((PL[0]._lo_np + PL[0]._hi_np) / 2)
 PL[0].plan(q, q + 0.05)
-first = list(seen)
+first = [(bool(kernel.first_free_boxed.signatures), bool(rrt._grow.signatures), PL[0]._np_body_cache is not None)]
 PL[0].plan(q, q + 0.05, obstacles=[[0.6, 0.0, 0.9, 0.05]], deadline=0.05)
 print(first[0], seen[-1])
 """
