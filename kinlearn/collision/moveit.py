@@ -428,6 +428,11 @@ def primitives_to_moveit(
     return {"name": name, "is_diff": True, "world": {"collision_objects": objects}}
 
 
+# --------------------------------------------------------------------------------------------------
+# Motion plan requests
+# --------------------------------------------------------------------------------------------------
+
+
 def _joint_map(state: Mapping, at: _At) -> dict[str, float]:
     names = _list(state.get("name"), at / "name", "joint names", optional=False)
     positions = _list(state.get("position"), at / "position", "numbers (rad or m)", optional=False)

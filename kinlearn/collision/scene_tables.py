@@ -19,6 +19,8 @@ from ..checks import broadcast_shapes
 from ..errors import ObstacleError
 from .geometry import IDENTITY, SCENE_KINDS, Primitive, check_rotations
 
+__all__ = ["MAX_METRES"]
+
 #: Per kind: (table field, mask field, primitive class).
 _TABLES = tuple((k.table, f"{k.kind}_mask", k) for k in SCENE_KINDS)
 #: Every tensor field and its number of trailing (non-batch) dimensions.
