@@ -432,19 +432,15 @@ class Planner(ObstacleStages):
         :class:`~kinlearn.errors.CollidingEndWarning`, which names the problems and says where the scene
         overlaps the robot's fixed base.
         """
-        if (
-            obstacles is None
-            and goal_position is None
-            and self._path_kernel is not None
-            and self._domain is None
-        ):
-            lean = self._batch1_free(start, goal)  # one free-space problem as two joint vectors
-            if lean is not None:
-                return lean
         if obstacles is not None or getattr(start, "obstacles", None) is not None:
             self.warm_up()  # once, before the clock starts: no deadline is spent loading kernels
         timer = Deadline(deadline)  # started before the input is checked: the caller's time
         steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
+        free_space = obstacles is None and goal_position is None and self._domain is None
+        if free_space and self._path_kernel is not None:
+            lean = self._batch1_free(start, goal)  # one free-space problem as two joint vectors
+            if lean is not None:
+                return lean
         stage1 = retreated = None  # what the batch-1 entry ran of a batch-1 problem's stages
         if obstacles is not None and goal_position is None:
             first = self._batch1(start, goal, obstacles, steps)
