@@ -2,6 +2,8 @@
 
     OMP_NUM_THREADS=1 python benchmarks/executable.py [--robots iiwa14 panda ur5] [--n 140] [--rrt-iterations 100000]
     OMP_NUM_THREADS=1 python benchmarks/executable.py --robots xarm7 z1 --per-family 6 --result executable_onboarded
+    OMP_NUM_THREADS=1 python benchmarks/executable.py --robots --onboarded runs/onboard/ur10 --per-family 10 \
+        --rrt-iterations 20000 --result executable_ur10
 
 Per arm and scene family, on the held-out problems of ``benchmarks/data/scene_problems_<arm>.npz``
 (made by ``benchmarks/make_obstacle_problems.py --families scenes``, never trained or tuned on; the
@@ -91,8 +93,9 @@ def run_arm(arm: str, n: int | None, iterations: int, figures: dict, per_family:
         problems = problems[np.linspace(0, len(problems) - 1, min(n, len(problems))).astype(int)]
     robot = load_robot(arm)
     body = problems.body(robot).double()
-    planner = kinlearn.Planner.load(DEFAULT_CHECKPOINTS / arm, body=body)
-    raw = kinlearn.Planner.load(DEFAULT_CHECKPOINTS / arm, body=body, shortcut=False)
+    folder = getattr(robot, "planner_dir", None) or DEFAULT_CHECKPOINTS / arm  # an onboarded arm's own
+    planner = kinlearn.Planner.load(folder, body=body)
+    raw = kinlearn.Planner.load(folder, body=body, shortcut=False)
     kb = kernel.KernelBody.of(body)
     start, goal, scene = problems.problem(0)
     for p in (planner, raw):
@@ -205,7 +208,7 @@ DATA = "benchmarks/data"
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--robots", nargs="+", default=["iiwa14", "panda", "ur5"])
+    ap.add_argument("--robots", nargs="*", default=["iiwa14", "panda", "ur5"])
     ap.add_argument(
         "--n", type=int, default=None, help="problems per arm, spread over the set (default: all)"
     )
@@ -214,19 +217,29 @@ def main() -> None:
         "--per-family", type=int, default=6, help="problems per family for an arm without a committed set"
     )
     ap.add_argument("--result", default="executable", help="the result file's name")
+    ap.add_argument(
+        "--onboarded",
+        nargs="*",
+        type=Path,
+        default=[],
+        help="run directories of `kinlearn onboard` (their arms)",
+    )
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     warnings.simplefilter("ignore")
     print(header("Executed trajectories among obstacles (held-out scene problems)", args.threads))
     figures: dict = {}
-    for arm in args.robots:
+    from kinlearn.training.onboard import load_onboarded
+
+    arms = list(args.robots) + [load_onboarded(d).name for d in args.onboarded]
+    for arm in arms:
         figures[f"{arm} summary"] = run_arm(arm, args.n, args.rrt_iterations, figures, args.per_family)
     write_result(
         args.result,
         figures,
         title="Executed trajectories among obstacles"
-        + ("" if args.result == "executable" else f" ({', '.join(args.robots)})"),
+        + ("" if args.result == "executable" else f" ({', '.join(arms)})"),
         notes=(
             "What a robot executes: plan.timed() of default plans, checked as executed (timed samples "
             "densified to 5 mrad per joint, the torch reference check, > 1 mm deep counts), beside the "
