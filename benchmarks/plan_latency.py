@@ -34,7 +34,6 @@ from kinlearn.baselines import joint_line, rrt_connect_timed
 from kinlearn.errors import MissingDependencyError
 from kinlearn.evaluation.workspace import heldout_pairs
 from kinlearn.models.trajectory import TMConfig, TrajectoryModel
-from kinlearn.planning.judge import judge
 from kinlearn.planning.planner import Planner
 
 
@@ -59,21 +58,26 @@ def stats(us: np.ndarray) -> dict:
 
 
 def breakdown(planner: Planner, s: torch.Tensor, g: torch.Tensor, calls: int) -> list[tuple[str, float]]:
-    """Median time of each stage of a batch-1 joint-path plan (µs)."""
-    problem, *_ = planner._problem(s, g, None, None)
-    st, gl = problem.start.numpy()[None], problem.goal.numpy()[None]
-    d = planner.robot.dof
-    th0, ef0, thT, efT = st[:, :d], st[:, d:], gl[:, :d], gl[:, d:]
-    joints, waypoints = planner._joint_path(th0, ef0, thT, efT)
-    parts = [
-        ("the Problem (checks, FK of start and goal)", lambda: planner._problem(s, g, None, None)),
-        ("TM forward (NumPy MLP)", lambda: planner._np_tm(th0, ef0, thT, efT)),
-        ("joint path and clamp", lambda: planner._joint_path(th0, ef0, thT, efT)),
-        (
-            "judge (FK of every configuration, limits, goal, the Plan)",
-            lambda: judge(problem, joints[0], waypoints=waypoints[0]),
-        ),
-    ]
+    """Median time (µs) of a batch-1 plan's parts: one problem as two joint vectors takes the batch-1 entry,
+    one compiled call from the input to the verdict, then the ``Plan`` of tensors; the same problem as a
+    batch of one (``(1, dof)``) takes the general path (a ``Problem``, the TM, ``judge``)."""
+    from kinlearn.planning.plan import START_TOLERANCE
+    from kinlearn.planning.planner import LIMIT_TOLERANCE, ZERO_MOVE
+
+    kernel, chain, tol = planner._path_kernel, planner._chain_kernel, planner.tolerance
+    tols = (LIMIT_TOLERANCE, START_TOLERANCE, tol.position, tol.joints)
+    q = np.stack((s.double().numpy(), g.double().numpy()))
+    parts = [("the whole call (the batch-1 entry)", lambda: planner.plan(s, g))]
+    if kernel is not None:
+        parts.append(
+            (
+                "its compiled call (checks, FK, MLP, knots, verdict)",
+                lambda: kernel.free_plan(q, chain, ZERO_MOVE, tols),
+            )
+        )
+    parts.append(
+        ("the same problem as a batch of one (the general path)", lambda: planner.plan(s[None], g[None]))
+    )
     out = []
     for name, fn in parts:
         out.append((name, float(np.median(per_call(lambda f=fn: f(), [()] * calls)))))
