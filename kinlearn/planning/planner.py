@@ -495,14 +495,18 @@ class Planner(ObstacleStages):
         if out is None:
             return None
         joints, ef, waypoints, states, scores, ok = out
-        t = torch.from_numpy
+        dtype = torch.promote_types(da, db)
+        narrow = dtype == torch.float32  # rounded as torch's .to() rounds, without its per-tensor dispatch
+
+        def t(a: np.ndarray) -> torch.Tensor:
+            return torch.from_numpy(a.astype(np.float32) if narrow and a.dtype != np.bool_ else a)
+
         plan = Plan(
             goal=t(states[1]), waypoints=t(waypoints), joints=t(joints), ef=t(ef), target=t(states[1, dof:]),
             goal_error=t(scores[0, 0, ...]), joint_error=t(scores[1, 0, ...]), success=t(ok[0, ...]),
             collision_free=None, tolerance=self.tolerance, robot=self.robot.name, stage="learned",
         )  # fmt: skip
-        dtype = torch.promote_types(da, db)
-        if dtype == torch.float64:
+        if dtype in (torch.float64, torch.float32):
             return plan
         return _as_output(plan, dtype, _CPU, self._lo_np, self._hi_np)
 
