@@ -4,9 +4,9 @@ Two kinds of trajectory model plan here:
 
 - the **joint-path TM** (:class:`~kinlearn.models.joint_path.JointPathModel`, the shipped planners): it
   predicts every waypoint's joints and end effector in one pass; the plan is its joint path from the
-  start's joints to the goal's, clamped to the limits, then checked by the analytic FK. At batch
-  sizes a CPU serves it runs in NumPy (:mod:`kinlearn.planning.inference`), which makes a batch-1 plan cost
-  tens of microseconds;
+  start's joints to the goal's, clamped to the limits, then checked by the analytic FK. A few problems
+  run compiled (:mod:`kinlearn.planning.inference`); one problem given as two joint vectors is one
+  compiled call from the input to the verdict, tens of microseconds; many problems run in torch;
 - the paper's **waypoint TM** (:class:`~kinlearn.models.trajectory.TrajectoryModel`): it predicts the end
   effector of each waypoint, and the IM and FM roll out from the start through them to the goal
   (Algorithm 1; one model-based correction per action, joints kept exact), so its plan ends near the
