@@ -10,7 +10,7 @@ inside a sphere, the points more than 2 mm outside every sphere, the farthest on
 spheres' union outside the link's solid (voxelised, Monte Carlo), summed over the links. For the panda and the
 ur5 both the shipped spherized URDFs (VAMP's, made with another tool) and spheres fitted now by
 :func:`kinlearn.collision.spherize.spherize` (seed 0, default settings); for the xarm7 and the z1 the shipped
-fitted bodies (``robots/<arm>/``).
+fitted bodies (``robots/<arm>/``); for an arm of an ``--onboarded`` run, named here too, the spheres it fitted.
 
 Planning (``--plan`` arms with a shipped obstacle network, ``--onboarded`` run directories of ``kinlearn
 onboard``): ``--per-family`` held-out problems of each of the seven scene families (seeds 1004–1010, the
@@ -36,6 +36,7 @@ import torch
 from _common import RUNS, table, write_result
 
 from kinlearn import load_robot
+from kinlearn.body.robot import BUILTIN_ROBOTS
 from kinlearn.collision.body import BodySpheres, _default_pairs, always_overlapping, body_spheres
 from kinlearn.collision.mesh import MeshBody, mesh_check
 from kinlearn.collision.spherize import (
@@ -112,8 +113,9 @@ def sphere_table(arms, points: int) -> tuple[dict, list]:
             t0 = time.perf_counter()
             fit = spherize(robot, config=SpherizeConfig())
             sets[f"fitted ({time.perf_counter() - t0:.0f} s)"] = fit.spheres
-        else:
-            sets["fitted (shipped)"] = _rows(body_spheres(robot))
+        else:  # an arm kinlearn ships, or one a `kinlearn onboard` run registered (--onboarded)
+            shipped = name in BUILTIN_ROBOTS
+            sets["fitted (shipped)" if shipped else "fitted (onboarded)"] = _rows(body_spheres(robot))
         for label, s in sets.items():
             f = sphere_figures(s, robot, points)
             out[f"{name} {label}"] = f
@@ -217,6 +219,11 @@ def main() -> None:
     out = RUNS / "onboard"
     out.mkdir(parents=True, exist_ok=True)
     figures: dict = {}
+    if args.onboarded:  # registered first, so that --spheres may name them too
+        from kinlearn.training.onboard import load_onboarded
+
+        for run_dir in args.onboarded:
+            load_onboarded(run_dir)
     if args.spheres:
         _, rows = sphere_table(args.spheres, args.points)
         figures["spheres"] = table(
@@ -314,10 +321,12 @@ def main() -> None:
             caption="held-out problems of the seven scene families; plan() default, batch 1; meshes checked with coal",
         )
     if "spheres" in figures:
+        default = args.spheres == ["panda", "ur5", "xarm7", "z1"]
         write_result(
-            "onboard_spheres",
+            "onboard_spheres" if default else "onboard_spheres_" + "_".join(args.spheres),
             {"spheres": figures.pop("spheres")},
-            title="Collision spheres fitted to an arm's own meshes, beside the shipped ones",
+            title="Collision spheres fitted to an arm's own meshes, beside the shipped ones"
+            + ("" if default else f" ({', '.join(args.spheres)})"),
             notes="Coverage on fresh surface samples of each link's collision geometry (example-robot-data's meshes).",
             threads=args.threads,
         )
