@@ -21,7 +21,7 @@ import io
 import math
 from abc import ABC, abstractmethod
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import torch
@@ -111,7 +111,7 @@ class Kinematics(ABC):
 
 def _z_to_axis(k: np.ndarray) -> np.ndarray:
     """A rotation A with A @ e_z = k, exact for the signed coordinate axes."""
-    exact = {
+    exact: dict[tuple[int, ...], np.ndarray] = {
         (0, 0, 1): np.eye(3),
         (0, 0, -1): np.diag([1.0, -1.0, -1.0]),
         (1, 0, 0): np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]),
@@ -316,7 +316,8 @@ class PkKinematics(Kinematics):
 
     def __init__(self, robot: Robot):
         super().__init__(robot)
-        self._chains: dict[tuple[torch.dtype, torch.device], object] = {}
+        # pytorch-kinematics' chains, untyped (it ships no annotations pyright reads)
+        self._chains: dict[tuple[torch.dtype, torch.device], Any] = {}
         self._chain(torch.float64, torch.device("cpu"))  # fail early on a URDF pk cannot read
 
     def _chain(self, dtype: torch.dtype, device: torch.device):

@@ -28,9 +28,9 @@ __all__ = ["judge", "judged", "verdict_small"]
 
 def judge(
     problem: Problem,
-    joints: torch.Tensor,
+    joints: torch.Tensor | np.ndarray,
     *,
-    waypoints: torch.Tensor | None = None,
+    waypoints: torch.Tensor | np.ndarray | None = None,
     found: torch.Tensor | None = None,
     tolerance: Tolerance = DEFAULT_TOLERANCE,
     max_travel: float = CHECK_TRAVEL,
@@ -194,11 +194,14 @@ def _judge_small(
 
             kb = kernel.KernelBody.of(planning_body(robot) if body is None else body)
             scene = problem.obstacles
-            unbatched = len(scene.batch_shape) == 0
-            flat_scene = None if unbatched else scene.reshape(n)
+            if len(scene.batch_shape) == 0:
+                scenes = [scene] * n
+            else:
+                flat_scene = scene.reshape(n)
+                scenes = [flat_scene[i] for i in range(n)]
             free = np.empty(n, dtype=bool)
             for i in range(n):
-                ks = kernel.KernelScene.of(scene) if unbatched else kernel.KernelScene(flat_scene[i])
+                ks = kernel.KernelScene.of(scenes[i]) if scenes[i] is scene else kernel.KernelScene(scenes[i])
                 free[i] = kernel.first_free(kb, flat[i : i + 1], ks, max_travel=float(max_travel)) == 0
     wp = None
     if waypoints is not None:
@@ -269,14 +272,24 @@ def verdict_small(
         success=ok,
         collision_free=free,
     )
+    t = {k: torch.from_numpy(v.reshape((*batch, *v.shape[1:]))) for k, v in fields.items() if v is not None}
     return Plan(
-        **{k: None if v is None else torch.from_numpy(v.reshape((*batch, *v.shape[1:]))) for k, v in fields.items()},
-        tolerance=tolerance, robot=robot.name, stage=stage,
+        goal=t["goal"], waypoints=t["waypoints"], joints=t["joints"], ef=t["ef"], target=t["target"],
+        goal_error=t["goal_error"], joint_error=t["joint_error"], success=t["success"],
+        collision_free=t.get("collision_free"), tolerance=tolerance, robot=robot.name, stage=stage,
     )  # fmt: skip
 
 
 def judged(
-    chain: KernelChain, flat, K: int, start, goal, state_goal: bool, tols: tuple, found, free
+    chain: KernelChain,
+    flat,
+    K: int,
+    start,
+    goal,
+    state_goal: bool,
+    tols: tuple[float, float, float, float],
+    found,
+    free,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """The arithmetic of a plan's verdict in one compiled call (:func:`verdict_small` holds the rule):
     ``flat (n · K, dof)`` float64 joint paths of K configurations of ``chain``'s robot, start states

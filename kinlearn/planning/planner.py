@@ -671,13 +671,12 @@ class Planner(ObstacleStages):
             if waypoints is not None:
                 waypoints[still] = ef0[still, None]
         lead = tuple(batch)
-        # judge takes float64 arrays as well as tensors (arrays: its fast path); it is annotated Tensor
-        paths = cast(torch.Tensor, joints.reshape(*lead, *joints.shape[1:]))
+        paths = joints.reshape(*lead, *joints.shape[1:])  # arrays: judge's fast path
         wps = None if waypoints is None else waypoints.reshape(*lead, *waypoints.shape[1:])
         plan = judge(
             problem,
             paths,
-            waypoints=cast("torch.Tensor | None", wps),
+            waypoints=wps,
             tolerance=self.tolerance,
             body=self.body if free is not None else None,
             collision_free=free,
