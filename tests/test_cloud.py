@@ -9,6 +9,7 @@ import torch
 
 from kinlearn.collision import Scene, body_obstacle_distance, check_path
 from kinlearn.collision.cloud import (
+    EXACT,
     Cleaning,
     PointCloud,
     clean_points,
@@ -211,6 +212,22 @@ def test_free_under_the_grid_is_free_under_the_points(seed):
     np.testing.assert_allclose(twin.detach().numpy(), cloud.distance(centres), rtol=0, atol=1e-12)
     twin.sum().backward()
     assert torch.isfinite(c.grad).all()
+    # a body sphere's query is exact wherever the sphere comes within EXACT of the balls, a lower bound
+    # beyond, never below the grid's bound, and so the points' own verdict at any margin below EXACT
+    sphere = cloud.distance(centres, r) - r
+    near = true <= EXACT
+    assert near.sum() > 100
+    np.testing.assert_allclose(sphere[near], true[near], rtol=0, atol=1e-12)
+    assert (sphere <= true + 1e-12).all() and (sphere >= bound - 1e-12).all()
+    for margin in (0.0, 0.004, 0.0099):
+        np.testing.assert_array_equal(sphere > margin, true > margin)
+    assert ((sphere > 0) & (bound <= 0)).sum() > 100  # spheres the grid alone could not clear
+    # its torch twin: the same numbers, and a gradient
+    c2 = torch.as_tensor(centres, dtype=torch.float64).requires_grad_(True)
+    twin = cloud.distance_torch(c2, torch.as_tensor(r)) - torch.as_tensor(r)
+    np.testing.assert_allclose(twin.detach().numpy(), sphere, rtol=0, atol=1e-12)
+    twin.sum().backward()
+    assert torch.isfinite(c2.grad).all()
 
 
 def test_points_and_primitives_mix_in_one_scene(body, robot):

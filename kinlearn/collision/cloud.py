@@ -1,11 +1,14 @@
 """Point-cloud obstacles: what a depth camera sees, as a :class:`PointCloud` a :class:`~kinlearn.collision.Scene`
-holds beside its primitives, checked through a compiled distance grid.
+holds beside its primitives, checked through a compiled distance grid, then the points themselves.
 
-Each point is an obstacle ball of ``radius`` (m) in the robot's base frame. The kernels never look at the
-points themselves: :attr:`PointCloud.packed` builds (once, on first use) a distance grid whose query is
-a **lower bound** on the signed distance from a point in space to the union of those balls, so that a
-body sphere found clear of the grid is clear of every point ball (*free under the structure is free
-under the points*):
+Each point is an obstacle ball of ``radius`` (m) in the robot's base frame. :attr:`PointCloud.packed`
+builds (once, on first use) one buffer: a distance grid whose query is a **lower bound** on the signed
+distance from a point in space to the union of those balls, so that a body sphere found clear of the grid
+is clear of every point ball (*free under the structure is free under the points*), and the points
+sorted into blocks of 4 × 4 × 4 cells. A body sphere's query (:func:`sphere_distance`, what every
+collision kernel takes) asks the grid first; a sphere the grid cannot clear by :data:`EXACT` beyond its
+radius reads the points of the blocks within reach, and its distance is then exact: the verdicts are the
+points' own, not the grid's (which would keep a sphere up to a cell's diagonal farther away). The grid:
 
 - the **grid** (cells of edge ``resolution``, default 1 cm) spans the points' bounding box and
   :data:`PAD` cells around it; each cell holds the exact Euclidean distance from its centre to the
@@ -17,11 +20,10 @@ under the points*):
   border), the largest of a centre's bound less ``‖p − centre‖`` (the distance is 1-Lipschitz, so each
   is a bound at ``p``), and the points' bounding box's distance.
 
-The conservative margin is the price of the cells: within the grid a sphere may be judged colliding
-before it touches a point ball by at most a cell's diagonal for the point's place in its cell and the
-query's (2√3 · ``resolution``, 3.5 cm at the default 1 cm), by about 1 cm typically at the default (the
-best of the 8 centres lies nearly behind ``p``), and never after; beyond the grid's :data:`PAD` the
-bound loosens with the angle to its border.
+The grid's bound is below the truth by at most a cell's diagonal for the point's place in its cell and
+the query's (2√3 · ``resolution``, 3.5 cm at the default 1 cm), by about 1 cm typically at the default
+(the best of the 8 centres lies nearly behind ``p``); beyond the grid's :data:`PAD` it loosens with the
+angle to its border. That slack costs only time: the spheres within it read the points.
 
 :meth:`PointCloud.distance` is the compiled query, :meth:`PointCloud.distance_torch` its torch twin
 (the same numbers, for :func:`~kinlearn.collision.body_obstacle_distance` and batches), and
@@ -47,6 +49,7 @@ from ..errors import PointCloudError
 from .cloud_cleaning import Cleaning, clean_points
 from .cloud_points import MILLIMETRE_NORM as MILLIMETRE_NORM
 from .cloud_points import check_points, points_in_base, read_points, shadows
+from .kinds import cloud as _k
 from .kinds.cloud import EDGE as _H
 from .kinds.cloud import HEADER as _HEADER
 from .kinds.cloud import HI as _HI
@@ -56,7 +59,7 @@ from .kinds.cloud import NY as _NY
 from .kinds.cloud import NZ as _NZ
 from .kinds.cloud import ORIGIN as _OX
 from .kinds.cloud import RADIUS as _R
-from .kinds.cloud import cloud_distance
+from .kinds.cloud import cloud_distance, nearest_point, sphere_distance
 
 __all__ = [
     "DEFAULT_RADIUS",
@@ -84,6 +87,12 @@ PAD = 0.04
 #: The most fine cells a grid may have (a float64 each): a larger cloud extent asks for a crop
 #: (:attr:`Cleaning.reach`) or a coarser resolution.
 MAX_CELLS = 1 << 26
+#: A body sphere's distance to the points is exact up to this far (m) beyond its radius (and a lower bound
+#: beyond): the verdict of every check with a margin below it is the points' own.
+EXACT = 0.01
+#: Spheres of a larger radius (m) than this are a link's bounding ball (whose spheres are looked at when
+#: it is near): the grid's bound alone decides them.
+LARGEST = 0.12
 #: Metres taken off every bound for the rounding of the arithmetic that made it.
 _ROUNDING = 1e-9
 
@@ -157,9 +166,9 @@ def _lines(g, base, n, step, m, v, z, top, site, at, scale=0.0, less=0.0):
 
 
 @jit
-def _build(points, radius, h, pad, out_header):
-    """The packed grid of ``points (N, 3)`` (see the module docstring): header filled (also into
-    ``out_header``), the cells' lower bounds after it, one buffer."""
+def _build(points, radius, h, pad, exact, largest, out_header):
+    """The packed cloud of ``points (N, 3)`` (see the module docstring): header filled (also into
+    ``out_header``), the cells' lower bounds after it, then the points by block, one buffer."""
     lo, hi = _bounds(points)
     ox, oy, oz = lo[0] - pad * h, lo[1] - pad * h, lo[2] - pad * h
     nx = int((hi[0] - ox) / h) + pad + 1
@@ -167,8 +176,15 @@ def _build(points, radius, h, pad, out_header):
     nz = int((hi[2] - oz) / h) + pad + 1
     P = ny * nz
     N = nx * P
-    buf = np.empty(_HEADER + N)
-    g = buf[_HEADER:]
+    e = _k.BLOCK_CELLS * h  # the points' blocks
+    bx = int((hi[0] - lo[0]) / e) + 1
+    by = int((hi[1] - lo[1]) / e) + 1
+    bz = int((hi[2] - lo[2]) / e) + 1
+    B = bx * by * bz
+    s0 = _HEADER + N
+    p0 = s0 + B + 1
+    buf = np.empty(p0 + 3 * points.shape[0])
+    g = buf[_HEADER:s0]
     g[:] = _NONE
     filled = np.zeros(nx, dtype=np.bool_)
     for i in range(points.shape[0]):
@@ -211,14 +227,60 @@ def _build(points, radius, h, pad, out_header):
     for a2 in range(3):
         hd[_LO + a2], hd[_HI + a2] = lo[a2], hi[a2]
     hd[_R] = radius
+    hd[_k.BX], hd[_k.BY], hd[_k.BZ], hd[_k.BEDGE] = bx, by, bz, e
+    hd[_k.EXACT], hd[_k.LARGEST] = exact, largest
+    hd[_k.STARTS], hd[_k.POINTS] = s0, p0
+    _sort_points(points, lo, e, bx, by, bz, buf[s0:p0], buf[p0:])
     out_header[:] = hd
     return buf
+
+
+@jit
+def _sort_points(points, lo, e, bx, by, bz, starts, out):
+    """``points`` sorted by block (a counting sort) into ``out`` (x, y, z each), block b's first at
+    ``starts[b]`` (``starts[-1]``: their number)."""
+    n = points.shape[0]
+    block = np.empty(n, dtype=np.int64)
+    count = np.zeros(bx * by * bz + 1, dtype=np.int64)
+    for i in range(n):
+        a = min(max(int((points[i, 0] - lo[0]) / e), 0), bx - 1)
+        b = min(max(int((points[i, 1] - lo[1]) / e), 0), by - 1)
+        c = min(max(int((points[i, 2] - lo[2]) / e), 0), bz - 1)
+        block[i] = (a * by + b) * bz + c
+        count[block[i] + 1] += 1
+    for b in range(bx * by * bz):
+        count[b + 1] += count[b]
+    for b in range(bx * by * bz + 1):
+        starts[b] = count[b]
+    for i in range(n):
+        o = 3 * count[block[i]]
+        out[o], out[o + 1], out[o + 2] = points[i, 0], points[i, 1], points[i, 2]
+        count[block[i]] += 1
 
 
 @jit
 def _distances(points, g, out):
     for i in range(points.shape[0]):
         out[i] = cloud_distance(points[i, 0], points[i, 1], points[i, 2], g)
+
+
+@jit
+def _sphere_distances(centres, radii, g, out):
+    for i in range(centres.shape[0]):
+        out[i] = sphere_distance(centres[i, 0], centres[i, 1], centres[i, 2], radii[i], g, np.inf)
+
+
+@jit
+def _refinements(centres, radii, g, bound, out):
+    """What :func:`sphere_distance` made of each sphere: the index of the nearest point it read (≥ 0),
+    −1 where it found none within reach, −2 where the grid's ``bound`` decided alone."""
+    for i in range(centres.shape[0]):
+        room = radii[i] + g[_k.EXACT]
+        if bound[i] >= room or radii[i] > g[_k.LARGEST]:
+            out[i] = -2
+        else:
+            x, y, z = centres[i, 0], centres[i, 1], centres[i, 2]
+            out[i] = nearest_point(x, y, z, room + g[_R], g)[0]
 
 
 class PointCloud:
@@ -263,7 +325,7 @@ class PointCloud:
         if self._packed is None:
             header = np.empty(_HEADER)
             pad = math.ceil(PAD / self.resolution)
-            buf = _build(self.points, self.radius, self.resolution, pad, header)
+            buf = _build(self.points, self.radius, self.resolution, pad, EXACT, LARGEST, header)
             buf.flags.writeable = False
             self._header = header
             self._packed = buf
@@ -275,19 +337,57 @@ class PointCloud:
         g = self.packed
         return int(g[_NX]), int(g[_NY]), int(g[_NZ])
 
-    def distance(self, points) -> np.ndarray:
+    def distance(self, points, radii=None) -> np.ndarray:
         """``(N,)``: the compiled lower bound on each point's (``(N, 3)``, base frame) signed distance to
-        the cloud's balls (:func:`cloud_distance`)."""
+        the cloud's balls, the grid's (:func:`cloud_distance`); with ``radii (N,)``, the distance of the
+        centres of spheres of those radii, exact up to :data:`EXACT` beyond them (:func:`sphere_distance`:
+        what the collision kernels take; subtract ``radii`` for the spheres' own)."""
         p = np.ascontiguousarray(np.asarray(points, dtype=np.float64))
         if p.ndim != 2 or p.shape[1] != 3:
             raise PointCloudError(f"query points must have shape (N, 3), got {p.shape}")
         out = np.empty(p.shape[0])
-        _distances(p, self.packed, out)
+        if radii is None:
+            _distances(p, self.packed, out)
+        else:
+            _sphere_distances(p, self._radii(radii, p.shape[0]), self.packed, out)
         return out
 
-    def distance_torch(self, p: torch.Tensor) -> torch.Tensor:
-        """The torch twin of :meth:`distance`: ``(...)`` for points ``p (..., 3)`` in their dtype and device,
-        differentiable in ``p`` (the gradient of the bound taken: away from the best cell centre)."""
+    @staticmethod
+    def _radii(radii, n: int) -> np.ndarray:
+        r = np.ascontiguousarray(np.broadcast_to(np.asarray(radii, dtype=np.float64), (n,)))
+        if not np.isfinite(r).all() or (r < 0).any():
+            raise PointCloudError("sphere radii must be finite and >= 0")
+        return r
+
+    def distance_torch(self, p: torch.Tensor, radii: torch.Tensor | None = None) -> torch.Tensor:
+        """The torch twin of :meth:`distance`: ``(...)`` for points ``p (..., 3)`` (with ``radii``, sphere
+        centres and their radii ``(...)``) in their dtype and device, differentiable in ``p`` (the gradient
+        of the bound taken: away from the best cell centre; of an exact distance: away from its point)."""
+        bound = self._bound_torch(p)
+        if radii is None:
+            return bound
+        radii = torch.as_tensor(radii, dtype=p.dtype, device=p.device).expand(bound.shape)
+        flat = p.detach().reshape(-1, 3).cpu().double().numpy()
+        r = self._radii(radii.detach().reshape(-1).cpu().double().numpy(), flat.shape[0])
+        found = np.empty(flat.shape[0], dtype=np.int64)
+        _refinements(flat, r, self.packed, bound.detach().reshape(-1).cpu().double().numpy(), found)
+        found_t = torch.from_numpy(found).to(p.device).reshape(bound.shape)
+        pts = self._points_torch(p.dtype, p.device)
+        exact = _norm(p - pts[found_t.clamp_min(0)]) - self.radius
+        room = torch.maximum(bound, radii + self.packed[_k.EXACT])
+        return torch.where(found_t >= 0, exact, torch.where(found_t == -1, room, bound))
+
+    def _points_torch(self, dtype: torch.dtype, device) -> torch.Tensor:
+        """The points in the packed order, as a tensor (kept)."""
+        key = ("points", dtype, device)
+        t = self._torch.get(key)
+        if t is None:
+            g = self.packed
+            p0 = int(g[_k.POINTS])
+            t = self._torch[key] = torch.from_numpy(np.array(g[p0:]).reshape(-1, 3)).to(dtype=dtype, device=device)
+        return t
+
+    def _bound_torch(self, p: torch.Tensor) -> torch.Tensor:
         g = self.packed
         key = (p.dtype, p.device)
         gt = self._torch.get(key)

@@ -122,10 +122,11 @@ def _per_sphere_core(c, r, fields: dict, floor_mask) -> torch.Tensor:
 
 def _per_sphere(centres: torch.Tensor, radii: torch.Tensor, scene: Scene, floor_mask) -> torch.Tensor:
     """``(..., M)``: each body sphere's smallest signed distance to the scene (+inf for an empty scene); a
-    point cloud's is its grid's lower bound (:meth:`~kinlearn.collision.cloud.PointCloud.distance_torch`)."""
+    point cloud's is exact near the points and the grid's lower bound beyond
+    (:meth:`~kinlearn.collision.cloud.PointCloud.distance_torch`)."""
     per = _per_sphere_primitives(centres, radii, scene, floor_mask)
     if scene.cloud is not None:
-        per = torch.minimum(per, scene.cloud.distance_torch(centres) - radii)
+        per = torch.minimum(per, scene.cloud.distance_torch(centres, radii) - radii)
     return per
 
 

@@ -122,7 +122,7 @@ def sphere_scene(x, y, z, r, on_floor, tables, floor):
     d = box.nearest(x, y, z, tables[1], d)
     d = cylinder.nearest(x, y, z, tables[2], d)
     d = capsule.nearest(x, y, z, tables[3], d)
-    d = cloud.nearest(x, y, z, tables[4], d)
+    d = cloud.nearest(x, y, z, r, tables[4], d)
     d = d - r
     if floor[0] > 0.5 and on_floor:
         d = min(d, z - r - floor[1])
@@ -143,7 +143,7 @@ def spheres_scene(c, radii, on_floor, tables, floor, xyz, out):
     box.nearest_many(X, Y, Z, M, tables[1], out)
     cylinder.nearest_many(X, Y, Z, M, tables[2], out)
     capsule.nearest_many(X, Y, Z, M, tables[3], out)
-    cloud.nearest_many(X, Y, Z, M, tables[4], out)
+    cloud.nearest_many(X, Y, Z, radii, M, tables[4], out)
     for m in range(M):
         out[m] = out[m] - radii[m]
     if floor[0] > 0.5:

@@ -1,6 +1,7 @@
 """The point-cloud kind: a scene's :class:`~kinlearn.collision.cloud.PointCloud` as the compiled kernels
-see it, its distance grid packed as one row (:attr:`~kinlearn.collision.cloud.PointCloud.packed`), and
-the grid's query (:func:`cloud_distance`, a lower bound on the distance to the point balls).
+see it, its distance grid and its points packed as one row (:attr:`~kinlearn.collision.cloud.PointCloud.packed`),
+the grid's query (:func:`cloud_distance`, a lower bound on the distance to the point balls) and a body
+sphere's query (:func:`sphere_distance`), exact wherever the verdict could turn on it.
 
 A cloud is no table of primitives: it is a packed kind (:data:`~kinlearn.collision.kinds.PACKED_KINDS`)
 after the scene's tables, whose table is empty for a scene without points. The obstacle network reads
@@ -19,13 +20,23 @@ from ...body.jit import jit
 
 __all__ = ["HEADER", "Cloud", "cloud_distance"]
 
-# The packed grid (float64): a header, then a lower bound per cell (nx · ny · nz, C order). Header slots:
-NX, NY, NZ = 0, 1, 2  # dimensions
+# The packed cloud (float64): a header, then a lower bound per grid cell (nx · ny · nz, C order), then the
+# points sorted by block (blocks of BLOCK_CELLS grid cells a side over the points' bounding box): each
+# block's first point (bx · by · bz + 1 offsets), then the points (x, y, z each). Header slots:
+NX, NY, NZ = 0, 1, 2  # the grid's dimensions
 ORIGIN = 3  # origin (3): the low corner of cell (0, 0, 0)
 EDGE = 6  # cell edge
 LO, HI = 7, 10  # the points' bounding box (3 + 3)
 RADIUS = 13  # the points' radius
-HEADER = 14
+BX, BY, BZ = 14, 15, 16  # the blocks' dimensions (their origin is LO)
+BEDGE = 17  # a block's edge
+EXACT = 18  # a sphere's distance is exact up to this far beyond its radius (m)
+LARGEST = 19  # spheres larger than this (a link's bounding ball) get the grid's bound alone
+STARTS = 20  # where the blocks' offsets start in the buffer
+POINTS = 21  # where the points start
+HEADER = 22
+#: Grid cells along a block's edge.
+BLOCK_CELLS = 4
 
 _TINY = float(np.finfo(np.float64).tiny)
 
@@ -86,20 +97,80 @@ def cloud_distance(x, y, z, g):
 
 
 @jit(inline="always")
-def nearest(x, y, z, t, d):
-    """min(``d``, the point's bound to the cloud of packed table ``t``; none when ``t`` is empty)."""
+def nearest_point(x, y, z, reach, g):
+    """``(index, distance)`` of the point nearest ``(x, y, z)`` among those within ``reach`` of it, or
+    ``(-1, inf)`` when none is: the blocks the ball of ``reach`` touches, point by point."""
+    e = g[BEDGE]
+    bx, by, bz = int(g[BX]), int(g[BY]), int(g[BZ])
+    lx, ly, lz = g[LO], g[LO + 1], g[LO + 2]
+    i0 = max(int(math.floor((x - reach - lx) / e)), 0)
+    i1 = min(int(math.floor((x + reach - lx) / e)), bx - 1)
+    j0 = max(int(math.floor((y - reach - ly) / e)), 0)
+    j1 = min(int(math.floor((y + reach - ly) / e)), by - 1)
+    k0 = max(int(math.floor((z - reach - lz) / e)), 0)
+    k1 = min(int(math.floor((z + reach - lz) / e)), bz - 1)
+    best2 = reach * reach
+    best = -1
+    s0, p0 = int(g[STARTS]), int(g[POINTS])
+    for i in range(i0, i1 + 1):
+        ax = lx + i * e
+        ex = max(max(ax - x, x - ax - e), 0.0)
+        for j in range(j0, j1 + 1):
+            ay = ly + j * e
+            ey = max(max(ay - y, y - ay - e), 0.0)
+            if ex * ex + ey * ey > best2:
+                continue
+            row = s0 + (i * by + j) * bz
+            for k in range(k0, k1 + 1):
+                az = lz + k * e
+                ez = max(max(az - z, z - az - e), 0.0)
+                if ex * ex + ey * ey + ez * ez > best2:
+                    continue
+                for n in range(int(g[row + k]), int(g[row + k + 1])):
+                    o = p0 + 3 * n
+                    dx, dy, dz = x - g[o], y - g[o + 1], z - g[o + 2]
+                    d2 = dx * dx + dy * dy + dz * dz
+                    if d2 <= best2:
+                        best2 = d2
+                        best = n
+    if best < 0:
+        return -1, np.inf
+    return best, math.sqrt(max(best2, _TINY))
+
+
+@jit(inline="always")
+def sphere_distance(x, y, z, r, g, d):
+    """min(``d``, a lower bound on the distance from ``(x, y, z)``, the centre of a sphere of radius ``r``,
+    to the point balls of packed cloud ``g``), **exact** wherever the sphere comes within ``g[EXACT]`` of
+    them: the grid's bound (:func:`cloud_distance`) first; where it cannot clear the sphere by that much
+    (and is below ``d``), the points within reach, one by one. A sphere larger than ``g[LARGEST]`` (a
+    link's bounding ball, whose spheres follow) keeps the bound."""
+    b = cloud_distance(x, y, z, g)
+    room = r + g[EXACT]
+    if b >= d or b >= room or r > g[LARGEST]:
+        return min(d, b)
+    n, e = nearest_point(x, y, z, room + g[RADIUS], g)
+    if n < 0:
+        return min(d, max(b, room))
+    return min(d, e - g[RADIUS])
+
+
+@jit(inline="always")
+def nearest(x, y, z, r, t, d):
+    """min(``d``, the sphere's (centre ``(x, y, z)``, radius ``r``) :func:`sphere_distance` to the cloud of
+    packed table ``t``; none when ``t`` is empty)."""
     if t.shape[0]:
-        d = min(d, cloud_distance(x, y, z, t[0]))
+        d = sphere_distance(x, y, z, r, t[0], d)
     return d
 
 
 @jit(inline="always")
-def nearest_many(X, Y, Z, M, t, out):
-    """``out[m] = min(out[m], the bound of point m)`` for the first ``M`` points."""
+def nearest_many(X, Y, Z, R, M, t, out):
+    """``out[m] = min(out[m], the sphere distance of sphere m)`` for the first ``M`` spheres (radii ``R``)."""
     if t.shape[0]:
         g = t[0]
         for m in range(M):
-            out[m] = min(out[m], cloud_distance(X[m], Y[m], Z[m], g))
+            out[m] = sphere_distance(X[m], Y[m], Z[m], R[m], g, out[m])
 
 
 @jit(inline="always")
