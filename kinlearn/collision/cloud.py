@@ -384,7 +384,9 @@ class PointCloud:
         if t is None:
             g = self.packed
             p0 = int(g[_k.POINTS])
-            t = self._torch[key] = torch.from_numpy(np.array(g[p0:]).reshape(-1, 3)).to(dtype=dtype, device=device)
+            t = self._torch[key] = torch.from_numpy(np.array(g[p0:]).reshape(-1, 3)).to(
+                dtype=dtype, device=device
+            )
         return t
 
     def _bound_torch(self, p: torch.Tensor) -> torch.Tensor:
