@@ -2,7 +2,7 @@
 each beside the same problems given as primitives, every plan judged on the TRUE primitives.
 
     OMP_NUM_THREADS=1 python benchmarks/clouds.py [--robots panda ur5] [--per-family 3] [--radius 0.01]
-        [--resolution 0.01] [--build-sizes 100000 1000000]
+        [--resolution 0.02] [--build-sizes 100000 1000000]
 
 Renderings (:mod:`kinlearn.collision.cloud_render`):
 
@@ -15,7 +15,8 @@ Renderings (:mod:`kinlearn.collision.cloud_render`):
   missing: **unknown space is free** to the planner, and the rows count the plans that collide with the
   true primitives there.
 
-Each point is a ball of ``--radius`` (m) checked through the compiled grid of ``--resolution`` (m); points
+Each point is a ball of ``--radius`` (m; a row says where not), checked exactly: through the compiled grid of
+``--resolution`` (m) first, then, for the body spheres the grid cannot clear, the points themselves; points
 beyond the body's reach are cropped. Every plan is the default ``plan()`` (the learned proposals, which
 read no cloud, then the retreat stage and RRT-Connect on the compiled check) at batch 1 on one thread, timed
 with the cloud's grid already built (the build times are their own rows). A problem's ends may collide
@@ -28,7 +29,10 @@ primitives), success among problems whose ends are free under that rendering, pl
 collision-free that collide with the true primitives, p50 plan time of the solved plans and, over the
 problems solved both ways, its ratio to the same problems' p50 among the primitives, mean points per
 cloud. A third rendering takes the depth camera's occluded space as occupied, 1 m behind every point it
-sees (after self-filtering: what the arm hides stays free): ``Scene.from_points(..., shadow=1.0)``.
+sees, the arm's own included (self-filtering comes after the shadows): ``Scene.from_points(..., shadow=1.0)``.
+Two more rows plan on the surface clouds without the obstacle network, and with balls of
+:data:`SMALL_RADIUS` instead of ``--radius`` (the trade of a smaller ball: more goals read free, a sparser
+or noisier cloud is covered less).
 """
 
 from __future__ import annotations
@@ -71,6 +75,9 @@ RENDERINGS = {"surface": 0.0, "depth camera": 0.0, "depth camera, occluded space
 
 #: The row of the surface clouds planned without the obstacle network.
 NO_NETWORK = "surface, no obstacle network"
+#: The row of the surface clouds whose points are balls of SMALL_RADIUS (m).
+SMALL = "surface, 5 mm balls"
+SMALL_RADIUS = 0.005
 
 
 def render(kind: str, scene: Scene, body, start, radius: float, resolution: float, seed: int) -> Scene:
@@ -137,7 +144,7 @@ def build_times(sizes: list[int], radius: float, resolution: float) -> list[list
     return rows
 
 
-def figure(path, rname: str = "panda", family: str = "table", radius: float = 0.01, resolution: float = 0.01):
+def figure(path, rname: str = "panda", family: str = "table", radius: float = 0.01, resolution: float = 0.02):
     """One held-out problem among its depth camera's points: the points, the plan's end-effector path and
     the arm's spheres at its start and goal."""
     import matplotlib
@@ -188,7 +195,7 @@ def main() -> None:
     ap.add_argument("--robots", nargs="*", default=["panda", "ur5"])
     ap.add_argument("--per-family", type=int, default=3, help="held-out problems per family (the first ones)")
     ap.add_argument("--radius", type=float, default=0.01)
-    ap.add_argument("--resolution", type=float, default=0.01)
+    ap.add_argument("--resolution", type=float, default=0.02)
     ap.add_argument("--build-sizes", type=int, nargs="*", default=[100_000, 1_000_000])
     ap.add_argument("--no-write", action="store_true", help="print only")
     ap.add_argument("--figure", action="store_true", help="only draw docs/figures/cloud_plan.png")
@@ -217,13 +224,16 @@ def main() -> None:
         s0, g0, sc0 = subset.problem(0)
         plan(planner, s0, g0, render("surface", sc0, body, s0[: robot.dof], args.radius, args.resolution, 0))
         result = {k: {"paths": [], "t": [], "flag": [], "ends": [], "points": [], "stage": []} for k in
-                  ("primitives", *RENDERINGS, NO_NETWORK)}  # fmt: skip
+                  ("primitives", *RENDERINGS, NO_NETWORK, SMALL)}  # fmt: skip
         for n in range(len(subset)):
             start, goal, scene = subset.problem(n)
             q = torch.stack([start[: robot.dof], goal[: robot.dof]]).double()
             for kind in result:
                 if kind == "primitives":
                     sc = scene
+                elif kind == SMALL:
+                    sc = render("surface", scene, body, q[0], SMALL_RADIUS, args.resolution, n)
+                    sc.cloud.packed  # noqa: B018 - the grid built before the clock starts
                 elif kind != NO_NETWORK:  # (the no-network row plans on the surface cloud just made)
                     sc = render(kind, scene, body, q[0], args.radius, args.resolution, n)
                     sc.cloud.packed  # noqa: B018 - the grid built before the clock starts
@@ -294,8 +304,9 @@ def main() -> None:
     print("per row (stages that made the plans):", json.dumps(summary, indent=1))
     caption = (
         f"The first {args.per_family} held-out problems of each of the seven families per arm, default plan(), "
-        f"points as balls of {args.radius} m through a grid of {args.resolution} m; judged on the true primitives. "
-        "Depth camera: unknown (occluded) space is free to the planner."
+        f"points as balls of {args.radius} m (a row says where not), checked exactly through a grid of "
+        f"{args.resolution} m and the points; judged on the true primitives. Depth camera: unknown (occluded) "
+        "space is free to the planner, unless the row takes it as occupied."
     )
     figures["planning among clouds"] = table(columns, rows, caption=caption)
     if args.build_sizes:

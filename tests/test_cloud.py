@@ -193,7 +193,7 @@ def test_free_under_the_grid_is_free_under_the_points(seed):
     pts = np.vstack([face, post, rng.random((200, 3)) * 1.2 - 0.3])
     cloud = PointCloud(pts, radius, resolution)
     centres = rng.random((20000, 3)) * 1.8 - 0.6
-    r = rng.random(20000) * 0.08
+    r = rng.random(20000) * 0.2  # body spheres and links' bounding balls
     bound = cloud.distance(centres) - r
     nearest = np.concatenate(  # brute force, in chunks (the whole broadcast holds gigabytes)
         [np.sqrt(((c[:, None] - pts[None]) ** 2).sum(-1).min(1)) for c in np.array_split(centres, 40)]
@@ -283,3 +283,27 @@ def test_a_cameras_points_in_its_own_frame_and_their_shadows():
     assert (np.linalg.norm(behind - T[:3, 3], axis=1) > np.linalg.norm(seen - T[:3, 3], axis=1).min()).all()
     with pytest.raises(PointCloudError, match="camera's pose"):
         Scene.from_points(seen, shadow=0.05)
+
+
+def test_what_the_arm_hides_from_the_camera_is_occupied(robot, body):
+    q = torch.as_tensor((robot.lower + robot.upper) / 2)
+    with torch.no_grad():
+        centres, radii = body(q[None])[0].numpy(), body.radii.numpy()
+    arm = np.column_stack([centres, radii])
+    target = centres[len(centres) // 2]
+    wall = Scene(boxes=torch.tensor([[target[0] + 0.5, target[1], target[2], 0.02, 0.6, 0.6]]))
+    cam = DepthCamera(position=tuple(target - (0.8, 0.0, 0.0)), target=tuple(target), width=64, height=48)
+    T = cam.pose()
+    seen = cam.points(wall, spheres=arm)
+    in_camera = (seen - T[:3, 3]) @ T[:3, :3]
+    scene = Scene.from_points(in_camera, frame=T, shadow=0.4, self_filter=(body, q.numpy()))
+    # the arm stands free where it was seen...
+    assert bool(check_path(body, q[None].expand(2, -1), scene).collision_free)
+    # ...and the space it hides, between it and the wall, is occupied
+    ray = target - T[:3, 3]
+    ray /= np.linalg.norm(ray)
+    hidden = target + ray * (radii[len(centres) // 2] + 0.2)
+    assert scene.cloud.distance(hidden[None])[0] < 0
+    bare = cam.points(wall)
+    without_arm = Scene.from_points((bare - T[:3, 3]) @ T[:3, :3], frame=T, shadow=0.4)
+    assert without_arm.cloud.distance(hidden[None])[0] > 0.1  # free were the arm not there

@@ -40,7 +40,7 @@ def test_the_kernels_see_the_points_as_torch_does(planner, robot):
     np.testing.assert_allclose(
         kernel.point_distances(ks, points),
         np.minimum(kernel.point_distances(kernel.KernelScene.of(Scene(boxes=box, floor=0.0)), points),
-                   scene.cloud.distance(points)),
+                   scene.cloud.distance(points, np.zeros(len(points)))),
         rtol=0, atol=1e-12,
     )  # fmt: skip
 

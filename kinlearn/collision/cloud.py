@@ -10,7 +10,7 @@ collision kernel takes) asks the grid first; a sphere the grid cannot clear by :
 radius reads the points of the blocks within reach, and its distance is then exact: the verdicts are the
 points' own, not the grid's (which would keep a sphere up to a cell's diagonal farther away). The grid:
 
-- the **grid** (cells of edge ``resolution``, default 1 cm) spans the points' bounding box and
+- the **grid** (cells of edge ``resolution``, default 2 cm) spans the points' bounding box and
   :data:`PAD` cells around it; each cell holds the exact Euclidean distance from its centre to the
   nearest cell holding a point (Felzenszwalb and Huttenlocher's separable transform: a scan along z, then
   the lower envelope of parabolas along y and x, many lines side by side so that every access is
@@ -21,8 +21,8 @@ points' own, not the grid's (which would keep a sphere up to a cell's diagonal f
   is a bound at ``p``), and the points' bounding box's distance.
 
 The grid's bound is below the truth by at most a cell's diagonal for the point's place in its cell and
-the query's (2√3 · ``resolution``, 3.5 cm at the default 1 cm), by about 1 cm typically at the default
-(the best of the 8 centres lies nearly behind ``p``); beyond the grid's :data:`PAD` it loosens with the
+the query's (2√3 · ``resolution``, 7 cm at the default 2 cm), by about a cell's edge typically (the best of
+the 8 centres lies nearly behind ``p``); beyond the grid's :data:`PAD` it loosens with the
 angle to its border. That slack costs only time: the spheres within it read the points.
 
 :meth:`PointCloud.distance` is the compiled query, :meth:`PointCloud.distance_torch` its torch twin
@@ -39,6 +39,7 @@ from here. Bad input raises :class:`~kinlearn.errors.PointCloudError` (a file th
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +47,7 @@ import torch
 
 from ..body.jit import jit
 from ..errors import PointCloudError
-from .cloud_cleaning import Cleaning, clean_points
+from .cloud_cleaning import Cleaning, body_of, clean_points
 from .cloud_points import MILLIMETRE_NORM as MILLIMETRE_NORM
 from .cloud_points import check_points, points_in_base, read_points, shadows
 from .kinds import cloud as _k
@@ -79,8 +80,10 @@ __all__ = [
 #: Default radius (m) of the ball each point stands for: a surface sampled every centimetre is covered
 #: by balls of half the diagonal of its spacing and then some (sensor noise).
 DEFAULT_RADIUS = 0.01
-#: Default edge (m) of the fine grid's cells.
-DEFAULT_RESOLUTION = 0.01
+#: Default edge (m) of the grid's cells: a speed setting, not an accuracy one (the spheres the grid cannot
+#: clear read the points). 2 cm builds a grid of 10⁵ points in milliseconds and plans as fast as 1 cm
+#: (``benchmarks/clouds.py``).
+DEFAULT_RESOLUTION = 0.02
 #: Metres of grid around the points' bounding box (beyond it, the border cells' bounds less the way
 #: there): about a body sphere's radius and a clearance, where the bounds matter most.
 PAD = 0.04
@@ -90,9 +93,6 @@ MAX_CELLS = 1 << 26
 #: A body sphere's distance to the points is exact up to this far (m) beyond its radius (and a lower bound
 #: beyond): the verdict of every check with a margin below it is the points' own.
 EXACT = 0.01
-#: Spheres of a larger radius (m) than this are a link's bounding ball (whose spheres are looked at when
-#: it is near): the grid's bound alone decides them.
-LARGEST = 0.12
 #: Metres taken off every bound for the rounding of the arithmetic that made it.
 _ROUNDING = 1e-9
 
@@ -166,7 +166,7 @@ def _lines(g, base, n, step, m, v, z, top, site, at, scale=0.0, less=0.0):
 
 
 @jit
-def _build(points, radius, h, pad, exact, largest, out_header):
+def _build(points, radius, h, pad, exact, out_header):
     """The packed cloud of ``points (N, 3)`` (see the module docstring): header filled (also into
     ``out_header``), the cells' lower bounds after it, then the points by block, one buffer."""
     lo, hi = _bounds(points)
@@ -228,7 +228,7 @@ def _build(points, radius, h, pad, exact, largest, out_header):
         hd[_LO + a2], hd[_HI + a2] = lo[a2], hi[a2]
     hd[_R] = radius
     hd[_k.BX], hd[_k.BY], hd[_k.BZ], hd[_k.BEDGE] = bx, by, bz, e
-    hd[_k.EXACT], hd[_k.LARGEST] = exact, largest
+    hd[_k.EXACT] = exact
     hd[_k.STARTS], hd[_k.POINTS] = s0, p0
     _sort_points(points, lo, e, bx, by, bz, buf[s0:p0], buf[p0:])
     out_header[:] = hd
@@ -276,7 +276,7 @@ def _refinements(centres, radii, g, bound, out):
     −1 where it found none within reach, −2 where the grid's ``bound`` decided alone."""
     for i in range(centres.shape[0]):
         room = radii[i] + g[_k.EXACT]
-        if bound[i] >= room or radii[i] > g[_k.LARGEST]:
+        if bound[i] >= room:
             out[i] = -2
         else:
             x, y, z = centres[i, 0], centres[i, 1], centres[i, 2]
@@ -325,7 +325,7 @@ class PointCloud:
         if self._packed is None:
             header = np.empty(_HEADER)
             pad = math.ceil(PAD / self.resolution)
-            buf = _build(self.points, self.radius, self.resolution, pad, EXACT, LARGEST, header)
+            buf = _build(self.points, self.radius, self.resolution, pad, EXACT, header)
             buf.flags.writeable = False
             self._header = header
             self._packed = buf
@@ -438,12 +438,26 @@ def sensed_cloud(
         points = read_points(points)
     pts = points_in_base(check_points(points, drop_nonfinite=drop_nonfinite), frame)
     radius = DEFAULT_RADIUS if radius is None else radius
+    resolution = DEFAULT_RESOLUTION if resolution is None else resolution
+    if shadow and frame is None:
+        raise PointCloudError("shadow= needs the camera's pose (frame=): the rays run from it")
+    if shadow and self_filter is not None:
+        # the arm's own points cast their shadows too, and self-filtering comes after them: the space the
+        # arm hides from the camera is occupied up to its body
+        if not (isinstance(self_filter, (tuple, list)) and len(self_filter) == 2):
+            raise PointCloudError("self_filter must be a pair (body, joints)")
+        c = cleaning or Cleaning()
+        if c.reach is None:
+            c = replace(c, reach=body_of(self_filter[0]).reach + c.self_margin)
+        pts = clean_points(pts, float(radius), c)
+        pts = shadows(pts, points_in_base(np.zeros((1, 3)), frame)[0], float(shadow), float(resolution))
+        pts = clean_points(
+            pts, float(radius), Cleaning(reach=c.reach, self_margin=c.self_margin), self_filter
+        )
+        return PointCloud(pts, radius, resolution)
     if cleaning is not None or self_filter is not None:
         pts = clean_points(pts, float(radius), cleaning, self_filter)
-    resolution = DEFAULT_RESOLUTION if resolution is None else resolution
     if shadow:
-        if frame is None:
-            raise PointCloudError("shadow= needs the camera's pose (frame=): the rays run from it")
         pts = shadows(pts, points_in_base(np.zeros((1, 3)), frame)[0], float(shadow), float(resolution))
     return PointCloud(pts, radius, resolution)
 

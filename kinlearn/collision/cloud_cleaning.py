@@ -71,7 +71,7 @@ class Cleaning:
             raise PointCloudError("Cleaning.outlier_radius must be > 0 to remove outliers")
 
 
-def _body_of(body):
+def body_of(body):
     """A :class:`~kinlearn.collision.BodySpheres`, or the ``body`` of a planner."""
     from .body import BodySpheres
 
@@ -101,7 +101,7 @@ def clean_points(
             body, q = self_filter
         except (TypeError, ValueError) as exc:
             raise PointCloudError("self_filter must be a pair (body, joints)") from exc
-        body = _body_of(body)
+        body = body_of(body)
         q = torch.as_tensor(np.asarray(q, dtype=np.float64)).to(body.radii)
         if q.shape != (body.robot.dof,):
             raise PointCloudError(

@@ -109,7 +109,7 @@ def free_lanes(qs, margin, f, nb, s, free):
         for e in range(A):
             _place_lane(T, lk, v0, v1, v2, alive[e], c, e)
             r[e], fl[e] = l_radius[lk], lk > 0
-        spheres_scene(c[:A], r[:A], fl[:A], tables, floor, xyz, d[:A])
+        spheres_scene(c[:A], r[:A], fl[:A], tables, floor, xyz, d[:A], True)  # the links' balls
         K = 0
         for e in range(A):
             if not d[e] > margin:

@@ -38,7 +38,7 @@ def _scene_hit(q, margin, body, scene, frames):
         if a == b:
             continue
         x, y, z = _point(frames, lk, l_folded[lk])
-        if sphere_scene(x, y, z, l_radius[lk], lk > 0, tables, floor) > margin:
+        if sphere_scene(x, y, z, l_radius[lk], lk > 0, tables, floor, True) > margin:
             continue
         for m in range(a, b):
             x, y, z = _point(frames, lk, folded[m])
@@ -67,7 +67,7 @@ def _scene_clear(q, margin, body, scene, frames, link_lever, path, k, n):
         if a == b:
             continue
         x, y, z = _point(frames, lk, l_folded[lk])
-        d = sphere_scene(x, y, z, l_radius[lk], lk > 0, tables, floor)
+        d = sphere_scene(x, y, z, l_radius[lk], lk > 0, tables, floor, True)
         if d > margin:
             rate = 0.0
             for j in range(dof):

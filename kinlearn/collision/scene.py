@@ -225,14 +225,14 @@ class Scene:
         (:func:`~kinlearn.collision.cloud.read_points`). ``frame``: the camera's pose in the robot's base
         frame (4 × 4, ``(position, quaternion xyzw)`` or ``[x, y, z, qx, qy, qz, qw]``) when the points are
         in the camera's frame; None: they are in the base frame. ``resolution``: the edge of the distance
-        grid's cells (default 1 cm; see :mod:`kinlearn.collision.cloud` for its conservative margin).
+        grid's cells (default 1 cm; a speed setting: the spheres it cannot clear read the points).
         ``cleaning`` (:class:`~kinlearn.collision.cloud.Cleaning`) and ``self_filter`` ``(body, q)`` (the
         robot's :class:`BodySpheres` or a planner, and its joints when the cloud was taken: points on its own
         body are dropped, and the cloud cropped to its reach) clean the points first;
         ``drop_nonfinite`` drops NaN rows (a depth camera's missing pixels) instead of refusing them.
         ``shadow`` (m, with ``frame``): the space behind each point left after cleaning, as the camera sees
-        it, is taken as occupied that far (:func:`~kinlearn.collision.cloud.shadows`); by default unknown
-        space is free (what the robot's own body hides stays free either way).
+        it, is taken as occupied that far (:func:`~kinlearn.collision.cloud.shadows`), behind the robot's own
+        points too (self-filtering then drops what lies on its body); by default unknown space is free.
 
         Raises :class:`~kinlearn.errors.PointCloudError` for points of another shape, NaN rows, no points,
         millimetres or a bad pose, :class:`~kinlearn.errors.PointCloudFileError` for a file it cannot read.

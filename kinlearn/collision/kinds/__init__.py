@@ -113,16 +113,18 @@ def pack(rows, shapes, has_floor, height):
 
 
 @jit
-def sphere_scene(x, y, z, r, on_floor, tables, floor):
+def sphere_scene(x, y, z, r, on_floor, tables, floor, ball=False):
     """One sphere's signed distance to the scene (+inf when empty): its centre's to every primitive
     (each kind culls by its bounding balls: the minimum is the same, to the bit), less its radius, and to
-    the floor where ``on_floor``."""
+    the floor where ``on_floor``. ``ball``: the sphere is a link's bounding ball, which only culls (its
+    spheres are looked at where it is near): a kind may give a looser lower bound for it (a point cloud
+    gives its grid's)."""
     d = np.inf
     d = sphere.nearest(x, y, z, tables[0], d)
     d = box.nearest(x, y, z, tables[1], d)
     d = cylinder.nearest(x, y, z, tables[2], d)
     d = capsule.nearest(x, y, z, tables[3], d)
-    d = cloud.nearest(x, y, z, r, tables[4], d)
+    d = cloud.nearest(x, y, z, r, ball, tables[4], d)
     d = d - r
     if floor[0] > 0.5 and on_floor:
         d = min(d, z - r - floor[1])
@@ -130,7 +132,7 @@ def sphere_scene(x, y, z, r, on_floor, tables, floor):
 
 
 @jit
-def spheres_scene(c, radii, on_floor, tables, floor, xyz, out):
+def spheres_scene(c, radii, on_floor, tables, floor, xyz, out, ball=False):
     """Every sphere's signed distance to the scene, ``out (M,)`` for centres ``c (M, 3)`` (``xyz (3, M)``:
     work space): :func:`sphere_scene`'s values to the bit, primitive by primitive over all the spheres,
     loops the compiler turns into vector instructions (the faster where many spheres are wanted)."""
@@ -143,7 +145,7 @@ def spheres_scene(c, radii, on_floor, tables, floor, xyz, out):
     box.nearest_many(X, Y, Z, M, tables[1], out)
     cylinder.nearest_many(X, Y, Z, M, tables[2], out)
     capsule.nearest_many(X, Y, Z, M, tables[3], out)
-    cloud.nearest_many(X, Y, Z, radii, M, tables[4], out)
+    cloud.nearest_many(X, Y, Z, radii, ball, M, tables[4], out)
     for m in range(M):
         out[m] = out[m] - radii[m]
     if floor[0] > 0.5:

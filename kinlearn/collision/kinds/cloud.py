@@ -31,10 +31,9 @@ RADIUS = 13  # the points' radius
 BX, BY, BZ = 14, 15, 16  # the blocks' dimensions (their origin is LO)
 BEDGE = 17  # a block's edge
 EXACT = 18  # a sphere's distance is exact up to this far beyond its radius (m)
-LARGEST = 19  # spheres larger than this (a link's bounding ball) get the grid's bound alone
-STARTS = 20  # where the blocks' offsets start in the buffer
-POINTS = 21  # where the points start
-HEADER = 22
+STARTS = 19  # where the blocks' offsets start in the buffer
+POINTS = 20  # where the points start
+HEADER = 21
 #: Grid cells along a block's edge.
 BLOCK_CELLS = 4
 
@@ -143,11 +142,10 @@ def sphere_distance(x, y, z, r, g, d):
     """min(``d``, a lower bound on the distance from ``(x, y, z)``, the centre of a sphere of radius ``r``,
     to the point balls of packed cloud ``g``), **exact** wherever the sphere comes within ``g[EXACT]`` of
     them: the grid's bound (:func:`cloud_distance`) first; where it cannot clear the sphere by that much
-    (and is below ``d``), the points within reach, one by one. A sphere larger than ``g[LARGEST]`` (a
-    link's bounding ball, whose spheres follow) keeps the bound."""
+    (and is below ``d``), the points within reach, one by one."""
     b = cloud_distance(x, y, z, g)
     room = r + g[EXACT]
-    if b >= d or b >= room or r > g[LARGEST]:
+    if b >= d or b >= room:
         return min(d, b)
     n, e = nearest_point(x, y, z, room + g[RADIUS], g)
     if n < 0:
@@ -156,21 +154,29 @@ def sphere_distance(x, y, z, r, g, d):
 
 
 @jit(inline="always")
-def nearest(x, y, z, r, t, d):
+def nearest(x, y, z, r, ball, t, d):
     """min(``d``, the sphere's (centre ``(x, y, z)``, radius ``r``) :func:`sphere_distance` to the cloud of
-    packed table ``t``; none when ``t`` is empty)."""
+    packed table ``t``, or for a link's bounding ``ball`` the grid's bound; none when ``t`` is empty)."""
     if t.shape[0]:
-        d = sphere_distance(x, y, z, r, t[0], d)
+        if ball:
+            d = min(d, cloud_distance(x, y, z, t[0]))
+        else:
+            d = sphere_distance(x, y, z, r, t[0], d)
     return d
 
 
 @jit(inline="always")
-def nearest_many(X, Y, Z, R, M, t, out):
-    """``out[m] = min(out[m], the sphere distance of sphere m)`` for the first ``M`` spheres (radii ``R``)."""
+def nearest_many(X, Y, Z, R, ball, M, t, out):
+    """``out[m] = min(out[m], the sphere distance of sphere m)`` for the first ``M`` spheres (radii ``R``;
+    links' bounding balls where ``ball``: the grid's bound)."""
     if t.shape[0]:
         g = t[0]
-        for m in range(M):
-            out[m] = sphere_distance(X[m], Y[m], Z[m], R[m], g, out[m])
+        if ball:
+            for m in range(M):
+                out[m] = min(out[m], cloud_distance(X[m], Y[m], Z[m], g))
+        else:
+            for m in range(M):
+                out[m] = sphere_distance(X[m], Y[m], Z[m], R[m], g, out[m])
 
 
 @jit(inline="always")
