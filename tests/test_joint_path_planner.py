@@ -1,6 +1,9 @@
 """The joint-path TM and its planner: goal states reached, limits kept, honest outcome, fast path
 agreeing with the model, position goals, the training domain, bad input."""
 
+import copy
+import dataclasses
+import pickle
 import warnings
 
 import numpy as np
@@ -421,7 +424,19 @@ def test_the_batch1_free_space_entry_plans_what_the_general_path_plans(name, mon
                 assert x.dtype == y.dtype and x.shape == y.shape, field
                 assert torch.equal(x, y) or (x.isnan().all() and y.isnan().all()), field
             assert lean.stage == full.stage and lean.collision_free is None
+            assert lean.robot == full.robot and lean.tolerance == full.tolerance and lean.scene is None
     assert all(calls) and len(calls) == 12
+    # its tensors made when first read, the plan reads, copies, pickles and replaces as any other
+    fresh = planner.plan(q[0], q[1])
+    assert "joints" not in vars(fresh)
+    for other in (copy.copy(fresh), copy.deepcopy(fresh), pickle.loads(pickle.dumps(fresh))):
+        for field in (f for f in Plan._BATCHED if f != "collision_free"):
+            assert torch.equal(getattr(other, field), getattr(fresh, field)), field
+    moved = dataclasses.replace(fresh, stage="refine")
+    assert moved.stage == "refine" and torch.equal(moved.joints, fresh.joints)
+    assert "Plan(" in repr(fresh) and len(fresh.timed().t) > 1
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        fresh.nothing  # noqa: B018
     calls.clear()
     beyond = q[0].copy()
     beyond[0] = robot.upper[0] + 0.1

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from typing import Protocol, cast, runtime_checkable
 
@@ -111,6 +112,38 @@ class Plan:
         "success",
         "collision_free",
     )
+
+    @classmethod
+    def deferred(cls, arrays: dict[str, np.ndarray], narrow: bool, **fields) -> Plan:
+        """A plan whose tensor fields ``arrays`` (float64 or bool NumPy arrays, by field name) become
+        tensors when first read (each a :func:`torch.from_numpy` of its array, rounded to float32 where
+        ``narrow``), its other ``fields`` as given: a batch-1 plan handed back without making the tensors
+        its caller may never read (:meth:`~kinlearn.planning.planner.Planner.plan`'s free-space entry).
+        It reads, compares, copies and pickles as the plan of those tensors."""
+        plan = object.__new__(cls)
+        state = plan.__dict__  # (a frozen dataclass's fields are its instance dict's, as __init__ sets them)
+        state.update(_defaults(cls))
+        state.update(fields)
+        state["_arrays"] = (arrays, narrow)
+        return plan
+
+    def __getattr__(self, name: str):
+        # only for attributes not set: a deferred plan's tensor fields, on first read
+        arrays = self.__dict__.get("_arrays")
+        if arrays is None or name not in arrays[0]:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        a = arrays[0][name]
+        t = torch.from_numpy(a.astype(np.float32) if arrays[1] and a.dtype != np.bool_ else a)
+        object.__setattr__(self, name, t)
+        return t
+
+    def __getstate__(self) -> dict:
+        state = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        for k, v in state.items():
+            object.__setattr__(self, k, v)
 
     @classmethod
     def from_joints(
@@ -346,3 +379,9 @@ def executed_check(body: BodySpheres | None, scene: Scene, max_travel: float = C
         return bad
 
     return verify
+
+
+@functools.cache
+def _defaults(cls: type) -> dict:
+    """The defaults of a dataclass's fields that have one (a deferred :class:`Plan`'s starting state)."""
+    return {f.name: f.default for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}

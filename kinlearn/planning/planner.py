@@ -433,15 +433,21 @@ class Planner(ObstacleStages):
         :class:`~kinlearn.errors.CollidingEndWarning`, which names the problems and says where the scene
         overlaps the robot's fixed base.
         """
+        if (  # one free-space problem as two joint vectors: one compiled call
+            obstacles is None
+            and goal_position is None
+            and refine_steps is None
+            and deadline is None
+            and self._domain is None
+            and self._path_kernel is not None
+        ):
+            lean = self._batch1_free(start, goal)
+            if lean is not None:
+                return lean
         if obstacles is not None or getattr(start, "obstacles", None) is not None:
             self.warm_up()  # once, before the clock starts: no deadline is spent loading kernels
         timer = Deadline(deadline)  # started before the input is checked: the caller's time
         steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
-        free_space = obstacles is None and goal_position is None and self._domain is None
-        if free_space and self._path_kernel is not None:
-            lean = self._batch1_free(start, goal)  # one free-space problem as two joint vectors
-            if lean is not None:
-                return lean
         stage1 = retreated = None  # what the batch-1 entry ran of a batch-1 problem's stages
         if obstacles is not None and goal_position is None:
             first = self._batch1(start, goal, obstacles, steps)
@@ -495,17 +501,16 @@ class Planner(ObstacleStages):
         if out is None:
             return None
         joints, ef, waypoints, states, scores, ok = out
-        dtype = torch.promote_types(da, db)
-        narrow = dtype == torch.float32  # rounded as torch's .to() rounds, without its per-tensor dispatch
-
-        def t(a: np.ndarray) -> torch.Tensor:
-            return torch.from_numpy(a.astype(np.float32) if narrow and a.dtype != np.bool_ else a)
-
-        plan = Plan(
-            goal=t(states[1]), waypoints=t(waypoints), joints=t(joints), ef=t(ef), target=t(states[1, dof:]),
-            goal_error=t(scores[0, 0, ...]), joint_error=t(scores[1, 0, ...]), success=t(ok[0, ...]),
-            collision_free=None, tolerance=self.tolerance, robot=self.robot.name, stage="learned",
-        )  # fmt: skip
+        dtype = da if da is db else torch.promote_types(da, db)
+        # float32 rounded as torch's .to() rounds, without its per-tensor dispatch; the tensors made when
+        # first read (a plan's caller often reads one or two of its eight)
+        arrays = {
+            "goal": states[1], "waypoints": waypoints, "joints": joints, "ef": ef, "target": states[1, dof:],
+            "goal_error": scores[0, 0, ...], "joint_error": scores[1, 0, ...], "success": ok[0, ...],
+        }  # fmt: skip
+        plan = Plan.deferred(
+            arrays, dtype == torch.float32, tolerance=self.tolerance, robot=self.robot.name, stage="learned"
+        )
         if dtype in (torch.float64, torch.float32):
             return plan
         return _as_output(plan, dtype, _CPU, self._lo_np, self._hi_np)
