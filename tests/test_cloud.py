@@ -174,6 +174,16 @@ def test_self_filtering_drops_the_robots_own_points(robot, body):
     assert bool(check_path(body, q[None].expand(2, -1), filtered).collision_free)
     with pytest.raises(PointCloudError, match="joints"):
         Scene.from_points(pts, self_filter=(body, q.numpy()[:3]))
+    # at several configurations (where it stands, and a goal vouched for): the points on each body go
+    other = q.clone()
+    other[1] += 1.0  # the shoulder turned: the hand far from where it was
+    on_other = body(other[None])[0, -1].numpy()
+    both = np.vstack([wall, on_arm, on_other])
+    assert len(clean_points(both, 0.01, None, self_filter=(body, q.numpy()))) == len(wall) + 1
+    kept = clean_points(both, 0.01, None, self_filter=(body, torch.stack([q, other]).numpy()))
+    assert len(kept) == len(wall)
+    with pytest.raises(PointCloudError, match="joints"):
+        Scene.from_points(pts, self_filter=(body, np.zeros((2, 3))))
 
 
 # -------------------------------------------------------------------------------------------------

@@ -90,7 +90,9 @@ def clean_points(
 ) -> np.ndarray:
     """The points ``(N, 3)`` (base frame, checked) after the steps of ``cleaning`` (see :class:`Cleaning`);
     ``self_filter``: ``(body, q)``, a :class:`~kinlearn.collision.BodySpheres` (or a planner) and the
-    robot's joints ``(dof,)`` when the cloud was taken: the points on its own body are dropped.
+    robot's joints ``(dof,)`` when the cloud was taken: the points on its own body are dropped; ``q (K, dof)``
+    drops those on its body at each of K configurations (where it stands, and a goal vouched for: the
+    points a goal's body hides are then no obstacle anywhere).
     :class:`PointCloudError` if nothing is left."""
     cleaning = cleaning or Cleaning()
     pts = points
@@ -103,13 +105,15 @@ def clean_points(
             raise PointCloudError("self_filter must be a pair (body, joints)") from exc
         body = body_of(body)
         q = torch.as_tensor(np.asarray(q, dtype=np.float64)).to(body.radii)
-        if q.shape != (body.robot.dof,):
+        dof = body.robot.dof
+        if q.shape[-1:] != (dof,) or q.ndim not in (1, 2) or q.numel() == 0:
             raise PointCloudError(
-                f"self_filter's joints must have shape ({body.robot.dof},), got {tuple(q.shape)}"
+                f"self_filter's joints must have shape ({dof},) or (K, {dof}), got {tuple(q.shape)}"
             )
         with torch.no_grad():
-            centres = body(q[None])[0].detach().cpu().double().numpy()
-            radii = body.radii.detach().cpu().double().numpy()
+            q = q.reshape(-1, dof)
+            centres = body(q).detach().cpu().double().numpy().reshape(-1, 3)
+            radii = np.tile(body.radii.detach().cpu().double().numpy(), q.shape[0])
         if reach is None:
             reach = body.reach + cleaning.self_margin
     if reach is not None:
