@@ -2,12 +2,12 @@
 each beside the same problems given as primitives, every plan judged on the TRUE primitives.
 
     OMP_NUM_THREADS=1 python benchmarks/clouds.py [--robots panda ur5] [--per-family 3] [--radius 0.01]
-        [--resolution 0.02] [--build-sizes 100000 1000000]
+        [--resolution 0.02] [--build-sizes 100000 1000000] [--spacing 0.01]
 
 Renderings (:mod:`kinlearn.collision.cloud_render`):
 
-- **surface**: every primitive's surface sampled on a 1 cm grid, 2 mm Gaussian noise per axis (a fused
-  scan: nothing occluded);
+- **surface**: every primitive's surface sampled on a 1 cm grid (``--spacing``), 2 mm Gaussian noise per
+  axis (a fused scan: nothing occluded);
 - **depth camera**: one pinhole camera, 320 × 240 pixels over 75° horizontally, 2 mm depth noise, placed
   over the robot's shoulder (0.35 m behind the base, 1.2 m up, looking at the obstacles' centre), the
   robot's own body at the start in view (its points removed by self-filtering at the start, 1 cm
@@ -77,6 +77,8 @@ RENDERINGS = {"surface": 0.0, "depth camera": 0.0, "depth camera, occluded space
 
 #: The row of the surface clouds planned without the obstacle network.
 NO_NETWORK = "surface, no obstacle network"
+#: The surface rendering's spacing between samples (m; ``--spacing``).
+SPACING = 0.01
 #: The row of the surface clouds whose points are balls of SMALL_RADIUS (m).
 SMALL = "surface, 5 mm balls"
 SMALL_RADIUS = 0.005
@@ -93,7 +95,7 @@ def render(
     clean = Cleaning(self_margin=0.01)
     start = start.numpy()
     if kind == "surface":
-        pts = surface_points(scene, spacing=0.01, noise=0.002, seed=seed)
+        pts = surface_points(scene, spacing=SPACING, noise=0.002, seed=seed)
         at = start if goal is None else np.stack([start, goal.numpy()])
         return Scene.from_points(
             pts,
@@ -205,6 +207,7 @@ def main() -> None:
     ap.add_argument("--radius", type=float, default=0.01)
     ap.add_argument("--resolution", type=float, default=0.02)
     ap.add_argument("--build-sizes", type=int, nargs="*", default=[100_000, 1_000_000])
+    ap.add_argument("--spacing", type=float, default=0.01, help="the surface rendering's sample spacing (m)")
     ap.add_argument("--no-write", action="store_true", help="print only")
     ap.add_argument("--figure", action="store_true", help="only draw docs/figures/cloud_plan.png")
     args = ap.parse_args()
@@ -212,6 +215,8 @@ def main() -> None:
         figure(__import__("pathlib").Path(__file__).parents[1] / "docs" / "figures" / "cloud_plan.png")
         return
     torch.set_num_threads(1)
+    global SPACING
+    SPACING = args.spacing
     print(header("Planning among point clouds", 1))
     figures: dict = {}
     rows, summary = [], {}
@@ -315,7 +320,8 @@ def main() -> None:
     print("per row (stages that made the plans):", json.dumps(summary, indent=1))
     caption = (
         f"The first {args.per_family} held-out problems of each of the seven families per arm, default plan(), "
-        f"points as balls of {args.radius} m (a row says where not), checked exactly through a grid of "
+        f"surfaces sampled every {args.spacing} m, points as balls of {args.radius} m (a row says where not), "
+        "checked exactly through a grid of "
         f"{args.resolution} m and the points; judged on the true primitives. Depth camera: unknown (occluded) "
         "space is free to the planner, unless the row takes it as occupied."
     )

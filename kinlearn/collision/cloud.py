@@ -5,7 +5,7 @@ Each point is an obstacle ball of ``radius`` (m) in the robot's base frame. :att
 builds (once, on first use) one buffer: a distance grid whose query is a **lower bound** on the signed
 distance from a point in space to the union of those balls, so that a body sphere found clear of the grid
 is clear of every point ball (*free under the structure is free under the points*), and the points
-sorted into blocks of 4 × 4 × 4 cells. A body sphere's query (:func:`sphere_distance`, what every
+sorted into blocks (cubes sized to hold a few points each where a surface crosses them). A body sphere's query (:func:`sphere_distance`, what every
 collision kernel takes) asks the grid first; a sphere the grid cannot clear by :data:`EXACT` beyond its
 radius reads the points of the blocks within reach, and its distance is then exact: the verdicts are the
 points' own, not the grid's (which would keep a sphere up to a cell's diagonal farther away). The grid:
@@ -176,7 +176,23 @@ def _build(points, radius, h, pad, exact, out_header):
     nz = int((hi[2] - oz) / h) + pad + 1
     P = ny * nz
     N = nx * P
-    e = _k.BLOCK_CELLS * h  # the points' blocks
+    cells = np.full(N, _NONE)
+    filled = np.zeros(nx, dtype=np.bool_)
+    occupied = 0
+    for i in range(points.shape[0]):
+        a = int((points[i, 0] - ox) / h)
+        b = int((points[i, 1] - oy) / h)
+        c = int((points[i, 2] - oz) / h)
+        k = (a * ny + b) * nz + c
+        if cells[k] != 0.0:
+            occupied += 1
+        cells[k] = 0.0
+        filled[a] = True
+    # the points' blocks: about BLOCK_POINTS points in a block a surface crosses (a surface's points in a
+    # block grow with the square of its edge), from one to four cells a side (smaller blocks cost more
+    # reads than the points they spare)
+    per_cell = points.shape[0] / max(occupied, 1)
+    e = h * min(max(math.sqrt(_k.BLOCK_POINTS / per_cell), 1.0), 4.0)
     bx = int((hi[0] - lo[0]) / e) + 1
     by = int((hi[1] - lo[1]) / e) + 1
     bz = int((hi[2] - lo[2]) / e) + 1
@@ -185,14 +201,7 @@ def _build(points, radius, h, pad, exact, out_header):
     p0 = s0 + B + 1
     buf = np.empty(p0 + 3 * points.shape[0])
     g = buf[_HEADER:s0]
-    g[:] = _NONE
-    filled = np.zeros(nx, dtype=np.bool_)
-    for i in range(points.shape[0]):
-        a = int((points[i, 0] - ox) / h)
-        b = int((points[i, 1] - oy) / h)
-        c = int((points[i, 2] - oz) / h)
-        g[(a * ny + b) * nz + c] = 0.0
-        filled[a] = True
+    g[:] = cells
     # z: the nearest site along each row, scanning both ways
     for r in range(nx * ny):
         o = r * nz

@@ -21,8 +21,9 @@ from ...body.jit import jit
 __all__ = ["HEADER", "Cloud", "cloud_distance"]
 
 # The packed cloud (float64): a header, then a lower bound per grid cell (nx · ny · nz, C order), then the
-# points sorted by block (blocks of BLOCK_CELLS grid cells a side over the points' bounding box): each
-# block's first point (bx · by · bz + 1 offsets), then the points (x, y, z each). Header slots:
+# points sorted by block (cubes over the points' bounding box, sized for about BLOCK_POINTS points where a
+# surface crosses one): each block's first point (bx · by · bz + 1 offsets), then the points (x, y, z
+# each). Header slots:
 NX, NY, NZ = 0, 1, 2  # the grid's dimensions
 ORIGIN = 3  # origin (3): the low corner of cell (0, 0, 0)
 EDGE = 6  # cell edge
@@ -34,8 +35,9 @@ EXACT = 18  # a sphere's distance is exact up to this far beyond its radius (m)
 STARTS = 19  # where the blocks' offsets start in the buffer
 POINTS = 20  # where the points start
 HEADER = 21
-#: Grid cells along a block's edge.
-BLOCK_CELLS = 4
+#: Points a block holds where a surface crosses it, about (a sphere's exact query reads the blocks within
+#: its reach: fewer points a block read fewer far points, more blocks cost more reads).
+BLOCK_POINTS = 16
 
 _TINY = float(np.finfo(np.float64).tiny)
 
@@ -111,6 +113,18 @@ def nearest_point(x, y, z, reach, g):
     best2 = reach * reach
     best = -1
     s0, p0 = int(g[STARTS]), int(g[POINTS])
+    # the block holding the point first: its nearest points bound the rest, whose blocks are then passed by
+    ci, cj, ck = math.floor((x - lx) / e), math.floor((y - ly) / e), math.floor((z - lz) / e)
+    home = -1
+    if 0 <= ci < bx and 0 <= cj < by and 0 <= ck < bz:
+        home = (ci * by + cj) * bz + ck
+        for n in range(int(g[s0 + home]), int(g[s0 + home + 1])):
+            o = p0 + 3 * n
+            dx, dy, dz = x - g[o], y - g[o + 1], z - g[o + 2]
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 <= best2:
+                best2 = d2
+                best = n
     for i in range(i0, i1 + 1):
         ax = lx + i * e
         ex = max(max(ax - x, x - ax - e), 0.0)
@@ -123,7 +137,7 @@ def nearest_point(x, y, z, reach, g):
             for k in range(k0, k1 + 1):
                 az = lz + k * e
                 ez = max(max(az - z, z - az - e), 0.0)
-                if ex * ex + ey * ey + ez * ez > best2:
+                if ex * ex + ey * ey + ez * ez > best2 or row - s0 + k == home:
                     continue
                 for n in range(int(g[row + k]), int(g[row + k + 1])):
                     o = p0 + 3 * n
