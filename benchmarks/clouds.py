@@ -77,8 +77,6 @@ RENDERINGS = {"surface": 0.0, "depth camera": 0.0, "depth camera, occluded space
 
 #: The row of the surface clouds planned without the obstacle network.
 NO_NETWORK = "surface, no obstacle network"
-#: The surface rendering's spacing between samples (m; ``--spacing``).
-SPACING = 0.01
 #: The row of the surface clouds whose points are balls of SMALL_RADIUS (m).
 SMALL = "surface, 5 mm balls"
 SMALL_RADIUS = 0.005
@@ -87,15 +85,16 @@ TRUSTED = "surface, goal vouched for (filtered there too)"
 
 
 def render(
-    kind: str, scene: Scene, body, start, radius: float, resolution: float, seed: int, goal=None
-) -> Scene:
-    """The problem's scene as a cloud (its floor kept as a plane), self-filtered at the start (1 cm margin:
-    the cloud is taken where the robot stands; with a ``goal``, at the goal too) and cropped to the body's
-    reach."""
+    kind: str, scene: Scene, body, start, radius: float, resolution: float, seed: int, goal=None,
+    spacing: float = 0.01,
+) -> Scene:  # fmt: skip
+    """The problem's scene as a cloud (its floor kept as a plane; surfaces sampled every ``spacing`` m),
+    self-filtered at the start (1 cm margin: the cloud is taken where the robot stands; with a ``goal``, at
+    the goal too) and cropped to the body's reach."""
     clean = Cleaning(self_margin=0.01)
     start = start.numpy()
     if kind == "surface":
-        pts = surface_points(scene, spacing=SPACING, noise=0.002, seed=seed)
+        pts = surface_points(scene, spacing=spacing, noise=0.002, seed=seed)
         at = start if goal is None else np.stack([start, goal.numpy()])
         return Scene.from_points(
             pts,
@@ -215,8 +214,6 @@ def main() -> None:
         figure(__import__("pathlib").Path(__file__).parents[1] / "docs" / "figures" / "cloud_plan.png")
         return
     torch.set_num_threads(1)
-    global SPACING
-    SPACING = args.spacing
     print(header("Planning among point clouds", 1))
     figures: dict = {}
     rows, summary = [], {}
@@ -235,7 +232,10 @@ def main() -> None:
         bare.warm_up()
         kb = kernel.KernelBody.of(body)
         s0, g0, sc0 = subset.problem(0)
-        plan(planner, s0, g0, render("surface", sc0, body, s0[: robot.dof], args.radius, args.resolution, 0))
+        sc0 = render(
+            "surface", sc0, body, s0[: robot.dof], args.radius, args.resolution, 0, spacing=args.spacing
+        )
+        plan(planner, s0, g0, sc0)
         result = {k: {"paths": [], "t": [], "flag": [], "ends": [], "points": [], "stage": []} for k in
                   ("primitives", *RENDERINGS, NO_NETWORK, SMALL, TRUSTED)}  # fmt: skip
         for n in range(len(subset)):
@@ -245,13 +245,27 @@ def main() -> None:
                 if kind == "primitives":
                     sc = scene
                 elif kind == SMALL:
-                    sc = render("surface", scene, body, q[0], SMALL_RADIUS, args.resolution, n)
+                    sc = render(
+                        "surface", scene, body, q[0], SMALL_RADIUS, args.resolution, n, spacing=args.spacing
+                    )
                     sc.cloud.packed  # noqa: B018 - the grid built before the clock starts
                 elif kind == TRUSTED:
-                    sc = render("surface", scene, body, q[0], args.radius, args.resolution, n, goal=q[1])
+                    sc = render(
+                        "surface",
+                        scene,
+                        body,
+                        q[0],
+                        args.radius,
+                        args.resolution,
+                        n,
+                        goal=q[1],
+                        spacing=args.spacing,
+                    )
                     sc.cloud.packed  # noqa: B018 - the grid built before the clock starts
                 elif kind != NO_NETWORK:  # (the no-network row plans on the surface cloud just made)
-                    sc = render(kind, scene, body, q[0], args.radius, args.resolution, n)
+                    sc = render(
+                        kind, scene, body, q[0], args.radius, args.resolution, n, spacing=args.spacing
+                    )
                     sc.cloud.packed  # noqa: B018 - the grid built before the clock starts
                     if kind == "surface":
                         surface = sc

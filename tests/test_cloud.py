@@ -238,6 +238,9 @@ def test_free_under_the_grid_is_free_under_the_points(seed):
     np.testing.assert_allclose(twin.detach().numpy(), sphere, rtol=0, atol=1e-12)
     twin.sum().backward()
     assert torch.isfinite(c2.grad).all()
+    for bad in (-r, np.full_like(r, np.nan)):
+        with pytest.raises(PointCloudError, match="radii"):
+            cloud.distance(centres, bad)
 
 
 def test_points_and_primitives_mix_in_one_scene(body, robot):

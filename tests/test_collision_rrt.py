@@ -65,17 +65,21 @@ def test_finds_a_path_free_by_the_torch_check_and_shortcuts_keep_it_free(wall_pr
     )
 
 
+def _seeded(problem, kb, ks, rounds: int, seed: int, budget: int, **options):
+    """RRT-Connect on ``problem`` with ``seed`` and the sampling ``options``, run ``rounds`` iterations at a
+    time for up to ``budget``: its path and the iterations it took."""
+    robot, _, _, start, goal = problem
+    rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=seed, **options)
+    path = _solve(rrt, budget // rounds, rounds)
+    assert path is not None, "no path"
+    return path, rrt.iterations
+
+
 def test_same_seed_same_path_whatever_the_rounds(wall_problem):
-    robot, body, scene, start, goal = wall_problem
-    kb, ks = K.KernelBody(body), K.KernelScene(scene)
+    kb, ks = K.KernelBody(wall_problem[1]), K.KernelScene(wall_problem[2])
 
     def solve(rounds, seed):
-        rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=seed)
-        for _ in range(10_000 // rounds):
-            path = rrt.run(rounds)
-            if path is not None:
-                return path, rrt.iterations
-        raise AssertionError("no path")
+        return _seeded(wall_problem, kb, ks, rounds, seed, 10_000)
 
     a, na = solve(1, 5)
     b, nb = solve(1, 5)
@@ -256,12 +260,7 @@ def test_every_sampling_same_path_whatever_the_rounds_and_free_by_the_compiled_c
     kb, ks = K.KernelBody(body), K.KernelScene(scene)
 
     def solve(rounds, seed):
-        rrt = RrtConnect(kb, ks, start, goal, robot.lower, robot.upper, seed=seed, **options)
-        for _ in range(20_000 // rounds):
-            path = rrt.run(rounds)
-            if path is not None:
-                return path, rrt.iterations
-        raise AssertionError("no path")
+        return _seeded(wall_problem, kb, ks, rounds, seed, 20_000, **options)
 
     a, na = solve(1, 5)
     b, nb = solve(7, 5)

@@ -60,7 +60,7 @@ from .kinds.cloud import NY as _NY
 from .kinds.cloud import NZ as _NZ
 from .kinds.cloud import ORIGIN as _OX
 from .kinds.cloud import RADIUS as _R
-from .kinds.cloud import cloud_distance, nearest_point, sphere_distance
+from .kinds.cloud import cloud_distance, refine, sphere_distance
 
 __all__ = [
     "DEFAULT_RADIUS",
@@ -281,15 +281,11 @@ def _sphere_distances(centres, radii, g, out):
 
 @jit
 def _refinements(centres, radii, g, bound, out):
-    """What :func:`sphere_distance` made of each sphere: the index of the nearest point it read (≥ 0),
-    −1 where it found none within reach, −2 where the grid's ``bound`` decided alone."""
+    """What :func:`sphere_distance` made of each sphere (:func:`refine`'s first value): the index of the
+    nearest point it read (≥ 0), −1 where it found none within reach, −2 where the grid's ``bound`` decided
+    alone."""
     for i in range(centres.shape[0]):
-        room = radii[i] + g[_k.EXACT]
-        if bound[i] >= room:
-            out[i] = -2
-        else:
-            x, y, z = centres[i, 0], centres[i, 1], centres[i, 2]
-            out[i] = nearest_point(x, y, z, room + g[_R], g)[0]
+        out[i] = refine(centres[i, 0], centres[i, 1], centres[i, 2], radii[i], bound[i], g)[0]
 
 
 class PointCloud:

@@ -138,8 +138,7 @@ class Plan:
         return t
 
     def __getstate__(self) -> dict:
-        state = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        return state
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
     def __setstate__(self, state: dict) -> None:
         for k, v in state.items():

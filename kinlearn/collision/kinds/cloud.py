@@ -98,6 +98,20 @@ def cloud_distance(x, y, z, g):
 
 
 @jit(inline="always")
+def _scan(x, y, z, g, p0, first, end, best2, best):
+    """``(squared distance, index)`` of the nearest of points ``first`` to ``end`` (packed from ``p0``) to
+    ``(x, y, z)``, or ``(best2, best)`` where none is as near."""
+    for n in range(first, end):
+        o = p0 + 3 * n
+        dx, dy, dz = x - g[o], y - g[o + 1], z - g[o + 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 <= best2:
+            best2 = d2
+            best = n
+    return best2, best
+
+
+@jit(inline="always")
 def nearest_point(x, y, z, reach, g):
     """``(index, distance)`` of the point nearest ``(x, y, z)`` among those within ``reach`` of it, or
     ``(-1, inf)`` when none is: the blocks the ball of ``reach`` touches, point by point."""
@@ -118,13 +132,7 @@ def nearest_point(x, y, z, reach, g):
     home = -1
     if 0 <= ci < bx and 0 <= cj < by and 0 <= ck < bz:
         home = (ci * by + cj) * bz + ck
-        for n in range(int(g[s0 + home]), int(g[s0 + home + 1])):
-            o = p0 + 3 * n
-            dx, dy, dz = x - g[o], y - g[o + 1], z - g[o + 2]
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 <= best2:
-                best2 = d2
-                best = n
+        best2, best = _scan(x, y, z, g, p0, int(g[s0 + home]), int(g[s0 + home + 1]), best2, best)
     for i in range(i0, i1 + 1):
         ax = lx + i * e
         ex = max(max(ax - x, x - ax - e), 0.0)
@@ -139,13 +147,7 @@ def nearest_point(x, y, z, reach, g):
                 ez = max(max(az - z, z - az - e), 0.0)
                 if ex * ex + ey * ey + ez * ez > best2 or row - s0 + k == home:
                     continue
-                for n in range(int(g[row + k]), int(g[row + k + 1])):
-                    o = p0 + 3 * n
-                    dx, dy, dz = x - g[o], y - g[o + 1], z - g[o + 2]
-                    d2 = dx * dx + dy * dy + dz * dz
-                    if d2 <= best2:
-                        best2 = d2
-                        best = n
+                best2, best = _scan(x, y, z, g, p0, int(g[row + k]), int(g[row + k + 1]), best2, best)
     if best < 0:
         return -1, np.inf
     return best, math.sqrt(max(best2, _TINY))
@@ -158,13 +160,23 @@ def sphere_distance(x, y, z, r, g, d):
     them: the grid's bound (:func:`cloud_distance`) first; where it cannot clear the sphere by that much
     (and is below ``d``), the points within reach, one by one."""
     b = cloud_distance(x, y, z, g)
+    if b >= d:
+        return d
+    return min(d, refine(x, y, z, r, b, g)[1])
+
+
+@jit(inline="always")
+def refine(x, y, z, r, b, g):
+    """What a sphere's query (centre ``(x, y, z)``, radius ``r``) makes of the grid's bound ``b``:
+    ``(-2, b)`` where the bound clears the sphere by ``g[EXACT]``; else the points within that reach read,
+    ``(-1, max(b, r + g[EXACT]))`` where none is there, or ``(index, exact distance)`` of the nearest."""
     room = r + g[EXACT]
-    if b >= d or b >= room:
-        return min(d, b)
+    if b >= room:
+        return -2, b
     n, e = nearest_point(x, y, z, room + g[RADIUS], g)
     if n < 0:
-        return min(d, max(b, room))
-    return min(d, e - g[RADIUS])
+        return -1, max(b, room)
+    return n, e - g[RADIUS]
 
 
 @jit(inline="always")
