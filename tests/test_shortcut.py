@@ -60,6 +60,21 @@ def test_shortcut_is_deterministic_and_its_seed_and_budget_matter(setting):
     assert _length(a) <= _length(none) + 1e-12
 
 
+def test_draws_that_save_too_little_are_not_checked(setting):
+    _, body, scene, paths = setting
+    for path in paths:
+        every = shorten(body, scene, path, min_gain=0.0)
+        assert _length(every) <= _length(path) + 1e-12
+        # no draw can save nearly all of a path's length: the pass is vertex skipping alone
+        np.testing.assert_array_equal(
+            shorten(body, scene, path, min_gain=0.999), shorten(body, scene, path, attempts=0)
+        )
+    with pytest.raises(ConfigError, match="min_gain"):
+        shorten(body, scene, paths[0], min_gain=1.0)
+    with pytest.raises(ConfigError, match="min_gain"):
+        shorten(body, scene, paths[0], min_gain=float("nan"))
+
+
 def test_a_cap_bounds_the_vertices(setting):
     _, body, scene, paths = setting
     path = paths[1]
