@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import pickle
 import warnings
 from pathlib import Path
 
@@ -84,6 +86,12 @@ def test_batch_one_gives_the_batch_verdict(planner, problems):
         assert one.collision_free.shape == ()
         assert bool(one.collision_free) == bool(plan.collision_free[i])
         assert bool(check_path(planner.body, one.joints, scene).collision_free) == bool(one.collision_free)
+        # its tensors are made when first read: it pickles and replaces as any plan
+        again = pickle.loads(pickle.dumps(planner.plan(start, goal, obstacles=scene)))
+        assert torch.equal(again.joints, one.joints) and bool(again.collision_free) == bool(
+            one.collision_free
+        )
+        assert again.scene is not None and dataclasses.replace(again, stage="x").ef.shape == one.ef.shape
 
 
 def test_the_batch_one_entry_plans_as_a_problem_plans(monkeypatch):

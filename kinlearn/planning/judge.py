@@ -240,6 +240,7 @@ def verdict_small(
     waypoints: np.ndarray | None = None,
     found: np.ndarray | None = None,
     stage=None,
+    deferred: dict | None = None,
 ) -> Plan:
     """The :class:`Plan` of ``n`` ≤ ``SMALL_BATCH`` float64 paths ``flat (n, T+1, dof)`` (C-contiguous) for
     start states ``start (n, dof + 3)`` and goals ``goal (n, dof + 3)`` (states, ``state_goal``) or
@@ -250,7 +251,9 @@ def verdict_small(
     ``free (n,)`` the dense check's verdicts among obstacles (None: no obstacles), ``found (n,)`` where
     a path was found at all; every field shaped to ``batch``, a tensor sharing its array's memory. A
     batch-1 plan's few NumPy and torch calls cost microseconds each where other work ran before them
-    (the code they run has left the caches): one compiled call replaced a dozen array operations."""
+    (the code they run has left the caches): one compiled call replaced a dozen array operations.
+    ``deferred``: the plan's other fields (a scene, a body), given to a plan whose tensors are made when
+    first read (:meth:`Plan.deferred`), for a caller handing one plan back as is."""
     n, K, dof = flat.shape
     tols = (LIMIT_TOLERANCE, START_TOLERANCE, tolerance.position, tolerance.joints)
     every = _EVERY[:n] if n <= SMALL_BATCH else np.ones(n, dtype=bool)  # read only
@@ -272,6 +275,9 @@ def verdict_small(
         success=ok,
         collision_free=free,
     )
+    if deferred is not None:
+        arrays = {k: v.reshape((*batch, *v.shape[1:])) for k, v in fields.items() if v is not None}
+        return Plan.deferred(arrays, False, tolerance=tolerance, robot=robot.name, stage=stage, **deferred)
     t = {k: torch.from_numpy(v.reshape((*batch, *v.shape[1:]))) for k, v in fields.items() if v is not None}
     return Plan(
         goal=t["goal"], waypoints=t["waypoints"], joints=t["joints"], ef=t["ef"], target=t["target"],

@@ -122,9 +122,12 @@ class Plan:
         It reads, compares, copies and pickles as the plan of those tensors."""
         plan = object.__new__(cls)
         state = plan.__dict__  # (a frozen dataclass's fields are its instance dict's, as __init__ sets them)
-        state.update(_defaults(cls))
+        defaults = _defaults(cls)
+        state.update(defaults)
         state.update(fields)
         state["_arrays"] = (arrays, narrow)
+        for name in arrays.keys() & defaults.keys():  # a field with a default (the class holds it: no
+            plan.__getattr__(name)  # deferred read would reach __getattr__), e.g. collision_free: made now
         return plan
 
     def __getattr__(self, name: str):

@@ -573,9 +573,9 @@ class Planner(ObstacleStages):
         plan = verdict_small(
             self._obstacle_robot, np.ascontiguousarray(path[None]), states[:1], states[1:], True, (),
             (_FREE if free else _NOT_FREE).copy(), self.tolerance, stage=stage,
+            deferred={"scene": scene, "body": self.body},
         )  # fmt: skip
-        plan = dataclasses.replace(plan, scene=scene, body=self.body)
-        if dtype == torch.float64:
+        if dtype == torch.float64:  # its tensors made when first read (a caller often reads one or two)
             return plan
         return _as_output(plan, dtype, _CPU, self._obstacle_robot.lower, self._obstacle_robot.upper)
 
