@@ -47,8 +47,8 @@ DEFAULT_ATTEMPTS = 8
 #: A change must shorten the path by more than this (rad) to be kept: rounding never loops.
 _GAIN = 1e-9
 #: The share of the path's joint-space length a partial shortcut must save, if free, to be checked.
-#: Measured on the planner's held-out problems (``benchmarks/obstacle_speed.py``, the shortcut's own
-#: share of a plan's time): the median plan 10–23% faster, the paths 0.1–0.2% longer in sum.
+#: Against 0, on the planner's 140 held-out problems per arm (iiwa14, panda, ur5): the median plan
+#: 10–23% faster, the paths 0.1–0.2% longer in sum.
 MIN_GAIN = 0.01
 #: A vertex within this share of its neighbours' distance (plus 1 rad) of the straight segment between
 #: them, in excess length, is no corner (:func:`_corners`).

@@ -122,12 +122,12 @@ class Plan:
         It reads, compares, copies and pickles as the plan of those tensors."""
         plan = object.__new__(cls)
         state = plan.__dict__  # (a frozen dataclass's fields are its instance dict's, as __init__ sets them)
-        defaults = _defaults(cls)
-        state.update(defaults)
+        state.update(_defaults(cls))
         state.update(fields)
         state["_arrays"] = (arrays, narrow)
-        for name in arrays.keys() & defaults.keys():  # a field with a default (the class holds it: no
-            plan.__getattr__(name)  # deferred read would reach __getattr__), e.g. collision_free: made now
+        for name in _hidden(cls):  # given as an array, made now: its class default would hide it
+            if name in arrays:
+                plan.__getattr__(name)
         return plan
 
     def __getattr__(self, name: str):
@@ -387,3 +387,11 @@ def executed_check(body: BodySpheres | None, scene: Scene, max_travel: float = C
 def _defaults(cls: type) -> dict:
     """The defaults of a dataclass's fields that have one (a deferred :class:`Plan`'s starting state)."""
     return {f.name: f.default for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}
+
+
+@functools.cache
+def _hidden(cls: type) -> tuple[str, ...]:
+    """The tensor fields of a :class:`Plan` class that have a default (``collision_free``): the class
+    holds the default, so a read of one never reaches :meth:`Plan.__getattr__`, and a deferred plan
+    makes it at once."""
+    return tuple(name for name in cls._BATCHED if name in _defaults(cls))
