@@ -66,13 +66,13 @@ def breakdown(planner: Planner, s: torch.Tensor, g: torch.Tensor, calls: int) ->
 
     kernel, chain, tol = planner._path_kernel, planner._chain_kernel, planner.tolerance
     tols = (LIMIT_TOLERANCE, START_TOLERANCE, tol.position, tol.joints)
-    q = np.stack((s.double().numpy(), g.double().numpy()))
+    a, b = s.double().numpy(), g.double().numpy()
     parts = [("the whole call (the batch-1 entry)", lambda: planner.plan(s, g))]
     if kernel is not None:
         parts.append(
             (
                 "its compiled call (checks, FK, MLP, knots, verdict)",
-                lambda: kernel.free_plan(q, chain, ZERO_MOVE, tols),
+                lambda: kernel.free_plan(a, b, chain, ZERO_MOVE, tols),
             )
         )
     parts.append(

@@ -57,32 +57,49 @@ def packed_mlp(seq: torch.nn.Sequential, mean, std, dtype=np.float32, rows: int 
 
 
 @_jit
+def _activate(h, silu):
+    """The activation in place on ``h (N, width)``: SiLU (in the network's dtype, as torch's), else tanh."""
+    one = np.ones(1, dtype=h.dtype)[0]
+    for i in range(h.shape[0]):
+        for j in range(h.shape[1]):
+            v = h[i, j]
+            h[i, j] = v / (one + np.exp(-v)) if silu else np.tanh(v)
+
+
+@_jit
 def mlp(h, weights, biases, silu, last_active):
     """(Compiled.) The MLP on ``h (N, in)`` (the weights' dtype): every layer but the last followed by the
     activation (SiLU, else tanh), the last too if ``last_active``. Products through BLAS (``np.dot``)."""
     last = len(weights) - 1
-    one = np.ones(1, dtype=h.dtype)[0]  # 1 in the network's dtype (SiLU in float32 as torch's)
     for k in range(len(weights)):
         h = np.dot(h, weights[k]) + biases[k]
         if k < last or last_active:
-            for i in range(h.shape[0]):
-                for j in range(h.shape[1]):
-                    v = h[i, j]
-                    h[i, j] = v / (one + np.exp(-v)) if silu else np.tanh(v)
+            _activate(h, silu)
     return h
 
 
 @_jit
-def _path_tm(
-    theta0, ef0, thetaT, efT, weights, biases, silu, basis, fractions, half_range, ef_scale, joints, ef
-):
-    """The joint-path TM's forward pass on ``N`` problems (float64 ``(N, dof)`` joints and ``(N, 3)`` end
-    effectors): its knots into ``joints (N, T − 1, dof)`` and its end-effector waypoints into
-    ``ef (N, T − 1, 3)``, as :meth:`JointPathModel.forward` computes them (the network in the weights'
-    dtype, the rest float64). ``basis (T − 1, modes)``, or ``(0, 0)`` where the network gives knots."""
+def _mlp_flat(h, flat, widths, silu):
+    """:func:`mlp` (the last layer without activation) with every layer's weights ``(in, out)`` then biases
+    ``(out,)`` in one buffer ``flat``, in order, the layers' widths in ``widths`` (input first)."""
+    o = 0
+    last = widths.shape[0] - 2
+    for k in range(last + 1):
+        n_in, n_out = widths[k], widths[k + 1]
+        W = flat[o : o + n_in * n_out].reshape(n_in, n_out)
+        o += n_in * n_out
+        h = np.dot(h, W) + flat[o : o + n_out].reshape(1, n_out)
+        o += n_out
+        if k < last:
+            _activate(h, silu)
+    return h
+
+
+@_jit
+def _path_input(theta0, ef0, thetaT, efT, dtype_of):
+    """The joint-path TM's input rows ``(N, 3 · dof + 6)`` (θ0, ef0, θT, efT, θT − θ0) in ``dtype_of``'s dtype."""
     n, dof = theta0.shape
-    W = fractions.shape[0]
-    h = np.empty((n, 3 * dof + 6), dtype=weights[0].dtype)
+    h = np.empty((n, 3 * dof + 6), dtype=dtype_of.dtype)
     for i in range(n):
         for j in range(dof):
             h[i, j] = theta0[i, j]
@@ -91,7 +108,15 @@ def _path_tm(
         for c in range(3):
             h[i, dof + c] = ef0[i, c]
             h[i, 2 * dof + 3 + c] = efT[i, c]
-    out = mlp(h, weights, biases, silu, False)
+    return h
+
+
+@_jit
+def _path_knots(out, theta0, ef0, thetaT, efT, basis, fractions, half_range, ef_scale, joints, ef):
+    """The network's output ``out (N, ·)`` into the knots ``joints (N, T − 1, dof)`` and end-effector waypoints
+    ``ef (N, T − 1, 3)``, as :meth:`JointPathModel.forward` assembles them (float64)."""
+    n, dof = theta0.shape
+    W = fractions.shape[0]
     modes = basis.shape[1]
     nj = modes * dof if modes else W * dof
     for i in range(n):
@@ -111,18 +136,56 @@ def _path_tm(
 
 
 @_jit
-def _free_plan(
-    q, F, prismatic, lower, upper, zero_move, limit_tol, start_tol, position_tol, joint_tol, weights, biases, silu, basis,
-    fractions, half_range, ef_scale, joints, waypoints, states, scores, ok,
-):  # fmt: skip
-    """A batch-1 free-space plan from ``q (2, dof)`` (start, goal): False where either lies outside the
-    limits or is not finite, or the two are within ``zero_move`` of each other (the general path explains
-    or plans those); else True, with the plan's knots in ``joints (T + 1, dof)`` (the TM's inner knots
-    clipped to the limits), its end-effector waypoints in ``waypoints (T − 1, 3)``, the start and goal
-    states in ``states (2, dof + 3)``, and the verdict's ``scores (2, 1)`` and ``ok (1,)``; returns the
-    end effectors of every knot too."""
-    dof = q.shape[1]
-    K = joints.shape[0]
+def _path_tm(
+    theta0, ef0, thetaT, efT, weights, biases, silu, basis, fractions, half_range, ef_scale, joints, ef
+):
+    """The joint-path TM's forward pass on ``N`` problems (float64 ``(N, dof)`` joints and ``(N, 3)`` end
+    effectors): its knots into ``joints (N, T − 1, dof)`` and its end-effector waypoints into
+    ``ef (N, T − 1, 3)``, as :meth:`JointPathModel.forward` computes them (the network in the weights'
+    dtype, the rest float64). ``basis (T − 1, modes)``, or ``(0, 0)`` where the network gives knots."""
+    out = mlp(_path_input(theta0, ef0, thetaT, efT, weights[0]), weights, biases, silu, False)
+    _path_knots(out, theta0, ef0, thetaT, efT, basis, fractions, half_range, ef_scale, joints, ef)
+
+
+#: The packed free-space kernel's scalars, in order at the head of its float64 buffer.
+_SCALARS = 6  # zero move, the verdict's limit, start, position and joint tolerances, ef scale
+
+
+@_jit
+def _free_plan(a, b, f64, net, ints, out):
+    """A batch-1 free-space plan from the start ``a`` and goal ``b (dof,)``, everything else packed
+    (:meth:`CompiledPathModel._packed`: few arguments, each of which costs a call time): ``f64`` the
+    scalars (:data:`_SCALARS`), the chain's fixed transforms ``F (dof + 1, 4, 4)`` (the last to the tip),
+    limits, knot basis, fractions and half ranges; ``net`` the network's layers in its dtype (:func:`_mlp_flat`); ``ints`` dof,
+    T − 1, modes, SiLU, the joints' prismatic flags, the layers' widths. False where either end lies
+    outside the limits or is not finite, or the two are within the zero move of each other (the general
+    path explains or plans those); else True, with ``out`` filled (:meth:`CompiledPathModel.views`: the
+    plan's knots ``(T + 1, dof)``, the TM's inner knots clipped to the limits, its end-effector waypoints
+    ``(T − 1, 3)``, the start and goal states ``(2, dof + 3)``, the verdict's scores ``(2,)`` and whether
+    it succeeds, 1 or 0); returns the end effectors of every knot too."""
+    dof, W, modes, silu = ints[0], ints[1], ints[2], ints[3] != 0
+    prismatic = ints[4 : 4 + dof] != 0
+    widths = ints[4 + dof :]
+    zero_move, limit_tol, start_tol, position_tol, joint_tol, ef_scale = f64[:_SCALARS]
+    o = _SCALARS
+    F = f64[o : o + 16 * (dof + 1)].reshape(dof + 1, 4, 4)
+    o += 16 * (dof + 1)
+    lower, upper = f64[o : o + dof], f64[o + dof : o + 2 * dof]
+    o += 2 * dof
+    basis = f64[o : o + W * modes].reshape(W, modes)
+    o += W * modes
+    fractions, half_range = f64[o : o + W], f64[o + W : o + W + dof]
+    K = W + 2
+    joints = out[: K * dof].reshape(K, dof)
+    o = K * dof
+    waypoints = out[o : o + 3 * W].reshape(W, 3)
+    o += 3 * W
+    states = out[o : o + 2 * (dof + 3)].reshape(2, dof + 3)
+    o += 2 * (dof + 3)
+    scores, ok = out[o : o + 2].reshape(2, 1), np.empty(1, dtype=np.bool_)
+    q = np.empty((2, dof))
+    for j in range(dof):
+        q[0, j], q[1, j] = a[j], b[j]
     inside = np.empty(2, dtype=np.bool_)
     tips = checked_tips(q, F, prismatic, lower, upper, 0.0, inside)
     moved = False
@@ -137,10 +200,9 @@ def _free_plan(
         for c in range(3):
             states[r, dof + c] = tips[r, c]
     mid = np.empty((1, K - 2, dof))
-    _path_tm(
-        q[:1], tips[:1], q[1:], tips[1:], weights, biases, silu, basis, fractions, half_range, ef_scale, mid,
-        waypoints.reshape(1, K - 2, 3),
-    )  # fmt: skip
+    y = _mlp_flat(_path_input(q[:1], tips[:1], q[1:], tips[1:], net), net, widths, silu)
+    _path_knots(y, q[:1], tips[:1], q[1:], tips[1:], basis, fractions, half_range, ef_scale, mid,
+                waypoints.reshape(1, K - 2, 3))  # fmt: skip
     for j in range(dof):
         joints[0, j] = q[0, j]
         joints[K - 1, j] = q[1, j]
@@ -152,6 +214,7 @@ def _free_plan(
         joints, K, states[:1], states[1:], True, F, prismatic, lower, upper, limit_tol, start_tol, position_tol,
         joint_tol, every, every, scores, ok,
     )  # fmt: skip
+    out[o + 2] = 1.0 if ok[0] else 0.0
     return True, ef
 
 
@@ -172,6 +235,8 @@ class CompiledPathModel:
         self.ef_scale = float(tm.ef_scale)
         self.W = tm.config.steps - 1
         self.basis = np.ascontiguousarray(_arr(tm.basis)) if tm.config.modes else np.zeros((0, 0))
+        self._free_key: tuple | None = None  # what _free_packed was packed for
+        self._free_packed: tuple = ()
 
     def _args(self) -> tuple:
         return (
@@ -194,18 +259,48 @@ class CompiledPathModel:
         _path_tm(c(theta0), c(ef0), c(thetaT), c(efT), *self._args(), joints, ef)
         return joints, ef
 
-    def free_plan(self, q: np.ndarray, chain, zero_move: float, tols: tuple) -> tuple | None:
-        """A batch-1 free-space plan from ``q (2, dof)`` float64 (start, goal) for a robot packed as
-        ``chain`` (:class:`~kinlearn.body.fk.KernelChain`), ``tols`` (the verdict's limit, start, position and
-        joint tolerances):
-        ``(joints (T + 1, dof), end effectors (T + 1, 3), waypoints (T − 1, 3), states (2, dof + 3),
-        scores (2, 1), ok (1,))``; None where either end lies outside the limits or is not finite, or they
-        are within ``zero_move`` of each other (for the general path to explain or plan)."""
-        dof = self.dof
-        joints, waypoints = np.empty((self.W + 2, dof)), np.empty((self.W, 3))
-        states, scores, ok = np.empty((2, dof + 3)), np.empty((2, 1)), np.empty(1, dtype=bool)
-        done, ef = _free_plan(
-            q, chain.F, chain.prismatic, chain.lower, chain.upper, zero_move, *tols, *self._args(), joints,
-            waypoints, states, scores, ok,
-        )  # fmt: skip
-        return (joints, ef, waypoints, states, scores, ok) if done else None
+    def _packed(self, chain, zero_move: float, tols: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`_free_plan`'s packed constants for ``chain``, ``zero_move`` and ``tols`` (made on the first
+        call with them, then kept: a planner plans with the same ones)."""
+        key = (chain, zero_move, tols)
+        if self._free_key is not None and self._free_key[0] is chain and self._free_key[1:] == key[1:]:
+            return self._free_packed
+        f64 = np.concatenate((
+            [zero_move, *tols, self.ef_scale], np.asarray(chain.F, dtype=np.float64).ravel(), chain.lower,
+            chain.upper, self.basis.ravel(), self.fractions.ravel(), self.half_range.ravel(),
+        ))  # fmt: skip
+        net = np.concatenate(
+            [a.ravel() for w, b in zip(self.weights, self.biases, strict=True) for a in (w, b)]
+        )
+        widths = [self.weights[0].shape[0], *(w.shape[1] for w in self.weights)]
+        modes = self.basis.shape[1]
+        ints = np.array(
+            [self.dof, self.W, modes, int(self.silu), *chain.prismatic.astype(int), *widths], dtype=np.int64
+        )
+        self._free_key, self._free_packed = key, (f64, net.astype(self.dtype), ints)
+        return self._free_packed
+
+    def free_plan(self, a: np.ndarray, b: np.ndarray, chain, zero_move: float, tols: tuple) -> tuple | None:
+        """A batch-1 free-space plan from the start ``a`` to the goal ``b`` (float64 ``(dof,)``) for a robot
+        packed as ``chain`` (:class:`~kinlearn.body.fk.KernelChain`), ``tols`` (the verdict's limit, start,
+        position and joint tolerances): ``(out, end effectors (T + 1, 3))``, ``out`` the rest of the plan
+        in one buffer (:meth:`views` reads it); None where either end lies outside the limits or is not
+        finite, or they are within ``zero_move`` of each other (for the general path to explain or plan)."""
+        dof, W = self.dof, self.W
+        out = np.empty((W + 2) * dof + 3 * W + 2 * (dof + 3) + 3)
+        done, ef = _free_plan(a, b, *self._packed(chain, zero_move, tols), out)
+        return (out, ef) if done else None
+
+    def views(self, out: np.ndarray, ef: np.ndarray) -> dict[str, np.ndarray]:
+        """The plan's arrays by field name (:meth:`~kinlearn.planning.plan.Plan.deferred`'s) in a buffer
+        :meth:`free_plan` filled, and its end effectors ``ef``."""
+        dof, W = self.dof, self.W
+        o = (W + 2) * dof
+        states = out[o + 3 * W : o + 3 * W + 2 * (dof + 3)].reshape(2, dof + 3)
+        s = o + 3 * W + 2 * (dof + 3)
+        return {
+            "goal": states[1], "waypoints": out[o : o + 3 * W].reshape(W, 3),
+            "joints": out[:o].reshape(W + 2, dof), "ef": ef, "target": states[1, dof:],
+            "goal_error": out[s : s + 1].reshape(()), "joint_error": out[s + 1 : s + 2].reshape(()),
+            "success": np.array(out[s + 2] > 0.5),
+        }  # fmt: skip

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Protocol, cast, runtime_checkable
 
@@ -17,7 +18,15 @@ from ..collision.scene import Scene
 from ..data.problem import Problem
 from ..errors import ConfigError, ShapeError
 
-__all__ = ["CHECK_TRAVEL", "DEFAULT_TOLERANCE", "Plan", "PlannerLike", "Tolerance", "executed_check"]
+__all__ = [
+    "CHECK_TRAVEL",
+    "DEFAULT_TOLERANCE",
+    "LazyArrays",
+    "Plan",
+    "PlannerLike",
+    "Tolerance",
+    "executed_check",
+]
 
 #: Sphere travel (m) allowed between two configurations the dense collision check looks at.
 CHECK_TRAVEL = 0.01
@@ -46,6 +55,30 @@ class Tolerance:
 
 #: The tolerance plans are judged with unless told otherwise (1 cm, 0.05 rad).
 DEFAULT_TOLERANCE = Tolerance()
+
+
+class LazyArrays(Mapping):
+    """A plan's arrays by field name (:meth:`Plan.deferred`), made by ``make()`` when one is first asked
+    for: views of one buffer a compiled call filled cost more to make than most callers read."""
+
+    __slots__ = ("_arrays", "_make", "_names")
+
+    def __init__(self, names: frozenset[str], make: Callable[[], dict[str, np.ndarray]]):
+        self._names, self._make, self._arrays = names, make, None
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._names
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if self._arrays is None:
+            self._arrays = self._make()
+        return self._arrays[name]
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
 
 
 @dataclass(frozen=True)
@@ -114,12 +147,13 @@ class Plan:
     )
 
     @classmethod
-    def deferred(cls, arrays: dict[str, np.ndarray], narrow: bool, **fields) -> Plan:
-        """A plan whose tensor fields ``arrays`` (float64 or bool NumPy arrays, by field name) become
-        tensors when first read (each a :func:`torch.from_numpy` of its array, rounded to float32 where
-        ``narrow``), its other ``fields`` as given: a batch-1 plan handed back without making the tensors
-        its caller may never read (:meth:`~kinlearn.planning.planner.Planner.plan`'s free-space entry).
-        It reads, compares, copies and pickles as the plan of those tensors."""
+    def deferred(cls, arrays: Mapping[str, np.ndarray], narrow: bool, **fields) -> Plan:
+        """A plan whose tensor fields ``arrays`` (float64 or bool NumPy arrays, by field name: a dict, or
+        :class:`LazyArrays` that makes them when first asked for) become tensors when first read (each a
+        :func:`torch.from_numpy` of its array, rounded to float32 where ``narrow``), its other ``fields``
+        as given: a batch-1 plan handed back without making the tensors its caller may never read
+        (:meth:`~kinlearn.planning.planner.Planner.plan`'s free-space entry). It reads, compares, copies
+        and pickles as the plan of those tensors."""
         plan = object.__new__(cls)
         state = plan.__dict__  # (a frozen dataclass's fields are its instance dict's, as __init__ sets them)
         state.update(_defaults(cls))

@@ -62,7 +62,7 @@ from ..models.trajectory import TrajectoryModel, load_trajectory_model
 from .around import ObstacleStages, _kernel, _load_kernels, _retreat_over
 from .inference import CompiledPathModel
 from .judge import judge, verdict_small
-from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, START_TOLERANCE, Plan, Tolerance
+from .plan import CHECK_TRAVEL, DEFAULT_TOLERANCE, START_TOLERANCE, LazyArrays, Plan, Tolerance
 from .retreat import RetreatVias
 from .stages import Deadline
 from .stages import retreat_share as _retreat_share
@@ -494,22 +494,18 @@ class Planner(ObstacleStages):
         (a, da), (b, db) = a, b
         path_kernel = self._path_kernel
         assert path_kernel is not None  # the caller's condition
-        tols = (LIMIT_TOLERANCE, START_TOLERANCE, self.tolerance.position, self.tolerance.joints)
-        out = path_kernel.free_plan(
-            np.concatenate((a, b)).reshape(2, dof), self._chain_kernel, ZERO_MOVE, tols
-        )
+        tolerance = self.tolerance
+        tols = (LIMIT_TOLERANCE, START_TOLERANCE, tolerance.position, tolerance.joints)
+        out = path_kernel.free_plan(a, b, self._chain_kernel, ZERO_MOVE, tols)
         if out is None:
             return None
-        joints, ef, waypoints, states, scores, ok = out
+        buffer, ef = out
         dtype = da if da is db else torch.promote_types(da, db)
-        # float32 rounded as torch's .to() rounds, without its per-tensor dispatch; the tensors made when
-        # first read (a plan's caller often reads one or two of its eight)
-        arrays = {
-            "goal": states[1], "waypoints": waypoints, "joints": joints, "ef": ef, "target": states[1, dof:],
-            "goal_error": scores[0, 0, ...], "joint_error": scores[1, 0, ...], "success": ok[0, ...],
-        }  # fmt: skip
+        # float32 rounded as torch's .to() rounds, without its per-tensor dispatch; the tensors (and the
+        # views of the buffer) made when first read (a plan's caller often reads one or two of its eight)
+        arrays = LazyArrays(_FREE_FIELDS, lambda: path_kernel.views(buffer, ef))
         plan = Plan.deferred(
-            arrays, dtype == torch.float32, tolerance=self.tolerance, robot=self.robot.name, stage="learned"
+            arrays, dtype == torch.float32, tolerance=tolerance, robot=self.robot.name, stage="learned"
         )
         if dtype in (torch.float64, torch.float32):
             return plan
@@ -921,6 +917,10 @@ _TORCH_FLOATS = {np.float64: torch.float64, np.float32: torch.float32, np.float1
 #: A batch-1 plan's collision verdict (:meth:`Planner._batch1_plan`: a copy of one, as its plan holds
 #: it), and its device.
 _FREE, _NOT_FREE, _CPU = np.ones(1, dtype=bool), np.zeros(1, dtype=bool), torch.device("cpu")
+#: The tensor fields of a free-space batch-1 plan (:meth:`Planner._batch1_free`).
+_FREE_FIELDS = frozenset(
+    ("goal", "waypoints", "joints", "ef", "target", "goal_error", "joint_error", "success")
+)
 
 
 def _as_output(plan: Plan, dtype: torch.dtype, device, lo: np.ndarray, hi: np.ndarray) -> Plan:
