@@ -503,7 +503,7 @@ def test_a_transfer_is_split_at_a_midpoint_where_no_whole_one_is_free_a_bounded_
 UR5_SPLIT = (82, 100)
 
 
-def test_the_ur5s_long_turns_are_cleared_through_a_midpoint(monkeypatch):
+def test_the_ur5s_long_turns_are_cleared_through_a_midpoint_where_no_sampler_follows(monkeypatch):
     ur5 = Planner.default("ur5")
     problems = ProblemSet.load(SCENES.with_name("scene_problems_ur5.npz"), robot="ur5")
     for i in UR5_SPLIT:
@@ -511,6 +511,15 @@ def test_the_ur5s_long_turns_are_cleared_through_a_midpoint(monkeypatch):
         plan = ur5.plan(start, goal, obstacles=scene, refine_steps=0)
         assert plan.stage == "retreat" and bool(plan.success)
         assert bool(check_path(ur5.body, plan.joints, scene).collision_free)  # torch agrees
+    # With the default budget of sampler iterations next, step 4 is left to the sampler, which clears them.
+    split = []
+    real = R.RetreatVias.midpoints
+    monkeypatch.setattr(R.RetreatVias, "midpoints", lambda self, a, b: split.append(1) or real(self, a, b))
+    for i in UR5_SPLIT:
+        start, goal, scene = problems.problem(i)
+        plan = ur5.plan(start, goal, obstacles=scene)
+        assert plan.stage == "rrt" and bool(plan.success) and not split
+    assert ur5.plan(start, goal, obstacles=scene, refine_steps=0).stage == "retreat" and split  # it runs
     monkeypatch.setattr(R, "MIDPOINT_TRANSFERS", 0)  # no step 4: the same problems stay colliding
     for i in UR5_SPLIT:
         start, goal, scene = problems.problem(i)

@@ -240,8 +240,11 @@ class ObstacleStages:
         branches: dict[int, tuple] = {}  # each problem's free retreats, the sampler's first branches
         open_ = ~free  # the problems no stage has cleared yet
         first_sampled = self._samples_first(deadline, iterations)
-        if not first_sampled:
-            self._retreat_open(theta0, thetaT, packed, open_, steps, deadline, found, branches, retreated)
+        if not first_sampled:  # a budget of sampler iterations (no deadline) next, or not
+            sampler_next = deadline.seconds is None and iterations > 0
+            self._retreat_open(
+                theta0, thetaT, packed, open_, steps, deadline, found, branches, retreated, sampler_next
+            )
         if steps:
             for i in np.flatnonzero(open_):
                 if deadline.expired(DEADLINE_RESERVE):
@@ -269,7 +272,9 @@ class ObstacleStages:
                     found[int(i)] = (path, "rrt")
                     open_[i] = False
         if first_sampled:  # what the sampler's budget left: the retreat stage, last
-            self._retreat_open(theta0, thetaT, packed, open_, steps, deadline, found, branches, retreated)
+            self._retreat_open(
+                theta0, thetaT, packed, open_, steps, deadline, found, branches, retreated, False
+            )
         if found:
             # Every plan at the knots of the longest: a later stage's path as it is where later stages
             # replaced every proposal (a batch-1 plan), else at least at the proposals' knots.
@@ -297,11 +302,12 @@ class ObstacleStages:
 
     def _retreat_open(
         self, theta0, thetaT, packed: list, open_: np.ndarray, steps: int, deadline: Deadline, found: dict,
-        branches: dict, retreated: tuple | None,
+        branches: dict, retreated: tuple | None, sampler_next: bool,
     ) -> None:  # fmt: skip
         """The retreat stage on the problems still ``open_`` (cleared ones added to ``found`` and closed;
         each problem's free retreats kept in ``branches``, the sampler's first branches); ``retreated``:
-        the batch-1 entry ran it on its one problem already, clearing nothing (not run again)."""
+        the batch-1 entry ran it on its one problem already, clearing nothing (not run again);
+        ``sampler_next``: :meth:`_retreat`'s."""
         if self._retreat_vias() is None:
             return
         for i in np.flatnonzero(open_):
@@ -310,7 +316,9 @@ class ObstacleStages:
                 continue
             if _retreat_over(deadline, self.retreat_share):
                 break
-            path, branches[int(i)] = self._retreat(theta0[i], thetaT[i], packed[i], steps, deadline)
+            path, branches[int(i)] = self._retreat(
+                theta0[i], thetaT[i], packed[i], steps, deadline, sampler_next
+            )
             if path is not None:
                 found[int(i)] = (path, "retreat")
                 open_[i] = False
@@ -370,12 +378,20 @@ class ObstacleStages:
         return self._vias or None
 
     def _retreat(
-        self, theta0: np.ndarray, thetaT: np.ndarray, nscene, steps: int, deadline: Deadline
+        self,
+        theta0: np.ndarray,
+        thetaT: np.ndarray,
+        nscene,
+        steps: int,
+        deadline: Deadline,
+        sampler_next: bool,
     ) -> tuple[np.ndarray | None, tuple]:
         """The retreat stage (:mod:`kinlearn.planning.retreat`) for one problem: its path ``(V, dof)`` or
         None, and the free retreats of either end (:func:`~kinlearn.planning.retreat.sampler_branches`: the
         sampler grows its trees from them). Its transfers are stage 1's (:meth:`_learned`) between two
-        configurations."""
+        configurations. ``sampler_next``: a budget of sampler iterations follows (no deadline), which
+        clears what the learned transfers leave sooner than transfers through midpoints (step 4 of
+        :mod:`~kinlearn.planning.retreat`, run otherwise: :data:`~kinlearn.planning.retreat.MIDPOINT_TRANSFERS`)."""
         k, body = _kernel(), self._np_body
         lo, hi = self._boxes(theta0[None], thetaT[None])
         vias = self._retreat_vias().within(lo[0], hi[0])  # the vias kept in the problem's box
@@ -425,7 +441,7 @@ class ObstacleStages:
             first_free,
             transfer,
             stop=lambda: _retreat_over(deadline, self.retreat_share),
-            midpoints=None if transfer is None else vias.midpoints,
+            midpoints=None if transfer is None or sampler_next else vias.midpoints,
         )
         return path, (sampler_branches(v0, d0), sampler_branches(vT, dT))
 

@@ -463,7 +463,7 @@ class Planner(ObstacleStages):
                     and self._retreat_vias() is not None
                     and not _retreat_over(timer, self.retreat_share)
                 ):
-                    path, branches = self._retreat(q[0], q[1], packed, steps, timer)
+                    path, branches = self._retreat(q[0], q[1], packed, steps, timer, sampling)
                     if path is not None:  # the retreat stage cleared it: no Problem made either
                         return self._batch1_plan(q, ef, path, "retreat", dtype, packed, scene)
                     retreated = branches  # the later stages start from its free retreats
