@@ -390,8 +390,9 @@ class ObstacleStages:
         None, and the free retreats of either end (:func:`~kinlearn.planning.retreat.sampler_branches`: the
         sampler grows its trees from them). Its transfers are stage 1's (:meth:`_learned`) between two
         configurations. ``sampler_next``: a budget of sampler iterations follows (no deadline), which
-        clears what the learned transfers leave sooner than transfers through midpoints (step 4 of
-        :mod:`~kinlearn.planning.retreat`, run otherwise: :data:`~kinlearn.planning.retreat.MIDPOINT_TRANSFERS`)."""
+        clears what the learned transfers leave sooner than transfers through midpoints do (step 4 of
+        :mod:`~kinlearn.planning.retreat`, run otherwise; see
+        :data:`~kinlearn.planning.retreat.MIDPOINT_TRANSFERS`)."""
         k, body = _kernel(), self._np_body
         lo, hi = self._boxes(theta0[None], thetaT[None])
         vias = self._retreat_vias().within(lo[0], hi[0])  # the vias kept in the problem's box

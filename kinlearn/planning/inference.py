@@ -97,7 +97,8 @@ def _mlp_flat(h, flat, widths, silu):
 
 @_jit
 def _path_input(theta0, ef0, thetaT, efT, dtype_of):
-    """The joint-path TM's input rows ``(N, 3 · dof + 6)`` (θ0, ef0, θT, efT, θT − θ0) in ``dtype_of``'s dtype."""
+    """The joint-path TM's input rows ``(N, 3 · dof + 6)`` (θ0, ef0, θT, efT, θT − θ0), in the dtype of the
+    array ``dtype_of`` (the network's)."""
     n, dof = theta0.shape
     h = np.empty((n, 3 * dof + 6), dtype=dtype_of.dtype)
     for i in range(n):
@@ -156,8 +157,9 @@ def _free_plan(a, b, f64, net, ints, out):
     """A batch-1 free-space plan from the start ``a`` and goal ``b (dof,)``, everything else packed
     (:meth:`CompiledPathModel._packed`: few arguments, each of which costs a call time): ``f64`` the
     scalars (:data:`_SCALARS`), the chain's fixed transforms ``F (dof + 1, 4, 4)`` (the last to the tip),
-    limits, knot basis, fractions and half ranges; ``net`` the network's layers in its dtype (:func:`_mlp_flat`); ``ints`` dof,
-    T − 1, modes, SiLU, the joints' prismatic flags, the layers' widths. False where either end lies
+    limits, knot basis, fractions and half ranges; ``net`` the network's layers in its dtype
+    (:func:`_mlp_flat`); ``ints`` dof, T − 1, modes, SiLU, the joints' prismatic flags, the layers'
+    widths. False where either end lies
     outside the limits or is not finite, or the two are within the zero move of each other (the general
     path explains or plans those); else True, with ``out`` filled (:meth:`CompiledPathModel.views`: the
     plan's knots ``(T + 1, dof)``, the TM's inner knots clipped to the limits, its end-effector waypoints
