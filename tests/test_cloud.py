@@ -182,6 +182,18 @@ def test_self_filtering_drops_the_robots_own_points(robot, body):
     assert len(clean_points(both, 0.01, None, self_filter=(body, q.numpy()))) == len(wall) + 1
     kept = clean_points(both, 0.01, None, self_filter=(body, torch.stack([q, other]).numpy()))
     assert len(kept) == len(wall)
+    # a vouched configuration's body drops the points within its own margin (the obstacle's surface beside
+    # a goal stays), where the robot's would drop them within the robot's
+    c, r = body(other[None])[0, -1].numpy(), float(body.radii[-1])
+    beside = c + np.array([0.0, 0.0, r + 0.01 + 0.01])  # its ball 1 cm from the sphere
+    near = np.vstack([wall, beside])
+    assert len(clean_points(near, 0.01, None, self_filter=(body, other.numpy()))) == len(wall)  # 2 cm: dropped
+    stack = torch.stack([q, other]).numpy()
+    assert len(clean_points(near, 0.01, None, self_filter=(body, stack))) == len(wall) + 1  # 4 mm: kept
+    wide = Cleaning(vouch_margin=0.02)
+    assert len(clean_points(near, 0.01, wide, self_filter=(body, stack))) == len(wall)
+    with pytest.raises(PointCloudError, match="vouch_margin"):
+        Cleaning(vouch_margin=-0.001)
     with pytest.raises(PointCloudError, match="joints"):
         Scene.from_points(pts, self_filter=(body, np.zeros((2, 3))))
 

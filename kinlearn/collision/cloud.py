@@ -457,7 +457,10 @@ def sensed_cloud(
         pts = clean_points(pts, float(radius), c)
         pts = shadows(pts, points_in_base(np.zeros((1, 3)), frame)[0], float(shadow), float(resolution))
         pts = clean_points(
-            pts, float(radius), Cleaning(reach=c.reach, self_margin=c.self_margin), self_filter
+            pts,
+            float(radius),
+            Cleaning(reach=c.reach, self_margin=c.self_margin, vouch_margin=c.vouch_margin),
+            self_filter,
         )
         return PointCloud(pts, radius, resolution)
     if cleaning is not None or self_filter is not None:

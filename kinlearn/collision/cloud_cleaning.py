@@ -29,7 +29,10 @@ class Cleaning:
       those can touch the robot: with a body, its :attr:`~kinlearn.collision.BodySpheres.reach` is taken
       when this is None). Keeps the grid small where a camera sees the room behind the robot.
     - self-filtering (given a body and its configuration to :func:`clean_points`): drop every point whose
-      ball comes within ``self_margin`` (m) of one of the body's spheres there, the robot seeing itself.
+      ball comes within ``self_margin`` (m) of one of the body's spheres there, the robot seeing itself;
+      at each further configuration given (a goal vouched for), within ``vouch_margin``: there the points
+      are the obstacles' own surface, which the margin's shell would hide from the approach (a sensor's
+      noise, not its view of the robot).
     - ``voxel``: one point per occupied cube of this edge (m), their centroid. The grid is an occupancy
       grid, so this mainly saves reading time; a voxel larger than the grid's resolution moves the
       surface by up to half its diagonal (give ``radius`` room for it).
@@ -43,6 +46,10 @@ class Cleaning:
 
     reach: float | None = None
     self_margin: float = 0.02
+    #: On the tuning problems' surface clouds (seeds 3004–3010, 140 per arm, 2 mm noise, the goal vouched
+    #: for) 4 mm left no plan colliding with the true obstacles and solved 99.3% (panda) and 97.1% (ur5 with
+    #: its gripper); 1 cm let 3 plans per arm collide and solved 97.1% and 96.4%; 0 solved 99.3% and 95.7%.
+    vouch_margin: float = 0.004
     voxel: float | None = None
     outliers: Literal["none", "radius", "statistical"] = "none"
     outlier_radius: float = 0.03
@@ -55,7 +62,7 @@ class Cleaning:
             v = getattr(self, name)
             if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise PointCloudError(f"Cleaning.{name} must be None or a number of metres > 0, got {v!r}")
-        for name in ("self_margin", "outlier_radius", "std_ratio"):
+        for name in ("self_margin", "vouch_margin", "outlier_radius", "std_ratio"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise PointCloudError(f"Cleaning.{name} must be a finite number >= 0, got {v!r}")
@@ -90,9 +97,10 @@ def clean_points(
 ) -> np.ndarray:
     """The points ``(N, 3)`` (base frame, checked) after the steps of ``cleaning`` (see :class:`Cleaning`);
     ``self_filter``: ``(body, q)``, a :class:`~kinlearn.collision.BodySpheres` (or a planner) and the
-    robot's joints ``(dof,)`` when the cloud was taken: the points on its own body are dropped; ``q (K, dof)``
-    drops those on its body at each of K configurations (where it stands, and a goal vouched for: the
-    points a goal's body hides are then no obstacle anywhere).
+    robot's joints ``(dof,)`` when the cloud was taken: the points on its own body are dropped
+    (``cleaning.self_margin``); ``q (K, dof)``: its first row where the robot stands, each further row a
+    configuration vouched for (a goal), whose body drops the points it touches too
+    (``cleaning.vouch_margin``: those points are then no obstacle anywhere).
     :class:`PointCloudError` if nothing is left."""
     cleaning = cleaning or Cleaning()
     pts = points
@@ -113,14 +121,18 @@ def clean_points(
         with torch.no_grad():
             q = q.reshape(-1, dof)
             centres = body(q).detach().cpu().double().numpy().reshape(-1, 3)
-            radii = np.tile(body.radii.detach().cpu().double().numpy(), q.shape[0])
+            r = body.radii.detach().cpu().double().numpy()
+            # the first configuration's spheres widened by the robot's margin, the vouched ones' by theirs
+            radii = np.concatenate(
+                [r + cleaning.self_margin] + [r + cleaning.vouch_margin] * (q.shape[0] - 1)
+            )
         if reach is None:
             reach = body.reach + cleaning.self_margin
     if reach is not None:
         pts = pts[np.linalg.norm(pts, axis=1) - radius <= reach]
     if centres is not None and len(pts):
         keep = np.empty(len(pts), dtype=np.bool_)
-        _outside_spheres(pts, np.ascontiguousarray(centres), radii + radius + cleaning.self_margin, keep)
+        _outside_spheres(pts, np.ascontiguousarray(centres), radii + radius, keep)
         pts = pts[keep]
     if cleaning.voxel is not None and len(pts):
         pts = _voxel_centroids(pts, cleaning.voxel)
