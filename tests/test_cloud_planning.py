@@ -84,3 +84,13 @@ def test_plan_points_on_the_command_line(tmp_path):
     assert code == 0
     bad = ["plan", "--start", joints(START), "--goal", joints(GOAL), "--camera-pose", "0,0,0,0,0,0,1"]
     assert main(bad) == 2  # a camera pose without points
+    # a point on the arm's body at the goal: the goal collides, unless vouched for
+    planner = Planner.default("iiwa14")
+    with torch.no_grad():
+        hand = planner.body(GOAL[None].to(planner.body.radii))[0, -1].numpy()
+    np.save(tmp_path / "held.npy", np.vstack([surface_points(BALL, noise=0.0), hand]))
+    held = ["plan", "--start", joints(START), "--goal", joints(GOAL), "--points", str(tmp_path / "held.npy")]
+    with pytest.warns(CollidingEndWarning, match="goal"):
+        assert main([*held, "--refine-steps", "0"]) == 1
+    assert main([*held, "--vouch-goal"]) == 0
+    assert main([*held[:3], "--goal-position", "0.5,0,0.5", *held[5:], "--vouch-goal"]) == 2

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import re
 
+import numpy as np
 import torch
 
 from ..errors import ConfigError
@@ -109,6 +110,12 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
         help="with --points: drop the points on the robot's own body at the start (and those beyond its reach)",
     )
     p.add_argument(
+        "--vouch-goal",
+        action="store_true",
+        help="with --points and a joint --goal: the goal is vouched for, the points its body touches dropped "
+        "(within 4 mm), as --self-filter drops the robot's own at the start; docs/clouds.md says what it risks",
+    )
+    p.add_argument(
         "--drop-nan",
         action="store_true",
         help="with --points: drop points holding NaN (a depth camera's missing pixels) instead of refusing them",
@@ -199,19 +206,30 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
 
         obstacles = Scene.from_moveit(args.scene, base_pose=args.base_pose)
     if args.points is None and (
-        args.camera_pose is not None or args.point_radius is not None or args.self_filter or args.drop_nan
+        args.camera_pose is not None
+        or args.point_radius is not None
+        or args.self_filter
+        or args.vouch_goal
+        or args.drop_nan
     ):
         raise ConfigError(
-            "--camera-pose, --point-radius, --self-filter and --drop-nan describe --points: give it too"
+            "--camera-pose, --point-radius, --self-filter, --vouch-goal and --drop-nan describe --points: "
+            "give it too"
         )
+    if args.vouch_goal and args.goal_position is not None:
+        raise ConfigError("--vouch-goal vouches for a goal given as joints (--goal), not --goal-position")
     if args.points is not None:
         from ..collision.scene import Scene
 
+        dof = planner.robot.dof
+        at = [start[:dof].numpy()] if args.self_filter or args.vouch_goal else []
+        if args.vouch_goal:  # where the robot stands first (its own points), then the goal vouched for
+            at.append(np.asarray(args.goal, dtype=np.float64)[:dof])
         obstacles = Scene.from_points(
             args.points,
             radius=args.point_radius,
             frame=args.camera_pose,
-            self_filter=(planner.body, start[: planner.robot.dof].numpy()) if args.self_filter else None,
+            self_filter=(planner.body, np.stack(at)) if at else None,
             drop_nonfinite=args.drop_nan,
             primitives=obstacles,
         )
