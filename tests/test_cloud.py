@@ -187,9 +187,8 @@ def test_self_filtering_drops_the_robots_own_points(robot, body):
     c, r = body(other[None])[0, -1].numpy(), float(body.radii[-1])
     beside = c + np.array([0.0, 0.0, r + 0.01 + 0.01])  # its ball 1 cm from the sphere
     near = np.vstack([wall, beside])
-    assert len(clean_points(near, 0.01, None, self_filter=(body, other.numpy()))) == len(
-        wall
-    )  # 2 cm: dropped
+    alone = clean_points(near, 0.01, None, self_filter=(body, other.numpy()))  # where the robot stands
+    assert len(alone) == len(wall)  # 2 cm: dropped
     stack = torch.stack([q, other]).numpy()
     assert len(clean_points(near, 0.01, None, self_filter=(body, stack))) == len(wall) + 1  # 4 mm: kept
     wide = Cleaning(vouch_margin=0.02)

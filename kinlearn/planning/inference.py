@@ -48,12 +48,13 @@ def _folded_mlp(seq: torch.nn.Sequential, mean, std, dtype, rows: int | None = N
 
 
 def packed_mlp(seq: torch.nn.Sequential, mean, std, dtype=np.float32, rows: int | None = None):
-    """The Linear layers of ``seq`` (the standardisation folded in: :func:`_folded_mlp`) as tuples for
-    :func:`mlp`: weights ``(in, out)`` and biases ``(1, out)`` of ``dtype``, contiguous."""
+    """The Linear layers of ``seq`` (the standardisation folded in: :func:`_folded_mlp`) packed for
+    :func:`mlp`: ``(flat, widths)``, every layer's weights ``(in, out)`` then its biases ``(out,)`` in one
+    contiguous buffer of ``dtype``, in order, and the layers' widths (input first, int64)."""
     weights, biases = _folded_mlp(seq, mean, std, dtype, rows=rows)
-    return tuple(np.ascontiguousarray(w) for w in weights), tuple(
-        np.ascontiguousarray(b[None]) for b in biases
-    )
+    flat = np.concatenate([a.ravel() for w, b in zip(weights, biases, strict=True) for a in (w, b)])
+    widths = np.array([weights[0].shape[0], *(w.shape[1] for w in weights)], dtype=np.int64)
+    return np.ascontiguousarray(flat.astype(dtype)), widths
 
 
 @_jit
@@ -67,21 +68,10 @@ def _activate(h, silu):
 
 
 @_jit
-def mlp(h, weights, biases, silu, last_active):
-    """(Compiled.) The MLP on ``h (N, in)`` (the weights' dtype): every layer but the last followed by the
-    activation (SiLU, else tanh), the last too if ``last_active``. Products through BLAS (``np.dot``)."""
-    last = len(weights) - 1
-    for k in range(len(weights)):
-        h = np.dot(h, weights[k]) + biases[k]
-        if k < last or last_active:
-            _activate(h, silu)
-    return h
-
-
-@_jit
-def _mlp_flat(h, flat, widths, silu):
-    """:func:`mlp` (the last layer without activation) with every layer's weights ``(in, out)`` then biases
-    ``(out,)`` in one buffer ``flat``, in order, the layers' widths in ``widths`` (input first)."""
+def mlp(h, flat, widths, silu, last_active):
+    """(Compiled.) The MLP packed by :func:`packed_mlp` (``flat``, ``widths``) on ``h (N, in)`` (the
+    weights' dtype): every layer but the last followed by the activation (SiLU, else tanh), the last too if
+    ``last_active``. Products through BLAS (``np.dot``)."""
     o = 0
     last = widths.shape[0] - 2
     for k in range(last + 1):
@@ -90,7 +80,7 @@ def _mlp_flat(h, flat, widths, silu):
         o += n_in * n_out
         h = np.dot(h, W) + flat[o : o + n_out].reshape(1, n_out)
         o += n_out
-        if k < last:
+        if k < last or last_active:
             _activate(h, silu)
     return h
 
@@ -137,14 +127,13 @@ def _path_knots(out, theta0, ef0, thetaT, efT, basis, fractions, half_range, ef_
 
 
 @_jit
-def _path_tm(
-    theta0, ef0, thetaT, efT, weights, biases, silu, basis, fractions, half_range, ef_scale, joints, ef
-):
+def _path_tm(theta0, ef0, thetaT, efT, net, widths, silu, basis, fractions, half_range, ef_scale, joints, ef):
     """The joint-path TM's forward pass on ``N`` problems (float64 ``(N, dof)`` joints and ``(N, 3)`` end
     effectors): its knots into ``joints (N, T − 1, dof)`` and its end-effector waypoints into
-    ``ef (N, T − 1, 3)``, as :meth:`JointPathModel.forward` computes them (the network in the weights'
-    dtype, the rest float64). ``basis (T − 1, modes)``, or ``(0, 0)`` where the network gives knots."""
-    out = mlp(_path_input(theta0, ef0, thetaT, efT, weights[0]), weights, biases, silu, False)
+    ``ef (N, T − 1, 3)``, as :meth:`JointPathModel.forward` computes them (the network, ``net`` and
+    ``widths`` as :func:`packed_mlp` packs it, in its dtype; the rest float64). ``basis (T − 1, modes)``, or
+    ``(0, 0)`` where the network gives knots."""
+    out = mlp(_path_input(theta0, ef0, thetaT, efT, net), net, widths, silu, False)
     _path_knots(out, theta0, ef0, thetaT, efT, basis, fractions, half_range, ef_scale, joints, ef)
 
 
@@ -153,12 +142,23 @@ _SCALARS = 6  # zero move, the verdict's limit, start, position and joint tolera
 
 
 @_jit
+def _layout(dof, W):
+    """Where a free-space plan's parts start in :func:`_free_plan`'s output buffer: the knots ``(W + 2, dof)``
+    at 0, then the waypoints ``(W, 3)``, the start and goal states ``(2, dof + 3)``, the two scores and the
+    verdict; returns (waypoints, states, scores, the buffer's size)."""
+    waypoints = (W + 2) * dof
+    states = waypoints + 3 * W
+    scores = states + 2 * (dof + 3)
+    return waypoints, states, scores, scores + 3
+
+
+@_jit
 def _free_plan(a, b, f64, net, ints, out):
     """A batch-1 free-space plan from the start ``a`` and goal ``b (dof,)``, everything else packed
     (:meth:`CompiledPathModel._packed`: few arguments, each of which costs a call time): ``f64`` the
     scalars (:data:`_SCALARS`), the chain's fixed transforms ``F (dof + 1, 4, 4)`` (the last to the tip),
     limits, knot basis, fractions and half ranges; ``net`` the network's layers in its dtype
-    (:func:`_mlp_flat`); ``ints`` dof, T − 1, modes, SiLU, the joints' prismatic flags, the layers'
+    (:func:`mlp`); ``ints`` dof, T − 1, modes, SiLU, the joints' prismatic flags, the layers'
     widths. False where either end lies
     outside the limits or is not finite, or the two are within the zero move of each other (the general
     path explains or plans those); else True, with ``out`` filled (:meth:`CompiledPathModel.views`: the
@@ -178,12 +178,10 @@ def _free_plan(a, b, f64, net, ints, out):
     o += W * modes
     fractions, half_range = f64[o : o + W], f64[o + W : o + W + dof]
     K = W + 2
-    joints = out[: K * dof].reshape(K, dof)
-    o = K * dof
-    waypoints = out[o : o + 3 * W].reshape(W, 3)
-    o += 3 * W
-    states = out[o : o + 2 * (dof + 3)].reshape(2, dof + 3)
-    o += 2 * (dof + 3)
+    wp, st, o, _ = _layout(dof, W)
+    joints = out[:wp].reshape(K, dof)
+    waypoints = out[wp:st].reshape(W, 3)
+    states = out[st:o].reshape(2, dof + 3)
     scores, ok = out[o : o + 2].reshape(2, 1), np.empty(1, dtype=np.bool_)
     q = np.empty((2, dof))
     for j in range(dof):
@@ -202,7 +200,7 @@ def _free_plan(a, b, f64, net, ints, out):
         for c in range(3):
             states[r, dof + c] = tips[r, c]
     mid = np.empty((1, K - 2, dof))
-    y = _mlp_flat(_path_input(q[:1], tips[:1], q[1:], tips[1:], net), net, widths, silu)
+    y = mlp(_path_input(q[:1], tips[:1], q[1:], tips[1:], net), net, widths, silu, False)
     _path_knots(y, q[:1], tips[:1], q[1:], tips[1:], basis, fractions, half_range, ef_scale, mid,
                 waypoints.reshape(1, K - 2, 3))  # fmt: skip
     for j in range(dof):
@@ -229,7 +227,7 @@ class CompiledPathModel:
         """``dtype``: of the network's weights and arithmetic (float32 halves a batch-1 pass's time; the
         waypoints are then assembled in float64)."""
         self.dtype = np.dtype(dtype)
-        self.weights, self.biases = packed_mlp(tm.net, tm.in_mean, tm.in_std, self.dtype)
+        self.net, self.widths = packed_mlp(tm.net, tm.in_mean, tm.in_std, self.dtype)
         self.silu = tm.config.activation == "silu"
         self.dof = tm.config.dof
         self.half_range = np.ascontiguousarray(_arr(tm.half_range))
@@ -238,12 +236,13 @@ class CompiledPathModel:
         self.W = tm.config.steps - 1
         self.basis = np.ascontiguousarray(_arr(tm.basis)) if tm.config.modes else np.zeros((0, 0))
         self._free_key: tuple | None = None  # what _free_packed was packed for
+        self._size = _layout(self.dof, self.W)[3]  # free_plan's output buffer
         self._free_packed: tuple = ()
 
     def _args(self) -> tuple:
         return (
-            self.weights,
-            self.biases,
+            self.net,
+            self.widths,
             self.silu,
             self.basis,
             self.fractions,
@@ -271,15 +270,12 @@ class CompiledPathModel:
             [zero_move, *tols, self.ef_scale], np.asarray(chain.F, dtype=np.float64).ravel(), chain.lower,
             chain.upper, self.basis.ravel(), self.fractions.ravel(), self.half_range.ravel(),
         ))  # fmt: skip
-        net = np.concatenate(
-            [a.ravel() for w, b in zip(self.weights, self.biases, strict=True) for a in (w, b)]
-        )
-        widths = [self.weights[0].shape[0], *(w.shape[1] for w in self.weights)]
         modes = self.basis.shape[1]
         ints = np.array(
-            [self.dof, self.W, modes, int(self.silu), *chain.prismatic.astype(int), *widths], dtype=np.int64
+            [self.dof, self.W, modes, int(self.silu), *chain.prismatic.astype(int), *self.widths],
+            dtype=np.int64,
         )
-        self._free_key, self._free_packed = key, (f64, net.astype(self.dtype), ints)
+        self._free_key, self._free_packed = key, (f64, self.net, ints)
         return self._free_packed
 
     def free_plan(self, a: np.ndarray, b: np.ndarray, chain, zero_move: float, tols: tuple) -> tuple | None:
@@ -288,8 +284,7 @@ class CompiledPathModel:
         position and joint tolerances): ``(out, end effectors (T + 1, 3))``, ``out`` the rest of the plan
         in one buffer (:meth:`views` reads it); None where either end lies outside the limits or is not
         finite, or they are within ``zero_move`` of each other (for the general path to explain or plan)."""
-        dof, W = self.dof, self.W
-        out = np.empty((W + 2) * dof + 3 * W + 2 * (dof + 3) + 3)
+        out = np.empty(self._size)
         done, ef = _free_plan(a, b, *self._packed(chain, zero_move, tols), out)
         return (out, ef) if done else None
 
@@ -297,11 +292,10 @@ class CompiledPathModel:
         """The plan's arrays by field name (:meth:`~kinlearn.planning.plan.Plan.deferred`'s) in a buffer
         :meth:`free_plan` filled, and its end effectors ``ef``."""
         dof, W = self.dof, self.W
-        o = (W + 2) * dof
-        states = out[o + 3 * W : o + 3 * W + 2 * (dof + 3)].reshape(2, dof + 3)
-        s = o + 3 * W + 2 * (dof + 3)
+        o, st, s, _ = _layout(dof, W)
+        states = out[st:s].reshape(2, dof + 3)
         return {
-            "goal": states[1], "waypoints": out[o : o + 3 * W].reshape(W, 3),
+            "goal": states[1], "waypoints": out[o:st].reshape(W, 3),
             "joints": out[:o].reshape(W + 2, dof), "ef": ef, "target": states[1, dof:],
             "goal_error": out[s : s + 1].reshape(()), "joint_error": out[s + 1 : s + 2].reshape(()),
             "success": np.array(out[s + 2] > 0.5),

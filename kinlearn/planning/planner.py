@@ -917,10 +917,9 @@ _TORCH_FLOATS = {np.float64: torch.float64, np.float32: torch.float32, np.float1
 #: A batch-1 plan's collision verdict (:meth:`Planner._batch1_plan`: a copy of one, as its plan holds
 #: it), and its device.
 _FREE, _NOT_FREE, _CPU = np.ones(1, dtype=bool), np.zeros(1, dtype=bool), torch.device("cpu")
-#: The tensor fields of a free-space batch-1 plan (:meth:`Planner._batch1_free`).
-_FREE_FIELDS = frozenset(
-    ("goal", "waypoints", "joints", "ef", "target", "goal_error", "joint_error", "success")
-)
+#: The tensor fields of a free-space batch-1 plan (:meth:`Planner._batch1_free`): all but the verdict
+#: among obstacles.
+_FREE_FIELDS = frozenset(Plan._BATCHED) - {"collision_free"}
 
 
 def _as_output(plan: Plan, dtype: torch.dtype, device, lo: np.ndarray, hi: np.ndarray) -> Plan:

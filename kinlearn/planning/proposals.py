@@ -47,7 +47,7 @@ def _put(row, o, v):
 
 
 @_jit
-def _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_b, silu, emb_size):
+def _coefficients(a0, e0, aT, eT, rows, floor, columns, enc, enc_widths, trunk, trunk_widths, silu, emb_size):
     """The network's coefficients ``(2, C · modes · dof)`` float64 for the problem (row 0) and the problem
     the other way round (row 1): ``a0, aT (dof,)`` joints, ``e0, eT (3,)`` their end-effector positions,
     ``rows (P, ≥ columns)`` the scene's primitive rows, ``floor (2,)``."""
@@ -64,14 +64,14 @@ def _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, t
                 for j in range(3):
                     p[o, columns + j] = rows[i, j] - f[j]
                     p[o, columns + 3 + j] = rows[i, j] - t[j]
-        h = mlp(p, enc_w, enc_b, silu, True)
+        h = mlp(p, enc, enc_widths, silu, True)
         for r in range(2):
             for j in range(emb_size):
                 m = h[r * P, j]
                 for i in range(1, P):
                     m = max(m, h[r * P + i, j])
                 emb[r, j] = m
-    x = np.empty((2, trunk_w[0].shape[0]), dtype=np.float32)  # θ0, ef0, θT, efT, θT − θ0, floor, scene
+    x = np.empty((2, trunk_widths[0]), dtype=np.float32)  # θ0, ef0, θT, efT, θT − θ0, floor, scene
     for r in range(2):
         s, t = (a0, aT) if r == 0 else (aT, a0)
         es, et = (e0, eT) if r == 0 else (eT, e0)
@@ -86,7 +86,7 @@ def _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, t
         o += 2
         for j in range(emb_size):
             x[r, o + j] = emb[r, j]
-    return mlp(x, trunk_w, trunk_b, silu, False).astype(np.float64)
+    return mlp(x, trunk, trunk_widths, silu, False).astype(np.float64)
 
 
 @_jit
@@ -158,13 +158,15 @@ def _assemble(a0, aT, ahead, back, fractions, lo, hi, halve, paths, length):
 
 @_jit
 def _proposals(
-    a0, e0, aT, eT, rows, floor, lo, hi, halve, columns, enc_w, enc_b, trunk_w, trunk_b, silu,
+    a0, e0, aT, eT, rows, floor, lo, hi, halve, columns, enc, enc_widths, trunk, trunk_widths, silu,
     emb_size, fractions, basis, half_range, paths,
 ):  # fmt: skip
     """The whole of :meth:`CompiledObstacleModel.proposals` but the argument checks: the candidates into
     ``paths`` and their order, shortest first (a stable sort: the line leads among equals)."""
     C, inner, dof = (paths.shape[0] - 1) // 2, fractions.shape[0], a0.shape[0]
-    coef = _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_b, silu, emb_size)
+    coef = _coefficients(
+        a0, e0, aT, eT, rows, floor, columns, enc, enc_widths, trunk, trunk_widths, silu, emb_size
+    )
     ahead, back = np.empty((C, inner, dof)), np.empty((C, inner, dof))
     _knots(a0, aT, coef[0], fractions, basis, half_range, ahead)
     _knots(aT, a0, coef[1], fractions, basis, half_range, back)
@@ -175,7 +177,7 @@ def _proposals(
 
 @_jit
 def _first_free_proposal(
-    a0, e0, aT, eT, rows, floor, lo, hi, halve, columns, enc_w, enc_b, trunk_w, trunk_b, silu,
+    a0, e0, aT, eT, rows, floor, lo, hi, halve, columns, enc, enc_widths, trunk, trunk_widths, silu,
     emb_size, fractions, basis, half_range, paths, order, max_travel, margin, box_lo, box_hi, f_in, n_in,
     f_all, n_all, s,
 ):  # fmt: skip
@@ -194,7 +196,7 @@ def _first_free_proposal(
                 paths[c] = paths[0]
         return k
     order[:] = _proposals(
-        a0, e0, aT, eT, rows, floor, lo, hi, halve, columns, enc_w, enc_b, trunk_w, trunk_b, silu,
+        a0, e0, aT, eT, rows, floor, lo, hi, halve, columns, enc, enc_widths, trunk, trunk_widths, silu,
         emb_size, fractions, basis, half_range, paths,
     )  # fmt: skip
     rest = np.empty(n_paths - 1, dtype=np.int64)
@@ -209,7 +211,7 @@ def _first_free_proposal(
 @_jit
 def _stage_one(
     q, F, prismatic, lower, upper, limit_tol, zero_move, body_lo, body_hi, ef, rows, floor, halve, columns,
-    enc_w, enc_b, trunk_w, trunk_b, silu, emb_size, fractions, basis, half_range, paths, order, max_travel,
+    enc, enc_widths, trunk, trunk_widths, silu, emb_size, fractions, basis, half_range, paths, order, max_travel,
     margin, box_lo, box_hi, f_in, n_in, f_all, n_all, s,
 ):  # fmt: skip
     """A batch-1 plan's stage 1 from its start and goal joints ``q (2, dof)``, in one call (:meth:`CompiledObstacleModel.stage_one`):
@@ -232,17 +234,19 @@ def _stage_one(
             inside = False
     lo, hi = (body_lo, body_hi) if inside else (lower, upper)
     return _first_free_proposal(
-        q[0], ef[0], q[1], ef[1], rows, floor, lo, hi, halve, columns, enc_w, enc_b, trunk_w, trunk_b, silu,
+        q[0], ef[0], q[1], ef[1], rows, floor, lo, hi, halve, columns, enc, enc_widths, trunk, trunk_widths, silu,
         emb_size, fractions, basis, half_range, paths, order, max_travel, margin, box_lo, box_hi, f_in, n_in,
         f_all, n_all, s,
     )  # fmt: skip
 
 
 @_jit
-def _forward(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_b, silu, emb_size, fractions,
+def _forward(a0, e0, aT, eT, rows, floor, columns, enc, enc_widths, trunk, trunk_widths, silu, emb_size, fractions,
              basis, half_range, out):  # fmt: skip
     """One problem's candidates' knots into ``out (C, T − 1, dof)`` (:meth:`CompiledObstacleModel.__call__`)."""
-    coef = _coefficients(a0, e0, aT, eT, rows, floor, columns, enc_w, enc_b, trunk_w, trunk_b, silu, emb_size)
+    coef = _coefficients(
+        a0, e0, aT, eT, rows, floor, columns, enc, enc_widths, trunk, trunk_widths, silu, emb_size
+    )
     _knots(a0, aT, coef[0], fractions, basis, half_range, out)
 
 
@@ -262,9 +266,9 @@ class CompiledObstacleModel:
     def __init__(self, tm: ObstaclePathModel):
         self.silu = tm.config.activation == "silu"
         in_scale, prim_scale = tm.input_scales  # a feature that never varied in training held at its mean
-        self.enc_w, self.enc_b = packed_mlp(tm.encoder, tm.prim_mean, prim_scale)
+        self.enc, self.enc_widths = packed_mlp(tm.encoder, tm.prim_mean, prim_scale)
         # Only the problem features are standardised; the pooled scene embedding follows them.
-        self.trunk_w, self.trunk_b = packed_mlp(tm.trunk, tm.in_mean, in_scale, rows=tm.n_problem_features)
+        self.trunk, self.trunk_widths = packed_mlp(tm.trunk, tm.in_mean, in_scale, rows=tm.n_problem_features)
         c = tm.config
         self.C, self.modes, self.dof = c.candidates, c.modes, c.dof
         self.half_range = np.ascontiguousarray(_arr(tm.half_range).reshape(-1))
@@ -291,8 +295,8 @@ class CompiledObstacleModel:
         (:meth:`~kinlearn.collision.kernel.KernelScene.model_rows`)."""
         paths = np.empty(self.candidates_shape(halve))
         order = _proposals(
-            theta0, ef0, thetaT, efT, rows, floor, lo, hi, bool(halve), self.columns, self.enc_w, self.enc_b,
-            self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions, self.basis, self.half_range, paths,
+            theta0, ef0, thetaT, efT, rows, floor, lo, hi, bool(halve), self.columns, self.enc, self.enc_widths,
+            self.trunk, self.trunk_widths, self.silu, self.emb, self.fractions, self.basis, self.half_range, paths,
         )  # fmt: skip
         return paths, order
 
@@ -313,7 +317,7 @@ class CompiledObstacleModel:
         order = np.empty(paths.shape[0], dtype=np.int64)
         k = _first_free_proposal(
             theta0, ef0, thetaT, efT, scene.model_rows(body.reach), scene.floor, lo, hi, bool(halve), self.columns,
-            self.enc_w, self.enc_b, self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions,
+            self.enc, self.enc_widths, self.trunk, self.trunk_widths, self.silu, self.emb, self.fractions,
             self.basis, self.half_range, paths, order, float(max_travel), 0.0, *body.boxed, scene.packed,
         )  # fmt: skip
         return paths, order, _finite(k)
@@ -345,8 +349,8 @@ class CompiledObstacleModel:
         ef = np.empty((2, 3))
         k = _stage_one(
             q, chain.F, chain.prismatic, chain.lower, chain.upper, float(limit_tol), float(zero_move),
-            *body_limits, ef, scene.model_rows(body.reach), scene.floor, bool(halve), self.columns, self.enc_w,
-            self.enc_b, self.trunk_w, self.trunk_b, self.silu, self.emb, self.fractions, self.basis,
+            *body_limits, ef, scene.model_rows(body.reach), scene.floor, bool(halve), self.columns, self.enc,
+            self.enc_widths, self.trunk, self.trunk_widths, self.silu, self.emb, self.fractions, self.basis,
             self.half_range, paths, order, float(max_travel), 0.0, *body.boxed, scene.packed,
         )  # fmt: skip
         if k == -3:
@@ -368,7 +372,7 @@ class CompiledObstacleModel:
         for i in range(theta0.shape[0]):
             _forward(
                 theta0[i], ef0[i], thetaT[i], efT[i], np.ascontiguousarray(rows[i][mask[i]]), floor[i],
-                self.columns, self.enc_w, self.enc_b, self.trunk_w, self.trunk_b, self.silu, self.emb,
+                self.columns, self.enc, self.enc_widths, self.trunk, self.trunk_widths, self.silu, self.emb,
                 self.fractions, self.basis, self.half_range, out[i],
             )  # fmt: skip
         return out
