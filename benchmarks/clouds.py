@@ -21,8 +21,10 @@ beyond the body's reach are cropped. Every plan is the default ``plan()`` (the l
 read no cloud, then the retreat stage and RRT-Connect on the compiled check) at batch 1 on one thread, timed
 with the cloud's grid already built (the build times are their own rows). A problem's ends may collide
 with a cloud where they do not with the primitives (the held-out goals lie within millimetres of the
-obstacles; a point's ball and the noise reach further): success is given over all problems and over
-those whose start and goal are free under the cloud (``ends free``).
+obstacles; a point's ball and the noise reach further): an end the balls touch with no point deeper inside
+the arm than the cloud's contact depth (6 mm) is taken to touch the surface
+(:mod:`kinlearn.collision.cloud_contact`), a deeper one refused. Success is given over all problems and
+over those whose start and goal are free under the cloud (``ends free``).
 
 Columns: problems, plans that succeed (flagged collision-free by the planner and successful on the true
 primitives), success among problems whose ends are free under that rendering, plans flagged
@@ -30,9 +32,9 @@ collision-free that collide with the true primitives, p50 plan time of the solve
 problems solved both ways, its ratio to the same problems' p50 among the primitives, mean points per
 cloud. A third rendering takes the depth camera's occluded space as occupied, 1 m behind every point it
 sees, the arm's own included (self-filtering comes after the shadows): ``Scene.from_points(..., shadow=1.0)``.
-Three more rows plan on the surface clouds: without the obstacle network; with balls of
+Four more rows plan on the surface clouds: without the obstacle network; with balls of
 :data:`SMALL_RADIUS` instead of ``--radius`` (the trade of a smaller ball: more goals read free, a sparser
-or noisier cloud is covered less); and self-filtered at the goal as well as the start
+or noisier cloud is covered less); with every end the balls touch refused (``contact=0``); and self-filtered at the goal as well as the start
 (``self_filter=(body, [start, goal])``: the goal vouched for by the user, the points its body hides
 dropped, so the plan is blind to the surface they sampled; the row counts what that costs).
 """
@@ -80,13 +82,15 @@ NO_NETWORK = "surface, no obstacle network"
 #: The row of the surface clouds whose points are balls of SMALL_RADIUS (m).
 SMALL = "surface, 5 mm balls"
 SMALL_RADIUS = 0.005
+#: The row of the surface clouds whose ends the balls touch are refused (``contact=0``).
+REFUSED = "surface, ends the balls touch refused (contact=0)"
 #: The row of the surface clouds self-filtered at the goal too: the goal vouched for.
 TRUSTED = "surface, goal vouched for (filtered there too)"
 
 
 def render(
     kind: str, scene: Scene, body, start, radius: float, resolution: float, seed: int, goal=None,
-    spacing: float = 0.01,
+    spacing: float = 0.01, contact: float | None = None,
 ) -> Scene:  # fmt: skip
     """The problem's scene as a cloud (its floor kept as a plane; surfaces sampled every ``spacing`` m),
     self-filtered at the start (1 cm margin: the cloud is taken where the robot stands; with a ``goal``, at
@@ -103,6 +107,7 @@ def render(
             cleaning=clean,
             self_filter=(body, at),
             floor=scene.floor,
+            contact=contact,
         )
     with torch.no_grad():
         robot_spheres = torch.cat([body(torch.as_tensor(start)[None])[0], body.radii[:, None]], dim=1).numpy()
@@ -119,6 +124,7 @@ def render(
         self_filter=(body, start),
         shadow=RENDERINGS[kind],
         floor=scene.floor,
+        contact=contact,
     )
 
 
@@ -237,7 +243,7 @@ def main() -> None:
         )
         plan(planner, s0, g0, sc0)
         result = {k: {"paths": [], "t": [], "flag": [], "ends": [], "points": [], "stage": []} for k in
-                  ("primitives", *RENDERINGS, NO_NETWORK, SMALL, TRUSTED)}  # fmt: skip
+                  ("primitives", *RENDERINGS, NO_NETWORK, SMALL, REFUSED, TRUSTED)}  # fmt: skip
         for n in range(len(subset)):
             start, goal, scene = subset.problem(n)
             q = torch.stack([start[: robot.dof], goal[: robot.dof]]).double()
@@ -248,6 +254,12 @@ def main() -> None:
                     sc = render(
                         "surface", scene, body, q[0], SMALL_RADIUS, args.resolution, n, spacing=args.spacing
                     )
+                    sc.cloud.packed  # noqa: B018 - the grid built before the clock starts
+                elif kind == REFUSED:
+                    sc = render(
+                        "surface", scene, body, q[0], args.radius, args.resolution, n, spacing=args.spacing,
+                        contact=0.0,
+                    )  # fmt: skip
                     sc.cloud.packed  # noqa: B018 - the grid built before the clock starts
                 elif kind == TRUSTED:
                     sc = render(

@@ -164,6 +164,13 @@ class CollidingEndWarning(KinlearnWarning):
     as a box), says so."""
 
 
+class EndContactWarning(KinlearnWarning):
+    """A plan among a point cloud whose start or goal touches the points' balls with no point deeper inside
+    the arm's body than the cloud's ``contact``: it is taken to touch the surface the points sample, and
+    the points within a few millimetres of its body there are dropped for the plan
+    (:mod:`kinlearn.collision.cloud_contact`). The message names the end and the depth."""
+
+
 class BeyondLimitsWarning(KinlearnWarning):
     """A plan among obstacles whose start or goal lies outside the robot's own joint limits but within
     those of the model its planning body was read from (MoveIt's panda, the standard benchmarks', turns up

@@ -9,7 +9,7 @@ import torch
 
 from kinlearn.collision import Scene, body_obstacle_distance, check_path
 from kinlearn.collision.cloud_render import surface_points
-from kinlearn.errors import CollidingEndWarning
+from kinlearn.errors import CollidingEndWarning, EndContactWarning
 from kinlearn.planning.planner import Planner
 
 START = torch.tensor([-1.2, 0.9, 0.5, -1.6, 0.3, 1.2, -2.0], dtype=torch.float64)
@@ -94,3 +94,12 @@ def test_plan_points_on_the_command_line(tmp_path):
         assert main([*held, "--refine-steps", "0"]) == 1
     assert main([*held, "--vouch-goal"]) == 0
     assert main([*held[:3], "--goal-position", "0.5,0,0.5", *held[5:], "--vouch-goal"]) == 2
+    # a point 8 mm off the hand at the goal: its ball touches the arm, no point lies inside it; taken as
+    # the surface the goal touches by default, refused with --contact 0
+    r = float(planner.body.radii[-1])
+    np.save(tmp_path / "near.npy", np.vstack([surface_points(BALL, noise=0.0), hand + [0.0, 0.0, r + 0.008]]))
+    near = [*held[:5], "--points", str(tmp_path / "near.npy")]
+    with pytest.warns(EndContactWarning, match="goal"):
+        assert main(near) == 0
+    with pytest.warns(CollidingEndWarning, match="goal"):
+        assert main([*near, "--contact", "0", "--refine-steps", "0"]) == 1

@@ -105,6 +105,14 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
         help="with --points: the radius of each point's obstacle ball (default 0.01)",
     )
     p.add_argument(
+        "--contact",
+        type=number_type(float, low=0),
+        default=None,
+        metavar="M",
+        help="with --points: how deep points may lie inside the arm at the start or goal and be taken as the "
+        "surface it touches (default 0.006; 0 refuses an end the points' balls touch)",
+    )
+    p.add_argument(
         "--self-filter",
         action="store_true",
         help="with --points: drop the points on the robot's own body at the start (and those beyond its reach)",
@@ -208,12 +216,13 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
     if args.points is None and (
         args.camera_pose is not None
         or args.point_radius is not None
+        or args.contact is not None
         or args.self_filter
         or args.vouch_goal
         or args.drop_nan
     ):
         raise ConfigError(
-            "--camera-pose, --point-radius, --self-filter, --vouch-goal and --drop-nan describe --points: "
+            "--camera-pose, --point-radius, --contact, --self-filter, --vouch-goal and --drop-nan describe --points: "
             "give it too"
         )
     if args.vouch_goal and args.goal_position is not None:
@@ -228,6 +237,7 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
         obstacles = Scene.from_points(
             args.points,
             radius=args.point_radius,
+            contact=args.contact,
             frame=args.camera_pose,
             self_filter=(planner.body, np.stack(at)) if at else None,
             drop_nonfinite=args.drop_nan,

@@ -63,6 +63,7 @@ from .kinds.cloud import RADIUS as _R
 from .kinds.cloud import cloud_distance, refine, sphere_distance
 
 __all__ = [
+    "DEFAULT_CONTACT",
     "DEFAULT_RADIUS",
     "DEFAULT_RESOLUTION",
     "PAD",
@@ -80,6 +81,11 @@ __all__ = [
 #: Default radius (m) of the ball each point stands for: a surface sampled every centimetre is covered
 #: by balls of half the diagonal of its spacing and then some (sensor noise).
 DEFAULT_RADIUS = 0.01
+#: Default depth (m) to which points may lie inside the arm's body at a plan's start or goal and be taken
+#: as the surface it touches (:mod:`~kinlearn.collision.cloud_contact`): three standard deviations of a
+#: depth camera's 2 mm noise. On the tuning problems' surface clouds (seeds 3004–3010, 140 per arm,
+#: 2 mm noise) the deepest point at a goal the balls touch lay 4.2 mm (panda) and 2.5 mm (ur5) inside.
+DEFAULT_CONTACT = 0.006
 #: Default edge (m) of the grid's cells: a speed setting, not an accuracy one (the spheres the grid cannot
 #: clear read the points). 2 cm builds a grid of 10⁵ points in milliseconds and plans as fast as 1 cm
 #: (``benchmarks/clouds.py``).
@@ -291,13 +297,21 @@ def _refinements(centres, radii, g, bound, out):
 class PointCloud:
     """Points ``(N, 3)`` (m, the robot's base frame), each an obstacle ball of ``radius``, with the
     compiled distance grid of cell edge ``resolution`` they are checked through (:attr:`packed`, built on
-    first use). Immutable: its points are a read-only float64 array."""
+    first use). ``contact`` (m): how deep points may lie inside the arm's body at a plan's start or goal
+    and be taken as the surface it touches, within the sensor's noise (:mod:`~kinlearn.collision.cloud_contact`;
+    0: an end the balls touch is refused). Immutable: its points are a read-only float64 array."""
 
-    __slots__ = ("__weakref__", "_header", "_packed", "_torch", "points", "radius", "resolution")
+    __slots__ = ("__weakref__", "_header", "_packed", "_torch", "contact", "points", "radius", "resolution")
 
-    def __init__(self, points, radius: float = DEFAULT_RADIUS, resolution: float = DEFAULT_RESOLUTION):
+    def __init__(
+        self,
+        points,
+        radius: float = DEFAULT_RADIUS,
+        resolution: float = DEFAULT_RESOLUTION,
+        contact: float = DEFAULT_CONTACT,
+    ):
         pts = check_points(points)
-        for name, v in (("radius", radius), ("resolution", resolution)):
+        for name, v in (("radius", radius), ("resolution", resolution), ("contact", contact)):
             ok = isinstance(v, (int, float, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
             if not ok or v < 0 or (name == "resolution" and v == 0):
                 raise PointCloudError(
@@ -316,6 +330,7 @@ class PointCloud:
         self.points = pts
         self.radius = float(radius)
         self.resolution = float(resolution)
+        self.contact = float(contact)
         self._packed = None
         self._header = None
         self._torch = {}
@@ -323,6 +338,13 @@ class PointCloud:
     @property
     def num_points(self) -> int:
         return int(self.points.shape[0])
+
+    def kept(self, keep: np.ndarray) -> PointCloud | None:
+        """This cloud with only the points where ``keep (N,)`` is True (its sizes and contact the same), or
+        None where none is left."""
+        if not keep.any():
+            return None
+        return PointCloud(self.points[keep], self.radius, self.resolution, self.contact)
 
     @property
     def packed(self) -> np.ndarray:
@@ -420,7 +442,10 @@ class PointCloud:
         return d
 
     def __repr__(self) -> str:
-        return f"PointCloud(points={self.num_points}, radius={self.radius:g} m, resolution={self.resolution:g} m)"
+        return (
+            f"PointCloud(points={self.num_points}, radius={self.radius:g} m, resolution={self.resolution:g} m, "
+            f"contact={self.contact:g} m)"
+        )
 
 
 def sensed_cloud(
@@ -433,17 +458,19 @@ def sensed_cloud(
     self_filter: tuple | None = None,
     drop_nonfinite: bool = False,
     shadow: float = 0.0,
+    contact: float | None = None,
 ) -> PointCloud:
     """The :class:`PointCloud` of sensed ``points`` (an ``(N, 3)`` array or tensor, or a point-cloud file's
     path): checked, moved into the base frame from the camera's ``frame``, cleaned (``cleaning``,
     ``self_filter``), its shadows added (``shadow`` m behind each point, seen from ``frame``), with the
-    default radius and resolution where they are None. The arguments are
+    default radius, resolution and contact where they are None. The arguments are
     :meth:`~kinlearn.collision.Scene.from_points`', which adds primitives beside the cloud."""
     if isinstance(points, (str, Path)):
         points = read_points(points)
     pts = points_in_base(check_points(points, drop_nonfinite=drop_nonfinite), frame)
     radius = DEFAULT_RADIUS if radius is None else radius
     resolution = DEFAULT_RESOLUTION if resolution is None else resolution
+    contact = DEFAULT_CONTACT if contact is None else contact
     if shadow and frame is None:
         raise PointCloudError("shadow= needs the camera's pose (frame=): the rays run from it")
     if shadow and self_filter is not None:
@@ -462,12 +489,12 @@ def sensed_cloud(
             Cleaning(reach=c.reach, self_margin=c.self_margin, vouch_margin=c.vouch_margin),
             self_filter,
         )
-        return PointCloud(pts, radius, resolution)
+        return PointCloud(pts, radius, resolution, contact)
     if cleaning is not None or self_filter is not None:
         pts = clean_points(pts, float(radius), cleaning, self_filter)
     if shadow:
         pts = shadows(pts, points_in_base(np.zeros((1, 3)), frame)[0], float(shadow), float(resolution))
-    return PointCloud(pts, radius, resolution)
+    return PointCloud(pts, radius, resolution, contact)
 
 
 def _norm(v: torch.Tensor) -> torch.Tensor:

@@ -214,6 +214,7 @@ class Scene:
         self_filter: tuple | None = None,
         drop_nonfinite: bool = False,
         shadow: float = 0.0,
+        contact: float | None = None,
         primitives: Scene | Sequence[Primitive] | None = None,
         floor=None,
     ) -> Scene:
@@ -233,6 +234,9 @@ class Scene:
         ``shadow`` (m, with ``frame``): the space behind each point left after cleaning, as the camera sees
         it, is taken as occupied that far (:func:`~kinlearn.collision.cloud.shadows`), behind the robot's own
         points too (self-filtering then drops what lies on its body); by default unknown space is free.
+        ``contact`` (m; default :data:`~kinlearn.collision.cloud.DEFAULT_CONTACT`, 6 mm): a plan's start or
+        goal whose body the balls touch, with no point deeper inside it than this, is taken to touch the
+        surface the points sample (:mod:`~kinlearn.collision.cloud_contact`); 0 refuses it.
 
         Raises :class:`~kinlearn.errors.PointCloudError` for points of another shape, NaN rows, no points,
         millimetres or a bad pose, :class:`~kinlearn.errors.PointCloudFileError` for a file it cannot read.
@@ -248,6 +252,7 @@ class Scene:
             self_filter=self_filter,
             drop_nonfinite=drop_nonfinite,
             shadow=shadow,
+            contact=contact,
         )
         if primitives is None:
             base = cls(floor=floor)

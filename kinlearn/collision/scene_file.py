@@ -1,7 +1,7 @@
 """Scene files: a :class:`~kinlearn.collision.scene.Scene` kept as an ``.npz`` of its arrays (float64
 and bool, keyed by field, as ``Scene.arrays`` gives them), with the robot whose base frame it is in and
-the layout's version (:data:`SCENE_FORMAT`). A point cloud is kept as its points and its two sizes
-(radius, resolution); its distance grid is built again when it is read. :func:`write_scene` writes
+the layout's version (:data:`SCENE_FORMAT`). A point cloud is kept as its points and its sizes
+(radius, resolution, contact; a file without the contact reads the default); its distance grid is built again when it is read. :func:`write_scene` writes
 atomically; :func:`read_scene` refuses a file of another kind, robot or format with a
 :class:`~kinlearn.errors.DatasetError`.
 """
@@ -25,10 +25,10 @@ SCENE_FORMATS = (1, 2, 3)
 
 
 def cloud_arrays(cloud) -> dict[str, np.ndarray]:
-    """A :class:`~kinlearn.collision.cloud.PointCloud`'s arrays in a scene file: its points and sizes."""
+    """A :class:`~kinlearn.collision.cloud.PointCloud`'s arrays in a scene file: its points, sizes and contact."""
     return {
         "cloud_points": np.array(cloud.points),
-        "cloud_sizes": np.array([cloud.radius, cloud.resolution]),
+        "cloud_sizes": np.array([cloud.radius, cloud.resolution, cloud.contact]),
     }
 
 
@@ -38,8 +38,10 @@ def cloud_from_arrays(arrays: dict[str, np.ndarray]):
         return None
     from .cloud import PointCloud
 
-    radius, resolution = (float(v) for v in np.asarray(arrays["cloud_sizes"]).reshape(2))
-    return PointCloud(np.asarray(arrays["cloud_points"]), radius, resolution)
+    sizes = [float(v) for v in np.asarray(arrays["cloud_sizes"]).reshape(-1)]
+    if len(sizes) not in (2, 3):  # (radius, resolution[, contact]): a file without contact reads the default
+        raise DatasetError(f"a scene file's cloud_sizes must hold 2 or 3 numbers, got {len(sizes)}")
+    return PointCloud(np.asarray(arrays["cloud_points"]), *sizes)
 
 
 def write_scene(path: str | Path, arrays: dict[str, np.ndarray], robot: str = "") -> Path:

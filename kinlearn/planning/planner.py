@@ -447,6 +447,8 @@ class Planner(ObstacleStages):
         if obstacles is not None or getattr(start, "obstacles", None) is not None:
             self.warm_up()  # once, before the clock starts: no deadline is spent loading kernels
         timer = Deadline(deadline)  # started before the input is checked: the caller's time
+        if obstacles is not None and goal_position is None and getattr(obstacles, "cloud", None) is not None:
+            obstacles = self._in_contact(start, goal, obstacles)
         steps = self.refine_steps if refine_steps is None else _check_steps(refine_steps)
         stage1 = retreated = None  # what the batch-1 entry ran of a batch-1 problem's stages
         if obstacles is not None and goal_position is None:
@@ -515,6 +517,16 @@ class Planner(ObstacleStages):
     def _chain_kernel(self) -> KernelChain:
         """The robot's FK packed for the kernels (:meth:`KernelChain.of`: made once per robot)."""
         return KernelChain.of(self.robot)
+
+    def _in_contact(self, start, goal, scene: Scene) -> Scene:
+        """A plan of one problem among a point cloud, given as joint vectors ``(dof,)``: its scene without
+        the points an end touches within the cloud's contact depth (:meth:`_ends_in_contact`). Other
+        input as it is (a batch shares its cloud, and its problems' ends differ)."""
+        dof = self.robot.dof
+        a, b = _joint_vector(start, dof), _joint_vector(goal, dof)
+        if a is None or b is None or not isinstance(scene, Scene) or scene.batch_shape:
+            return scene
+        return self._ends_in_contact(np.stack((a[0], b[0])), scene, stacklevel=5)
 
     def _batch1(self, start, goal, obstacles, steps: int) -> tuple | None:
         """The batch-1 entry of a plan among obstacles, for the most common call, one problem given as
