@@ -82,6 +82,16 @@ def test_only_the_points_near_the_end_are_dropped(planner):
     kb = kernel.KernelBody.of(body)
     d, _ = kernel.clearances(kb, kernel.KernelScene.of(kept), START[None])
     assert d[0] > 0.0  # the start is free among what is left
+    # the kept cloud reuses the grid, its dropped points moved out of reach: within the exact reach its
+    # distances are those of a cloud built from the points left
+    built = PointCloud(kept.cloud.points)
+    q = c + np.random.default_rng(1).uniform(-0.1, 0.1, (2000, 3))
+    r = np.full(len(q), 0.03)
+    a, b = kept.cloud.distance(q, r), built.distance(q, r)
+    exact = np.minimum(a, b) < r + 0.01
+    assert exact.sum() > 100
+    np.testing.assert_allclose(a[exact], b[exact], rtol=0, atol=1e-12)
+    assert (a[~exact] >= r[~exact] + 0.01).all() and (b[~exact] >= r[~exact] + 0.01).all()
 
 
 def test_a_cloud_out_of_reach_leaves_the_scene_alone(planner):

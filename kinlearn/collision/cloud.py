@@ -47,7 +47,7 @@ import torch
 
 from ..body.jit import jit
 from ..errors import PointCloudError
-from .cloud_cleaning import Cleaning, body_of, clean_points
+from .cloud_cleaning import Cleaning, _outside_spheres, body_of, clean_points
 from .cloud_points import MILLIMETRE_NORM as MILLIMETRE_NORM
 from .cloud_points import check_points, points_in_base, read_points, shadows
 from .kinds import cloud as _k
@@ -99,6 +99,8 @@ MAX_CELLS = 1 << 26
 #: A body sphere's distance to the points is exact up to this far (m) beyond its radius (and a lower bound
 #: beyond): the verdict of every check with a margin below it is the points' own.
 EXACT = 0.01
+#: Where :meth:`PointCloud.without_near` moves the points it drops (m): beyond any query's reach.
+_GONE = 1e9
 #: Metres taken off every bound for the rounding of the arithmetic that made it.
 _ROUNDING = 1e-9
 
@@ -339,12 +341,31 @@ class PointCloud:
     def num_points(self) -> int:
         return int(self.points.shape[0])
 
-    def kept(self, keep: np.ndarray) -> PointCloud | None:
-        """This cloud with only the points where ``keep (N,)`` is True (its sizes and contact the same), or
-        None where none is left."""
+    def without_near(self, centres: np.ndarray, reach: np.ndarray) -> PointCloud | None:
+        """This cloud without the points within ``reach (M,)`` (m) of ``centres (M, 3)`` (its sizes and contact
+        the same), or None where none is left. Its grid is this one's, copied: the bounds of a cloud that held
+        more points still bound its distances from below, and the points dropped are moved out of every
+        query's reach in its blocks (:data:`_GONE`), so it costs a copy, not a build."""
+        c = np.ascontiguousarray(centres, dtype=np.float64)
+        r = np.ascontiguousarray(reach, dtype=np.float64)
+        keep = np.empty(self.num_points, dtype=np.bool_)
+        _outside_spheres(self.points, c, r, keep)
+        if keep.all():
+            return self
         if not keep.any():
             return None
-        return PointCloud(self.points[keep], self.radius, self.resolution, self.contact)
+        g = np.array(self.packed)
+        blocks = g[int(g[_k.POINTS]) :].reshape(-1, 3)  # the points in the blocks' order
+        kept = np.empty(blocks.shape[0], dtype=np.bool_)
+        _outside_spheres(blocks, c, r, kept)
+        blocks[~kept] = _GONE
+        g.flags.writeable = False
+        out = object.__new__(PointCloud)
+        out.points = self.points[keep]
+        out.points.flags.writeable = False
+        out.radius, out.resolution, out.contact = self.radius, self.resolution, self.contact
+        out._packed, out._header, out._torch = g, self._header, {}
+        return out
 
     @property
     def packed(self) -> np.ndarray:

@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .cloud_cleaning import Cleaning, _outside_spheres
+from .cloud_cleaning import Cleaning
 from .kernel import centres
 from .kernel_body import KernelBody
 from .scene import Scene
@@ -67,6 +67,4 @@ def ends_in_contact(body: KernelBody, scene: Scene, q: np.ndarray) -> tuple[Scen
         return scene, []
     at = np.concatenate([c[0 if k.end == "start" else 1] for k in found])
     reach = np.tile(radii, len(found)) + CONTACT_MARGIN + cloud.radius
-    keep = np.empty(cloud.num_points, dtype=np.bool_)
-    _outside_spheres(cloud.points, np.ascontiguousarray(at), reach, keep)
-    return scene.with_cloud(cloud.kept(keep)), found
+    return scene.with_cloud(cloud.without_near(at, reach)), found
