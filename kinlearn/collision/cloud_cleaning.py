@@ -146,8 +146,21 @@ def clean_points(
 
 @jit
 def _outside_spheres(points, centres, reach, keep):
-    """``keep[i]``: point i lies farther than ``reach[m]`` from every centre m."""
+    """``keep[i]``: point i lies farther than ``reach[m]`` from every centre m (a point outside the box that
+    holds the spheres, at once)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for m in range(centres.shape[0]):
+        for a in range(3):
+            lo[a] = min(lo[a], centres[m, a] - reach[m])
+            hi[a] = max(hi[a], centres[m, a] + reach[m])
     for i in range(points.shape[0]):
+        if not (
+            lo[0] <= points[i, 0] <= hi[0]
+            and lo[1] <= points[i, 1] <= hi[1]
+            and lo[2] <= points[i, 2] <= hi[2]
+        ):
+            keep[i] = True
+            continue
         ok = True
         for m in range(centres.shape[0]):
             dx = points[i, 0] - centres[m, 0]
