@@ -97,7 +97,8 @@ def test_plan_points_on_the_command_line(tmp_path):
     # a point 8 mm off the hand at the goal: its ball touches the arm, no point lies inside it; taken as
     # the surface the goal touches by default, refused with --contact 0
     r = float(planner.body.radii[-1])
-    np.save(tmp_path / "near.npy", np.vstack([surface_points(BALL, noise=0.0), hand + [0.0, 0.0, r + 0.008]]))
+    near_hand = hand + np.array([0.0, 0.0, r + 0.008])
+    np.save(tmp_path / "near.npy", np.vstack([surface_points(BALL, noise=0.0), near_hand]))
     near = [*held[:5], "--points", str(tmp_path / "near.npy")]
     with pytest.warns(EndContactWarning, match="goal"):
         assert main(near) == 0
