@@ -10,8 +10,8 @@ Renderings (:mod:`kinlearn.collision.cloud_render`):
   axis (a fused scan: nothing occluded);
 - **depth camera**: one pinhole camera, 320 × 240 pixels over 75° horizontally, 2 mm depth noise, placed
   over the robot's shoulder (0.35 m behind the base, 1.2 m up, looking at the obstacles' centre), the
-  robot's own body at the start in view (its points removed by self-filtering at the start, 1 cm
-  margin); the floor is given as a plane (its hits dropped), the hidden sides of every obstacle are
+  robot's own body at the start in view (its points removed by self-filtering at the start, its
+  default margin); the floor is given as a plane (its hits dropped), the hidden sides of every obstacle are
   missing: **unknown space is free** to the planner, and the rows count the plans that collide with the
   true primitives there.
 
@@ -93,9 +93,9 @@ def render(
     spacing: float = 0.01, contact: float | None = None,
 ) -> Scene:  # fmt: skip
     """The problem's scene as a cloud (its floor kept as a plane; surfaces sampled every ``spacing`` m),
-    self-filtered at the start (1 cm margin: the cloud is taken where the robot stands; with a ``goal``, at
-    the goal too) and cropped to the body's reach."""
-    clean = Cleaning(self_margin=0.01)
+    self-filtered at the start (the default margin: the cloud is taken where the robot stands; with a
+    ``goal``, at the goal too) and cropped to the body's reach."""
+    clean = Cleaning()
     start = start.numpy()
     if kind == "surface":
         pts = surface_points(scene, spacing=spacing, noise=0.002, seed=seed)

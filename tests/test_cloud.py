@@ -183,12 +183,14 @@ def test_self_filtering_drops_the_robots_own_points(robot, body):
     kept = clean_points(both, 0.01, None, self_filter=(body, torch.stack([q, other]).numpy()))
     assert len(kept) == len(wall)
     # a vouched configuration's body drops the points within its own margin (the obstacle's surface beside
-    # a goal stays), where the robot's would drop them within the robot's
+    # a goal stays)
     c, r = body(other[None])[0, -1].numpy(), float(body.radii[-1])
     beside = c + np.array([0.0, 0.0, r + 0.01 + 0.01])  # its ball 1 cm from the sphere
     near = np.vstack([wall, beside])
-    alone = clean_points(near, 0.01, None, self_filter=(body, other.numpy()))  # where the robot stands
-    assert len(alone) == len(wall)  # 2 cm: dropped
+    # where the robot stands: kept at the default 5 mm, dropped within a 2 cm shell
+    assert len(clean_points(near, 0.01, None, self_filter=(body, other.numpy()))) == len(wall) + 1
+    shell = clean_points(near, 0.01, Cleaning(self_margin=0.02), self_filter=(body, other.numpy()))
+    assert len(shell) == len(wall)
     stack = torch.stack([q, other]).numpy()
     assert len(clean_points(near, 0.01, None, self_filter=(body, stack))) == len(wall) + 1  # 4 mm: kept
     wide = Cleaning(vouch_margin=0.02)
