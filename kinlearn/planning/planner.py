@@ -431,7 +431,9 @@ class Planner(ObstacleStages):
         the training domain. A plan that misses its goal is returned with ``success`` False; one among
         obstacles that failed because its start or goal itself collides also warns with
         :class:`~kinlearn.errors.CollidingEndWarning`, which names the problems and says where the scene
-        overlaps the robot's fixed base.
+        overlaps the robot's fixed base. Among a point cloud, one problem's start or goal that touches the
+        points within the cloud's contact depth is taken to touch the surface they sample
+        (:mod:`~kinlearn.collision.cloud_contact`), with an :class:`~kinlearn.errors.EndContactWarning`.
         """
         if (  # one free-space problem as two joint vectors: one compiled call
             obstacles is None
