@@ -10,7 +10,8 @@ import torch
 from kinlearn.collision import Scene, kernel
 from kinlearn.collision.cloud import DEFAULT_CONTACT, PointCloud
 from kinlearn.collision.cloud_contact import CONTACT_MARGIN, ends_in_contact
-from kinlearn.errors import CollidingEndWarning, EndContactWarning, PointCloudError
+from kinlearn.collision.scene_file import write_scene
+from kinlearn.errors import CollidingEndWarning, DatasetError, EndContactWarning, PointCloudError
 from kinlearn.planning.planner import Planner
 
 START = np.array([-1.2, 0.9, 0.5, -1.6, 0.3, 1.2, -2.0])
@@ -37,9 +38,10 @@ def test_a_goal_touching_the_points_within_the_contact_depth_is_planned(planner,
     point, _, _ = _hand(planner, GOAL, depth)
     scene = Scene.from_points(np.vstack([WALL, point]))
     assert scene.cloud.contact == DEFAULT_CONTACT
-    with pytest.warns(EndContactWarning, match="goal"):
+    with pytest.warns(EndContactWarning, match="goal") as caught:
         plan = planner.plan(START, GOAL, obstacles=scene)
     assert bool(plan.success) and bool(plan.collision_free)
+    assert caught[0].filename == __file__  # the warning points at the caller's plan()
     # the points it touched are dropped for the plan, no other: the wall is checked as before
     kept, found = ends_in_contact(planner._np_body, scene, np.stack([START, GOAL]))
     assert [c.end for c in found] == ["goal"] and found[0].depth == pytest.approx(depth, abs=1e-9)
@@ -110,3 +112,9 @@ def test_the_contact_depth_is_saved_with_the_scene(tmp_path):
     scene = Scene.from_points(WALL, contact=0.002)
     path = scene.save(tmp_path / "cloud.npz")
     assert Scene.load(path).cloud.contact == 0.002
+    arrays = scene.arrays()
+    arrays["cloud_sizes"] = arrays["cloud_sizes"][:2]  # a file written before the contact depth
+    assert Scene.load(write_scene(tmp_path / "two.npz", arrays)).cloud.contact == DEFAULT_CONTACT
+    arrays["cloud_sizes"] = np.array([0.01, 0.02, 0.006, 1.0])
+    with pytest.raises(DatasetError, match="cloud_sizes"):
+        Scene.load(write_scene(tmp_path / "four.npz", arrays))

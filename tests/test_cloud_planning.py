@@ -104,3 +104,7 @@ def test_plan_points_on_the_command_line(tmp_path):
         assert main(near) == 0
     with pytest.warns(CollidingEndWarning, match="goal"):
         assert main([*near, "--contact", "0", "--refine-steps", "0"]) == 1
+    assert main([*held[:5], "--contact", "0.01"]) == 2  # a contact depth without points
+    with pytest.raises(SystemExit) as refused:  # a negative one: argparse's usage error
+        main([*near, "--contact", "-0.01"])
+    assert refused.value.code == 2

@@ -343,26 +343,30 @@ class PointCloud:
 
     def without_near(self, centres: np.ndarray, reach: np.ndarray) -> PointCloud | None:
         """This cloud without the points within ``reach (M,)`` (m) of ``centres (M, 3)`` (its sizes and contact
-        the same), or None where none is left. Its grid is this one's, copied: the bounds of a cloud that held
-        more points still bound its distances from below, and the points dropped are moved out of every
-        query's reach in its blocks (:data:`_GONE`), so it costs a copy, not a build."""
-        c = np.ascontiguousarray(centres, dtype=np.float64)
-        r = np.ascontiguousarray(reach, dtype=np.float64)
-        keep = np.empty(self.num_points, dtype=np.bool_)
-        _outside_spheres(self.points, c, r, keep)
+        the same; its points in its grid's block order), or None where none is left. Its grid is this one's,
+        copied: the bounds of a cloud that held more points still bound its distances from below, and the
+        points dropped are moved out of every query's reach in its blocks (:data:`_GONE`), so it costs a
+        copy, not a build."""
+        g = self.packed
+        p0 = int(g[_k.POINTS])
+        keep = np.empty((g.shape[0] - p0) // 3, dtype=np.bool_)
+        _outside_spheres(
+            g[p0:].reshape(-1, 3),
+            np.ascontiguousarray(centres, dtype=np.float64),
+            np.ascontiguousarray(reach, dtype=np.float64),
+            keep,
+        )
         if keep.all():
             return self
         if not keep.any():
             return None
-        g = np.array(self.packed)
-        blocks = g[int(g[_k.POINTS]) :].reshape(-1, 3)  # the points in the blocks' order
-        kept = np.empty(blocks.shape[0], dtype=np.bool_)
-        _outside_spheres(blocks, c, r, kept)
-        blocks[~kept] = _GONE
-        g.flags.writeable = False
+        g = np.array(g)
+        blocks = g[p0:].reshape(-1, 3)  # the points in the blocks' order
         out = object.__new__(PointCloud)
-        out.points = self.points[keep]
+        out.points = blocks[keep]
         out.points.flags.writeable = False
+        blocks[~keep] = _GONE
+        g.flags.writeable = False
         out.radius, out.resolution, out.contact = self.radius, self.resolution, self.contact
         out._packed, out._header, out._torch = g, self._header, {}
         return out

@@ -20,10 +20,9 @@ import numpy as np
 import torch
 
 from ..collision.body import BodySpheres, planning_body
-from ..collision.cloud_contact import CONTACT_MARGIN, ends_in_contact
 from ..collision.scene import Scene
 from ..data.problem import LIMIT_TOLERANCE
-from ..errors import BeyondLimitsWarning, CollidingEndWarning, EndContactWarning, NonFiniteError
+from ..errors import BeyondLimitsWarning, CollidingEndWarning, NonFiniteError
 from ..models.chain import ChainFM
 from .plan import CHECK_TRAVEL
 from .retreat import RetreatVias, retreat_path, sampler_branches
@@ -86,29 +85,6 @@ class ObstacleStages:
         if self._wide_robot is None:
             self._wide_robot = self.robot.with_limits(*self.body.outer_limits)
         return self._wide_robot
-
-    def _ends_in_contact(self, q: np.ndarray, scene: Scene, stacklevel: int) -> Scene:
-        """The scene a plan from ``q[0]`` to ``q[1]`` (float64 ``(2, dof)``) among a cloud ``scene`` plans in:
-        where an end touches the points within the cloud's contact depth, without the points it touches
-        there (:func:`~kinlearn.collision.cloud_contact.ends_in_contact`), with an
-        :class:`~kinlearn.errors.EndContactWarning`; else ``scene``."""
-        if not np.isfinite(q).all():  # the plan's checks explain
-            return scene
-        contact = scene.cloud.contact if scene.cloud is not None else 0.0
-        scene, found = ends_in_contact(self._np_body, scene, q)
-        if found:
-            ends = " and ".join(
-                f"the {c.end} (deepest point {c.depth * 1e3:.1f} mm inside the arm)" if c.depth > 0
-                else f"the {c.end} (no point inside the arm, the points' balls reach it)"
-                for c in found
-            )  # fmt: skip
-            warnings.warn(
-                f"{ends} touches the point cloud within its contact depth ({contact * 1e3:g} mm): taken to touch the surface the points sample, the points within {CONTACT_MARGIN * 1e3:g} mm of the arm "
-                "there are dropped for this plan (a cloud of contact=0 refuses such an end)",
-                EndContactWarning,
-                stacklevel=stacklevel,
-            )
-        return scene
 
     def _warn_beyond(self, q: np.ndarray, stacklevel: int) -> None:
         """Warn (:class:`~kinlearn.errors.BeyondLimitsWarning`) where starts or goals ``q (..., dof)`` of

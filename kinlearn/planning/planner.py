@@ -42,6 +42,7 @@ from ..body.robot import BUILTIN_ROBOTS, ROBOTS, Robot, load_robot
 from ..body.state import StateLayout
 from ..checks import as_int, as_real
 from ..collision.body import BodySpheres
+from ..collision.cloud_contact import CONTACT_MARGIN, ends_in_contact
 from ..collision.scene import Scene, as_scene
 from ..data.babbling import MAX_STEP
 from ..data.problem import LIMIT_TOLERANCE, SMALL_BATCH, Problem, positions
@@ -49,6 +50,7 @@ from ..errors import (
     ConfigError,
     DomainError,
     DomainWarning,
+    EndContactWarning,
     KinlearnError,
     NoObstacleModelWarning,
 )
@@ -521,14 +523,34 @@ class Planner(ObstacleStages):
         return KernelChain.of(self.robot)
 
     def _in_contact(self, start, goal, scene: Scene) -> Scene:
-        """A plan of one problem among a point cloud, given as joint vectors ``(dof,)``: its scene without
-        the points an end touches within the cloud's contact depth (:meth:`_ends_in_contact`). Other
-        input as it is (a batch shares its cloud, and its problems' ends differ)."""
+        """The scene a plan of one problem among a point cloud, given as finite joint vectors ``(dof,)``,
+        plans in: where an end touches the points within the cloud's contact depth, without the points it
+        touches there (:func:`~kinlearn.collision.cloud_contact.ends_in_contact`), with an
+        :class:`~kinlearn.errors.EndContactWarning`. Other input as it is (a batch shares its cloud, and
+        its problems' ends differ; the plan's checks explain bad joints)."""
         dof = self.robot.dof
         a, b = _joint_vector(start, dof), _joint_vector(goal, dof)
-        if a is None or b is None or not isinstance(scene, Scene) or scene.batch_shape:
+        if a is None or b is None or not isinstance(scene, Scene) or scene.batch_shape or scene.cloud is None:
             return scene
-        return self._ends_in_contact(np.stack((a[0], b[0])), scene, stacklevel=5)
+        q = np.stack((a[0], b[0]))
+        if not np.isfinite(q).all():
+            return scene
+        contact = scene.cloud.contact
+        scene, found = ends_in_contact(self._np_body, scene, q)
+        if found:
+            ends = " and ".join(
+                f"the {c.end} (deepest point {c.depth * 1e3:.1f} mm inside the arm)" if c.depth > 0
+                else f"the {c.end} (no point inside the arm, the points' balls reach it)"
+                for c in found
+            )  # fmt: skip
+            warnings.warn(
+                f"{ends} touches the point cloud within its contact depth ({contact * 1e3:g} mm): taken to "
+                f"touch the surface the points sample, the points within {CONTACT_MARGIN * 1e3:g} mm of the "
+                "arm there are dropped for this plan (a cloud of contact=0 refuses such an end)",
+                EndContactWarning,
+                stacklevel=3,
+            )
+        return scene
 
     def _batch1(self, start, goal, obstacles, steps: int) -> tuple | None:
         """The batch-1 entry of a plan among obstacles, for the most common call, one problem given as
