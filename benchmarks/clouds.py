@@ -28,7 +28,9 @@ over those whose start and goal are free under the cloud (``ends free``).
 
 Columns: problems, plans that succeed (flagged collision-free by the planner and successful on the true
 primitives), success among problems whose ends are free under that rendering, plans flagged
-collision-free that collide with the true primitives, p50 plan time of the solved plans and, over the
+collision-free that collide with the true primitives, successful plans whose timed trajectory
+(``plan.timed()``, what a robot executes) sinks more than 1 mm into the true primitives, densely checked
+as ``executable.py`` checks it (and those that cannot be timed), p50 plan time of the solved plans and, over the
 problems solved both ways, its ratio to the same problems' p50 among the primitives, mean points per
 cloud. A third rendering takes the depth camera's occluded space as occupied, 1 m behind every point it
 sees, the arm's own included (self-filtering comes after the shadows): ``Scene.from_points(..., shadow=1.0)``.
@@ -50,6 +52,7 @@ import warnings
 import numpy as np
 import torch
 from _common import header, markdown_table, table, write_result
+from executable import DEPTH, executed_depth
 
 import kinlearn
 from kinlearn import Scene, load_robot
@@ -57,6 +60,7 @@ from kinlearn.collision import kernel
 from kinlearn.collision.cloud import Cleaning, PointCloud
 from kinlearn.collision.cloud_render import DepthCamera, surface_points
 from kinlearn.data.problems import FAMILIES, ProblemSet
+from kinlearn.errors import TimingError
 from kinlearn.evaluation.obstacles import obstacle_outcome
 from kinlearn.planning.planner import DEFAULT_CHECKPOINTS
 
@@ -133,7 +137,20 @@ def plan(planner, start, goal, scene):
         warnings.simplefilter("ignore")
         t0 = time.perf_counter()
         p = planner.plan(start, goal, obstacles=scene)
-        return time.perf_counter() - t0, torch.as_tensor(p.joints), bool(p.collision_free), str(p.stage)
+        return time.perf_counter() - t0, torch.as_tensor(p.joints), bool(p.collision_free), str(p.stage), p
+
+
+def executed(p, body, truth: Scene) -> str:
+    """What a robot would execute of a successful plan ``p``: its :meth:`~kinlearn.Plan.timed` trajectory
+    checked densely against the TRUE primitives (``executable.py``'s check): "collides" (deeper than
+    ``DEPTH``), "untimed", "free"; "" for a plan that did not succeed."""
+    if not bool(p.success):
+        return ""
+    try:
+        q = p.timed().q
+    except TimingError:
+        return "untimed"
+    return "collides" if executed_depth(body, q, truth) > DEPTH else "free"
 
 
 def build_times(sizes: list[int], radius: float, resolution: float) -> list[list]:
@@ -177,7 +194,7 @@ def figure(path, rname: str = "panda", family: str = "table", radius: float = 0.
     for i in np.flatnonzero(fam == FAMILIES.index(family)):
         start, goal, scene = problems.problem(int(i))
         cloud = render("depth camera", scene, body, start[: robot.dof].double(), radius, resolution, int(i))
-        _t, joints, free, stage = plan(planner, start, goal, cloud)
+        _t, joints, free, stage, _ = plan(planner, start, goal, cloud)
         if free:
             break
     pts = cloud.cloud.points
@@ -242,7 +259,7 @@ def main() -> None:
             "surface", sc0, body, s0[: robot.dof], args.radius, args.resolution, 0, spacing=args.spacing
         )
         plan(planner, s0, g0, sc0)
-        result = {k: {"paths": [], "t": [], "flag": [], "ends": [], "points": [], "stage": []} for k in
+        result = {k: {"paths": [], "t": [], "flag": [], "ends": [], "points": [], "stage": [], "executed": []} for k in
                   ("primitives", *RENDERINGS, NO_NETWORK, SMALL, REFUSED, TRUSTED)}  # fmt: skip
         for n in range(len(subset)):
             start, goal, scene = subset.problem(n)
@@ -284,8 +301,9 @@ def main() -> None:
                 else:
                     sc = surface
                 d, s = kernel.clearances(kb, kernel.KernelScene.of(sc), q.numpy())
-                t, joints, free, stage = plan(bare if kind == NO_NETWORK else planner, start, goal, sc)
+                t, joints, free, stage, p = plan(bare if kind == NO_NETWORK else planner, start, goal, sc)
                 r = result[kind]
+                r["executed"].append(executed(p, body, scene))
                 r["paths"].append(joints)
                 r["t"].append(t)
                 r["flag"].append(free)
@@ -320,6 +338,8 @@ def main() -> None:
                 "ends_free": int(ends.sum()),
                 "success_ends_free": float(ok[ends].mean()) if ends.any() else None,
                 "flagged_free_but_colliding": wrong,
+                "timed_colliding_as_executed": r["executed"].count("collides"),
+                "timed_untimed": r["executed"].count("untimed"),
                 "p50_ms": float(np.median(t[ok]) * 1e3) if ok.any() else None,
                 "p50_ratio_solved_both": ratio if both.any() else None,
                 "solved_both": int(both.sum()),
@@ -334,13 +354,14 @@ def main() -> None:
                     f"{100 * ok.mean():.1f}%",
                     f"{100 * ok[ends].mean():.1f}% of {int(ends.sum())}" if ends.any() else "",
                     wrong,
+                    f"{r['executed'].count('collides')} ({r['executed'].count('untimed')} untimed)",
                     f"{np.median(t[ok]) * 1e3:.1f}" if ok.any() else "",
                     f"{ratio:.2f} ({int(both.sum())})" if both.any() else "",
                     f"{np.mean(r['points']):.0f}",
                 ]
             )
     columns = ["robot", "scene as", "problems", "success", "success, ends free", "flagged free but colliding",
-               "p50 ms (solved)", "p50 / primitives (solved both)", "points"]  # fmt: skip
+               "timed, colliding as executed", "p50 ms (solved)", "p50 / primitives (solved both)", "points"]  # fmt: skip
     print()
     print(markdown_table(columns, rows))
     print("per row (stages that made the plans):", json.dumps(summary, indent=1))
