@@ -13,7 +13,10 @@ Renderings (:mod:`kinlearn.collision.cloud_render`):
   robot's own body at the start in view (its points removed by self-filtering at the start, its
   default margin); the floor is given as a plane (its hits dropped), the hidden sides of every obstacle are
   missing: **unknown space is free** to the planner, and the rows count the plans that collide with the
-  true primitives there.
+  true primitives there;
+- **two depth cameras, fused**: the same camera and a second one 1.2 m to the side of the obstacles
+  (:func:`side_camera`), each cloud given in its own camera's frame, fused by ``Scene.from_points`` (what
+  one camera cannot see, the other may).
 
 Each point is a ball of ``--radius`` (m; a row says where not), checked exactly: through the compiled grid of
 ``--resolution`` (m) first, then, for the body spheres the grid cannot clear, the points themselves; points
@@ -76,9 +79,27 @@ def camera_for(scene: Scene) -> DepthCamera:
     return DepthCamera(position=position, target=tuple(c), width=320, height=240, fov=75.0, noise=0.002)
 
 
+def side_camera(scene: Scene) -> DepthCamera:
+    """A second camera, 1.2 m to the side of the primitives' centre (left of the way from the base to it)
+    and 1.2 m up, looking at it: what the over-the-shoulder camera cannot see, it may."""
+    first = camera_for(scene)
+    c = np.asarray(first.target)
+    xy = c[:2] / max(np.linalg.norm(c[:2]), 1e-9)
+    position = (c[0] - 1.2 * xy[1], c[1] + 1.2 * xy[0], 1.2)
+    return DepthCamera(position=position, target=first.target, width=320, height=240, fov=75.0, noise=0.002)
+
+
+#: The row of the two depth cameras' views fused (over the shoulder and from the side).
+TWO_VIEWS = "two depth cameras, fused"
+
 #: The renderings, each a row: how the scene is seen, and how far behind a seen surface space counts as
 #: occupied (m; 0: unknown space is free).
-RENDERINGS = {"surface": 0.0, "depth camera": 0.0, "depth camera, occluded space occupied": 1.0}
+RENDERINGS = {
+    "surface": 0.0,
+    "depth camera": 0.0,
+    TWO_VIEWS: 0.0,
+    "depth camera, occluded space occupied": 1.0,
+}
 
 
 #: The row of the surface clouds planned without the obstacle network.
@@ -115,13 +136,16 @@ def render(
         )
     with torch.no_grad():
         robot_spheres = torch.cat([body(torch.as_tensor(start)[None])[0], body.radii[:, None]], dim=1).numpy()
-    camera = camera_for(scene)
-    T = camera.pose()
-    pts = camera.points(scene, spheres=robot_spheres, seed=seed)
-    in_camera = (pts - T[:3, 3]) @ T[:3, :3]  # as the camera gives them
+    cameras = [camera_for(scene), side_camera(scene)] if kind == TWO_VIEWS else [camera_for(scene)]
+    views, poses = [], []
+    for k, camera in enumerate(cameras):
+        T = camera.pose()
+        pts = camera.points(scene, spheres=robot_spheres, seed=seed + 100_000 * k)
+        views.append((pts - T[:3, 3]) @ T[:3, :3])  # as the camera gives them
+        poses.append(T)
     return Scene.from_points(
-        in_camera,
-        frame=T,
+        views[0] if len(views) == 1 else views,
+        frame=poses[0] if len(poses) == 1 else poses,
         radius=radius,
         resolution=resolution,
         cleaning=clean,

@@ -313,6 +313,37 @@ def test_a_cameras_points_in_its_own_frame_and_their_shadows():
         Scene.from_points(seen, shadow=0.05)
 
 
+def test_two_cameras_views_fuse_into_one_cloud(tmp_path):
+    # a box seen from two sides: each camera sees its own face, the fused cloud both, in the base frame
+    box = Scene(boxes=torch.tensor([[0.6, 0.0, 0.3, 0.1, 0.2, 0.3]]))
+    cams = [
+        DepthCamera(position=(0.0, 0.0, 0.3), target=(0.6, 0.0, 0.3), width=48, height=36, noise=0.0),
+        DepthCamera(position=(0.6, 0.8, 0.3), target=(0.6, 0.0, 0.3), width=48, height=36, noise=0.0),
+    ]
+    seen = [c.points(box) for c in cams]
+    poses = [c.pose() for c in cams]
+    views = [(p - T[:3, 3]) @ T[:3, :3] for p, T in zip(seen, poses, strict=True)]
+    np.save(tmp_path / "b.npy", views[1])
+    fused = Scene.from_points([views[0], tmp_path / "b.npy"], frame=poses).cloud.points
+    np.testing.assert_allclose(fused, np.concatenate(seen), atol=1e-12)
+    assert np.isclose(fused[:, 0], 0.5).sum() == len(seen[0])  # the face towards the first camera
+    assert np.isclose(fused[:, 1], 0.2).sum() == len(seen[1])  # and the second's
+    # views already in the base frame take no pose, or None among the poses
+    np.testing.assert_allclose(Scene.from_points(seen).cloud.points, fused, atol=1e-12)
+    mixed = Scene.from_points([seen[0], views[1]], frame=[None, poses[1]]).cloud.points
+    np.testing.assert_allclose(mixed, fused, atol=1e-12)
+    with pytest.raises(PointCloudError, match="2 views of points take a list of 2 camera poses"):
+        Scene.from_points(views, frame=poses[0])
+    with pytest.raises(PointCloudError, match="2 views"):
+        Scene.from_points(views, frame=poses[:1])
+    with pytest.raises(PointCloudError, match="view 1's points must have shape"):
+        Scene.from_points([views[0], views[1][:, :2]], frame=poses)
+    with pytest.raises(PointCloudError, match="view 1: frame must be"):
+        Scene.from_points(views, frame=[poses[0], np.eye(3)])
+    with pytest.raises(PointCloudError, match="one camera's view"):
+        Scene.from_points(views, frame=poses, shadow=0.1)
+
+
 def test_what_the_arm_hides_from_the_camera_is_occupied(robot, body):
     q = torch.as_tensor((robot.lower + robot.upper) / 2)
     with torch.no_grad():

@@ -105,6 +105,17 @@ def test_plan_points_on_the_command_line(tmp_path):
     with pytest.warns(CollidingEndWarning, match="goal"):
         assert main([*near, "--contact", "0", "--refine-steps", "0"]) == 1
     assert main([*held[:5], "--contact", "0.01"]) == 2  # a contact depth without points
+    # two clouds fused: the ball's and the point on the hand, each given in its own camera's frame
+    T = np.eye(4)
+    T[:3, 3] = (0.1, -0.2, 0.3)
+    np.save(tmp_path / "hand.npy", hand[None] - T[:3, 3])
+    pose = ",".join(map(str, (*T[:3, 3], 0, 0, 0, 1)))
+    ball_pose, two = "0,0,0,0,0,0,1", [*held[:5], "--points", str(tmp_path / "ball.npy")]
+    two += ["--points", str(tmp_path / "hand.npy"), "--camera-pose", ball_pose, "--camera-pose", pose]
+    with pytest.warns(CollidingEndWarning, match="goal"):  # the hand's point, moved back onto the hand
+        assert main([*two, "--refine-steps", "0"]) == 1
+    assert main([*two, "--vouch-goal"]) == 0
+    assert main([*two[:-2]]) == 2  # one pose for two clouds
     with pytest.raises(SystemExit) as refused:  # a negative one: argparse's usage error
         main([*near, "--contact", "-0.01"])
     assert refused.value.code == 2

@@ -85,17 +85,21 @@ def add_plan_inputs(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--points",
         type=EXISTING_FILE,
+        action="append",
         default=None,
         metavar="FILE",
         help="plan among a point cloud (.npy, .ply or .pcd; metres, the robot's base frame unless "
-        "--camera-pose), each point an obstacle ball of --point-radius; with --obstacles or --scene, beside them",
+        "--camera-pose), each point an obstacle ball of --point-radius; with --obstacles or --scene, beside them; "
+        "repeated: several cameras' clouds, fused",
     )
     p.add_argument(
         "--camera-pose",
         type=_floats,
+        action="append",
         default=None,
         metavar="X,Y,Z,QX,QY,QZ,QW",
-        help="with --points: the camera's pose in the robot's base frame (the points are in its frame)",
+        help="with --points: the camera's pose in the robot's base frame (the points are in its frame); "
+        "with several --points, one per cloud, in their order",
     )
     p.add_argument(
         "--point-radius",
@@ -234,11 +238,17 @@ def plan_from_args(args: argparse.Namespace, strict: bool = False):
         at = [start[:dof].numpy()] if args.self_filter or args.vouch_goal else []
         if args.vouch_goal:  # where the robot stands first (its own points), then the goal vouched for
             at.append(np.asarray(args.goal, dtype=np.float64)[:dof])
+        views, poses = args.points, args.camera_pose
+        if poses is not None and len(poses) != len(views):
+            raise ConfigError(
+                f"--camera-pose is given {len(poses)} time(s) for {len(views)} --points: give one per cloud, "
+                "in their order, or none (clouds in the base frame)"
+            )
         obstacles = Scene.from_points(
-            args.points,
+            views[0] if len(views) == 1 else views,
             radius=args.point_radius,
             contact=args.contact,
-            frame=args.camera_pose,
+            frame=(poses[0] if len(views) == 1 else poses) if poses is not None else None,
             self_filter=(planner.body, np.stack(at)) if at else None,
             drop_nonfinite=args.drop_nan,
             primitives=obstacles,

@@ -30,7 +30,8 @@ angle to its border. That slack costs only time: the spheres within it read the 
 :func:`cloud_distance` the inline function the collision kernels call with :attr:`PointCloud.packed`.
 
 Before a cloud is made, its points are read and checked (:mod:`kinlearn.collision.cloud_points`:
-:func:`read_points`, :func:`check_points`, :func:`points_in_base`, :func:`shadows`) and optionally cleaned
+:func:`read_points`, :func:`check_points`, :func:`points_in_base`, :func:`views_in_base`, :func:`shadows`)
+and optionally cleaned
 (:mod:`kinlearn.collision.cloud_cleaning`: :class:`Cleaning`, :func:`clean_points`); both are importable
 from here. Bad input raises :class:`~kinlearn.errors.PointCloudError` (a file that cannot be read:
 :class:`~kinlearn.errors.PointCloudFileError`).
@@ -40,7 +41,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -49,7 +49,7 @@ from ..body.jit import jit
 from ..errors import PointCloudError
 from .cloud_cleaning import Cleaning, _outside_spheres, body_of, clean_points
 from .cloud_points import MILLIMETRE_NORM as MILLIMETRE_NORM
-from .cloud_points import check_points, points_in_base, read_points, shadows
+from .cloud_points import check_points, is_views, points_in_base, read_points, shadows, views_in_base
 from .kinds import cloud as _k
 from .kinds.cloud import EDGE as _H
 from .kinds.cloud import HEADER as _HEADER
@@ -76,6 +76,7 @@ __all__ = [
     "read_points",
     "sensed_cloud",
     "shadows",
+    "views_in_base",
 ]
 
 #: Default radius (m) of the ball each point stands for: a surface sampled every centimetre is covered
@@ -486,13 +487,17 @@ def sensed_cloud(
     contact: float | None = None,
 ) -> PointCloud:
     """The :class:`PointCloud` of sensed ``points`` (an ``(N, 3)`` array or tensor, or a point-cloud file's
-    path): checked, moved into the base frame from the camera's ``frame``, cleaned (``cleaning``,
+    path; or a list of them, one per camera, with ``frame`` a list of their poses: :func:`views_in_base`):
+    checked, moved into the base frame from the camera's ``frame``, cleaned (``cleaning``,
     ``self_filter``), its shadows added (``shadow`` m behind each point, seen from ``frame``), with the
     default radius, resolution and contact where they are None. The arguments are
     :meth:`~kinlearn.collision.Scene.from_points`', which adds primitives beside the cloud."""
-    if isinstance(points, (str, Path)):
-        points = read_points(points)
-    pts = points_in_base(check_points(points, drop_nonfinite=drop_nonfinite), frame)
+    if shadow and is_views(points):
+        raise PointCloudError(
+            "shadow= takes one camera's view (the space one camera cannot see, another may see free): fuse "
+            "several views without it"
+        )
+    pts = views_in_base(points, frame, drop_nonfinite)
     radius = DEFAULT_RADIUS if radius is None else radius
     resolution = DEFAULT_RESOLUTION if resolution is None else resolution
     contact = DEFAULT_CONTACT if contact is None else contact

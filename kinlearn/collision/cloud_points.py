@@ -5,7 +5,8 @@ frame.
 :func:`read_points` reads ``.npy``, ``.ply`` (``plyfile``) and ``.pcd`` (ASCII and binary; a small strict
 reader here, for PCD has no light, well-kept one); :func:`check_points` holds an array to the shape,
 numbers and units a cloud takes (NaN rows refused or dropped, millimetres refused); :func:`points_in_base`
-moves a camera's points into the base frame given the camera's pose; :func:`shadows` fills the space a
+moves a camera's points into the base frame given the camera's pose, :func:`views_in_base` several
+cameras' points, each with its pose, fused into one cloud; :func:`shadows` fills the space a
 camera cannot see behind each point, along its ray. Bad input raises
 :class:`~kinlearn.errors.PointCloudError` (a file that cannot be read:
 :class:`~kinlearn.errors.PointCloudFileError`).
@@ -22,7 +23,15 @@ import torch
 from ..errors import PointCloudError, PointCloudFileError
 from .geometry import check_rotations, rotation_from_quaternion
 
-__all__ = ["MILLIMETRE_NORM", "check_points", "points_in_base", "read_points", "shadows"]
+__all__ = [
+    "MILLIMETRE_NORM",
+    "check_points",
+    "is_views",
+    "points_in_base",
+    "read_points",
+    "shadows",
+    "views_in_base",
+]
 
 #: A cloud whose median point lies farther than this (m) from its frame's origin is taken for millimetres.
 MILLIMETRE_NORM = 20.0
@@ -269,3 +278,45 @@ def points_in_base(points: np.ndarray, frame) -> np.ndarray:
     except Exception as exc:
         raise PointCloudError(str(exc)) from exc
     return np.ascontiguousarray(points @ R.T + t)
+
+
+def is_views(points) -> bool:
+    """Whether ``points`` are several cameras' clouds (a list or tuple of ``(N, 3)`` arrays or tensors, or of
+    files' paths), not one cloud."""
+    return (
+        isinstance(points, (list, tuple))
+        and len(points) > 0
+        and all(
+            isinstance(p, (str, Path)) or (isinstance(p, (np.ndarray, torch.Tensor)) and p.ndim == 2)
+            for p in points
+        )
+    )
+
+
+def views_in_base(points, frame=None, drop_nonfinite: bool = False) -> np.ndarray:
+    """One cloud ``(N, 3)`` in the robot's base frame: ``points`` (an ``(N, 3)`` array or tensor, or a
+    point-cloud file's path) read, checked (:func:`check_points`) and moved from the camera's ``frame``
+    (:func:`points_in_base`); or several cameras' clouds (a list of them, :func:`is_views`), each moved from
+    its own pose (``frame``: a list as long, None where a cloud is in the base frame already; None for
+    all) and fused. A view's bad points or pose raise :class:`PointCloudError` naming the view."""
+    if not is_views(points):
+        if isinstance(points, (str, Path)):
+            points = read_points(points)
+        return points_in_base(check_points(points, drop_nonfinite=drop_nonfinite), frame)
+    frames = [None] * len(points) if frame is None else frame
+    if not isinstance(frames, (list, tuple)) or len(frames) != len(points):
+        raise PointCloudError(
+            f"{len(points)} views of points take a list of {len(points)} camera poses (None for a view in "
+            f"the base frame), got {type(frame).__name__}"
+            + (f" of {len(frame)}" if isinstance(frame, (list, tuple)) else "")
+        )
+    fused = []
+    for i, (view, pose) in enumerate(zip(points, frames, strict=True)):
+        if isinstance(view, (str, Path)):
+            view = read_points(view)
+        view = check_points(view, f"view {i}'s points", drop_nonfinite)
+        try:
+            fused.append(points_in_base(view, pose))
+        except PointCloudError as exc:
+            raise PointCloudError(f"view {i}: {exc}") from exc
+    return np.ascontiguousarray(np.concatenate(fused))

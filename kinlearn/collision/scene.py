@@ -225,21 +225,27 @@ class Scene:
         ``points``: an ``(N, 3)`` array or tensor (m), or a ``.npy``, ``.ply`` or ``.pcd`` file's path
         (:func:`~kinlearn.collision.cloud.read_points`). ``frame``: the camera's pose in the robot's base
         frame (4 × 4, ``(position, quaternion xyzw)`` or ``[x, y, z, qx, qy, qz, qw]``) when the points are
-        in the camera's frame; None: they are in the base frame. ``resolution``: the edge of the distance
-        grid's cells (default 1 cm; a speed setting: the spheres it cannot clear read the points).
+        in the camera's frame; None: they are in the base frame. Several cameras' clouds: ``points`` a list
+        of them and ``frame`` a list of their poses (None where a cloud is in the base frame), fused into one
+        (:func:`~kinlearn.collision.cloud.views_in_base`; what one camera cannot see, another may).
+        ``resolution``: the edge of the distance
+        grid's cells (default :data:`~kinlearn.collision.cloud.DEFAULT_RESOLUTION`, 2 cm; a speed setting:
+        the spheres it cannot clear read the points).
         ``cleaning`` (:class:`~kinlearn.collision.cloud.Cleaning`) and ``self_filter`` ``(body, q)`` (the
         robot's :class:`BodySpheres` or a planner, and its joints when the cloud was taken: points on its own
         body are dropped, and the cloud cropped to its reach) clean the points first;
         ``drop_nonfinite`` drops NaN rows (a depth camera's missing pixels) instead of refusing them.
-        ``shadow`` (m, with ``frame``): the space behind each point left after cleaning, as the camera sees
-        it, is taken as occupied that far (:func:`~kinlearn.collision.cloud.shadows`), behind the robot's own
-        points too (self-filtering then drops what lies on its body); by default unknown space is free.
+        ``shadow`` (m, with one camera's ``frame``): the space behind each point left after cleaning, as the
+        camera sees it, is taken as occupied that far (:func:`~kinlearn.collision.cloud.shadows`), behind the
+        robot's own points too (self-filtering then drops what lies on its body); by default unknown space
+        is free.
         ``contact`` (m; default :data:`~kinlearn.collision.cloud.DEFAULT_CONTACT`, 6 mm): a plan's start or
         goal whose body the balls touch, with no point deeper inside it than this, is taken to touch the
         surface the points sample (:mod:`~kinlearn.collision.cloud_contact`); 0 refuses it.
 
         Raises :class:`~kinlearn.errors.PointCloudError` for points of another shape, NaN rows, no points,
-        millimetres or a bad pose, :class:`~kinlearn.errors.PointCloudFileError` for a file it cannot read.
+        millimetres, a bad pose or poses not one per view, :class:`~kinlearn.errors.PointCloudFileError`
+        for a file it cannot read.
         """
         from .cloud import sensed_cloud
 
