@@ -246,8 +246,8 @@ def _add_train_obstacle_planner(sub) -> None:
         choices=TEACHER_STAGES,
         default="default",
         help="what the teacher planner plans with (--teacher planner): plan()'s default stages (the fixed-time "
-        "stages, then its default budget of sampler iterations; default) or its fixed-time stages alone ('fixed': the network "
-        "and the retreat stage, no sampler, so no searched path is shown)",
+        "stages, then its default budget of sampler iterations; default) or its fixed-time stages alone "
+        "('fixed': the network and the retreat stage, no sampler, so no searched path is shown)",
     )
     p.add_argument(
         "--solvable-only",
