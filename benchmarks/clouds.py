@@ -31,7 +31,9 @@ over those whose start and goal are free under the cloud (``ends free``).
 
 Columns: problems, plans that succeed (flagged collision-free by the planner and successful on the true
 primitives), success among problems whose ends are free under that rendering, plans flagged
-collision-free that collide with the true primitives, successful plans whose timed trajectory
+collision-free that collide with the true primitives (and, for the depth renderings, those of them whose
+deepest sphere sinks into a surface a camera saw, :func:`seen_where_it_collides`: a collision through the
+gaps between its points, not in space no camera saw), successful plans whose timed trajectory
 (``plan.timed()``, what a robot executes) sinks more than 1 mm into the true primitives, densely checked
 as ``executable.py`` checks it (and those that cannot be timed), p50 plan time of the solved plans and, over the
 problems solved both ways, its ratio to the same problems' p50 among the primitives, mean points per
@@ -113,6 +115,36 @@ REFUSED = "surface, ends the balls touch refused (contact=0)"
 TRUSTED = "surface, goal vouched for (filtered there too)"
 
 
+def cameras_of(kind: str, scene: Scene) -> list[DepthCamera]:
+    """The cameras of a depth rendering ``kind`` of ``scene``."""
+    return [camera_for(scene), side_camera(scene)] if kind == TWO_VIEWS else [camera_for(scene)]
+
+
+def arm_spheres(body, q) -> np.ndarray:
+    """The arm's spheres ``(M, 4)`` (x, y, z, r) at joints ``q``: what the cameras see of it."""
+    with torch.no_grad():
+        return torch.cat([body(torch.as_tensor(q)[None])[0], body.radii[:, None]], dim=1).numpy()
+
+
+def seen_where_it_collides(kb, joints, truth: Scene, cameras, occluders) -> bool:
+    """Whether a camera saw where a plan collides: the true surface at the plan's deepest sphere (its
+    samples inside the sphere, or the 20 nearest), seen by one of ``cameras`` past the true primitives and
+    the arm where the cloud was taken (``occluders``). A plan flagged free touches no point's ball, so a
+    collision where a camera saw is one through the gaps between its points; elsewhere, one in space no
+    camera saw."""
+    q = np.asarray(joints, dtype=np.float64)
+    dense = np.concatenate(
+        [np.linspace(a, b, 50, endpoint=False) for a, b in itertools.pairwise(q)] + [q[-1:]]
+    )
+    per = kernel.clearances(kb, kernel.KernelScene.of(truth), dense, per_sphere=True)[2]
+    i, m = np.unravel_index(int(np.argmin(per)), per.shape)
+    c = kernel.centres(kb, dense[i : i + 1])[0, m]
+    samples = surface_points(truth, spacing=0.003, noise=0.0, seed=0)
+    d = np.linalg.norm(samples - c, axis=1)
+    at = samples[d < kb.radii[m]] if (d < kb.radii[m]).any() else samples[np.argsort(d)[:20]]
+    return any(bool(cam.sees(truth, at, occluders).any()) for cam in cameras)
+
+
 def render(
     kind: str, scene: Scene, body, start, radius: float, resolution: float, seed: int, goal=None,
     spacing: float = 0.01, contact: float | None = None,
@@ -134,9 +166,8 @@ def render(
             floor=scene.floor,
             contact=contact,
         )
-    with torch.no_grad():
-        robot_spheres = torch.cat([body(torch.as_tensor(start)[None])[0], body.radii[:, None]], dim=1).numpy()
-    cameras = [camera_for(scene), side_camera(scene)] if kind == TWO_VIEWS else [camera_for(scene)]
+    robot_spheres = arm_spheres(body, start)
+    cameras = cameras_of(kind, scene)
     views, poses = [], []
     for k, camera in enumerate(cameras):
         T = camera.pose()
@@ -352,6 +383,15 @@ def main() -> None:
             ok = out["success"].numpy() & flag  # the planner's own verdict too: a flagged plan failed
             ends = np.array(r["ends"])
             wrong = int((flag & ~free_true).sum())
+            seen = None  # of the colliding plans, those colliding where a camera saw (depth renderings)
+            if "camera" in kind:
+                seen = 0
+                for n in np.flatnonzero(flag & ~free_true):
+                    start, _, scene = subset.problem(int(n))
+                    occluders = arm_spheres(body, start[: robot.dof].double())
+                    seen += seen_where_it_collides(
+                        kb, r["paths"][n], scene, cameras_of(kind, scene), occluders
+                    )
             t = np.array(r["t"])
             both = ok & prim_ok  # the time of the same problems, solved both ways
             t_prim = np.array(result["primitives"]["t"])
@@ -362,6 +402,7 @@ def main() -> None:
                 "ends_free": int(ends.sum()),
                 "success_ends_free": float(ok[ends].mean()) if ends.any() else None,
                 "flagged_free_but_colliding": wrong,
+                "colliding_where_a_camera_saw": seen,
                 "timed_colliding_as_executed": r["executed"].count("collides"),
                 "timed_untimed": r["executed"].count("untimed"),
                 "p50_ms": float(np.median(t[ok]) * 1e3) if ok.any() else None,
@@ -378,6 +419,7 @@ def main() -> None:
                     f"{100 * ok.mean():.1f}%",
                     f"{100 * ok[ends].mean():.1f}% of {int(ends.sum())}" if ends.any() else "",
                     wrong,
+                    "" if seen is None else seen,
                     f"{r['executed'].count('collides')} ({r['executed'].count('untimed')} untimed)",
                     f"{np.median(t[ok]) * 1e3:.1f}" if ok.any() else "",
                     f"{ratio:.2f} ({int(both.sum())})" if both.any() else "",
@@ -385,7 +427,7 @@ def main() -> None:
                 ]
             )
     columns = ["robot", "scene as", "problems", "success", "success, ends free", "flagged free but colliding",
-               "timed, colliding as executed", "p50 ms (solved)", "p50 / primitives (solved both)", "points"]  # fmt: skip
+               "of which where a camera saw", "timed, colliding as executed", "p50 ms (solved)", "p50 / primitives (solved both)", "points"]  # fmt: skip
     print()
     print(markdown_table(columns, rows))
     print("per row (stages that made the plans):", json.dumps(summary, indent=1))

@@ -296,6 +296,27 @@ def test_rendered_clouds_cover_the_primitives():
     assert len(seen) > 100
 
 
+def test_what_a_camera_sees_of_a_scene():
+    box = Scene(boxes=torch.tensor([[0.6, 0.0, 0.3, 0.1, 0.2, 0.3]]), floor=0.0)
+    cam = DepthCamera(position=(0.0, 0.0, 0.3), target=(0.6, 0.0, 0.3), width=64, height=48, noise=0.0)
+    assert cam.sees(box, cam.points(box)).all()  # every point it returns
+    pts = surface_points(box, spacing=0.02, noise=0.0)
+    in_view = np.abs(pts[:, 2] - 0.3) < 0.25  # its image spans ±0.29 m vertically at the face
+    front, back = np.isclose(pts[:, 0], 0.5) & in_view, np.isclose(pts[:, 0], 0.7)
+    seen = cam.sees(box, pts)
+    assert seen[front].all() and not seen[back].any()  # the face towards it, not the one behind
+    assert not seen[np.isclose(pts[:, 0], 0.5) & (np.abs(pts[:, 2] - 0.3) > 0.295)].any()  # out of its image
+    assert not cam.sees(box, [[-0.5, 0.0, 0.3], [0.6, 3.0, 0.3]]).any()  # behind the camera; out of its image
+    assert cam.sees(box, [[0.3, 0.0, 0.3]]).all()  # a point in front of the face, in free space
+    # a ball between the camera and the face hides the face's middle
+    ball = np.array([[0.25, 0.0, 0.3, 0.05]])
+    middle = [[0.5, 0.0, 0.3]]
+    assert cam.sees(box, middle).all() and not cam.sees(box, middle, spheres=ball).any()
+    t = cam.first_hits(box, np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]))
+    np.testing.assert_allclose(t[0], 0.5, atol=1e-12)
+    assert np.isinf(t[1]) and np.isinf(t[2])  # nothing that way; the floor
+
+
 def test_a_cameras_points_in_its_own_frame_and_their_shadows():
     box = Scene(boxes=torch.tensor([[0.6, 0.0, 0.3, 0.1, 0.2, 0.3]]))
     cam = DepthCamera(position=(0.0, 0.3, 0.5), target=(0.6, 0.0, 0.3), width=48, height=36, noise=0.0)

@@ -129,10 +129,21 @@ class DepthCamera:
         ``spheres (K, 4)`` (x, y, z, r; the robot's body, say) nearer than the floor and within range."""
         o = np.asarray(self.position, dtype=float)
         D = self.rays()
+        t = self.first_hits(scene, D, spheres)
+        seen = np.isfinite(t) & (t >= self.near) & (t <= self.far)
+        rng = np.random.default_rng(seed)
+        depth = t[seen] + rng.normal(0.0, self.noise, int(seen.sum()))
+        return o + D[seen] * depth[:, None]
+
+    def first_hits(self, scene, directions, spheres: np.ndarray | None = None) -> np.ndarray:
+        """``(K,)``: how far (m) the ray from the camera along each unit vector of ``directions (K, 3)`` (the
+        base frame) runs before it meets a primitive of the unbatched ``scene`` or one of ``spheres (K', 4)``;
+        inf where it meets none, or meets the floor first."""
+        o = np.asarray(self.position, dtype=float)
+        D = np.asarray(directions, dtype=float).reshape(-1, 3)
         t = np.full(D.shape[0], np.inf)
-        prims = scene.primitives()
         extra = [] if spheres is None else [Sphere(tuple(s[:3]), float(s[3])) for s in np.asarray(spheres)]
-        for p in prims + extra:
+        for p in scene.primitives() + extra:
             if isinstance(p, Sphere):
                 t = np.minimum(t, _hit_sphere(o, D, np.asarray(p.centre), p.radius))
             elif isinstance(p, Box):
@@ -144,10 +155,22 @@ class DepthCamera:
                 tf = (float(scene.floor) - o[2]) / D[:, 2]
             tf = np.where((tf > 0) & np.isfinite(tf), tf, np.inf)
             t = np.where(tf < t, np.inf, t)  # the floor hides what lies beyond it; its own hits dropped
-        seen = np.isfinite(t) & (t >= self.near) & (t <= self.far)
-        rng = np.random.default_rng(seed)
-        depth = t[seen] + rng.normal(0.0, self.noise, int(seen.sum()))
-        return o + D[seen] * depth[:, None]
+        return t
+
+    def sees(self, scene, points, spheres: np.ndarray | None = None, tolerance: float = 0.01) -> np.ndarray:
+        """``(K,)`` bool: whether the camera sees each of ``points (K, 3)`` (on the surfaces of ``scene``, say):
+        in its image and range, and its ray meets nothing (``scene``'s primitives, ``spheres``, the floor)
+        more than ``tolerance`` (m) before it."""
+        T = self.pose()
+        v = np.asarray(points, dtype=float).reshape(-1, 3) - T[:3, 3]
+        dist = np.linalg.norm(v, axis=1)
+        local = v @ T[:3, :3]  # x right, y down, z forward
+        f = 0.5 * self.width / math.tan(math.radians(self.fov) / 2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u, w = f * local[:, 0] / local[:, 2], f * local[:, 1] / local[:, 2]
+        framed = (local[:, 2] > 0) & (np.abs(u) <= self.width / 2) & (np.abs(w) <= self.height / 2)
+        t = self.first_hits(scene, v / np.maximum(dist, 1e-12)[:, None], spheres)
+        return framed & (dist >= self.near) & (dist <= self.far) & ~(t < dist - tolerance)
 
 
 def _hit_sphere(o, D, c, r) -> np.ndarray:
