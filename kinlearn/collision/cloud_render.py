@@ -113,11 +113,15 @@ class DepthCamera:
         T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = right, np.cross(fwd, right), fwd, o
         return T
 
+    def focal(self) -> float:
+        """The focal length in pixels: ``width`` pixels span ``fov`` degrees."""
+        return 0.5 * self.width / math.tan(math.radians(self.fov) / 2)
+
     def rays(self) -> np.ndarray:
         """Unit ray directions ``(height · width, 3)`` in the base frame."""
         T = self.pose()
         right, down, fwd = T[:3, 0], T[:3, 1], T[:3, 2]
-        f = 0.5 * self.width / math.tan(math.radians(self.fov) / 2)
+        f = self.focal()
         u = np.arange(self.width) + 0.5 - self.width / 2
         v = np.arange(self.height) + 0.5 - self.height / 2
         uu, vv = np.meshgrid(u, v)
@@ -165,7 +169,7 @@ class DepthCamera:
         v = np.asarray(points, dtype=float).reshape(-1, 3) - T[:3, 3]
         dist = np.linalg.norm(v, axis=1)
         local = v @ T[:3, :3]  # x right, y down, z forward
-        f = 0.5 * self.width / math.tan(math.radians(self.fov) / 2)
+        f = self.focal()
         with np.errstate(divide="ignore", invalid="ignore"):
             u, w = f * local[:, 0] / local[:, 2], f * local[:, 1] / local[:, 2]
         framed = (local[:, 2] > 0) & (np.abs(u) <= self.width / 2) & (np.abs(w) <= self.height / 2)
