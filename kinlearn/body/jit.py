@@ -33,6 +33,7 @@ _PACKAGE = Path(__file__).resolve().parents[1]
 SOURCES = (
     "body/fk.py",
     "body/jit.py",
+    "body/travel.py",
     "collision/configurations.py",
     "collision/kinds",
     "collision/kernel.py",

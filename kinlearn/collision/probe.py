@@ -11,6 +11,7 @@ import numpy as np
 
 from ..body.fk import _chain, _place, _point
 from ..body.jit import jit
+from ..body.travel import axis_speed, growth, window
 from .kernel_body import _all_finite, _unpack_body, _within
 from .kinds import sphere_scene, unpack
 from .walk import _SLACK, _gap, _steps_at, _verdict, _verdict_packed
@@ -53,8 +54,10 @@ def _scene_clear(q, margin, body, scene, frames, link_lever, path, k, n):
     along the segment, either way, its clearances prove the body clear of the scene: −1 where some sphere is
     within ``margin``, else w > 0 such that every grid configuration of the segment fewer than w sub-steps
     from ``q`` is clear. A link whose ball is clear proves its spheres clear while the ball's clearance
-    outlasts their fastest travel (``link_lever``: per link and joint the largest lever of its spheres);
-    a sphere looked at alone, while its own clearance outlasts its own travel (the walk's bound)."""
+    outlasts its centre's travel (``link_lever``: per link and joint the largest lever of its spheres, which
+    bound the centre's); a sphere looked at alone, while its own clearance outlasts its own travel. Each
+    travel is bounded at ``q`` (:mod:`kinlearn.body.travel`: the centre's distances from the axes there),
+    where the global levers alone would give the shorter window."""
     F, prismatic, _, folded, radii, on_floor = body[:6]
     lever = body[7]
     l_start, l_folded, l_radius = body[18:21]
@@ -72,19 +75,23 @@ def _scene_clear(q, margin, body, scene, frames, link_lever, path, k, n):
             rate = 0.0
             for j in range(dof):
                 rate += abs(path[k + 1, j] - path[k, j]) * link_lever[lk, j]
-            if rate > 0.0:
-                w = min(w, (d - margin - _SLACK) * n / rate)
+            e = d - margin - _SLACK
+            if rate > 0.0 and e * n < w * rate:  # the global bound's window is shorter than w: the local one
+                speed = axis_speed(frames, x, y, z, lk, path, k, prismatic)
+                w = min(w, window(e, speed, growth(path, k, lk, link_lever, lk), rate) * n)
             continue
         for m in range(a, b):
-            x, y, z = _point(frames, lk, folded[m])
-            d = sphere_scene(x, y, z, radii[m], on_floor[m], tables, floor)
+            xm, ym, zm = _point(frames, lk, folded[m])
+            d = sphere_scene(xm, ym, zm, radii[m], on_floor[m], tables, floor)
             if d <= margin:
                 return -1.0
             rate = 0.0
             for j in range(dof):
                 rate += abs(path[k + 1, j] - path[k, j]) * lever[m, j]
-            if rate > 0.0:
-                w = min(w, (d - margin - _SLACK) * n / rate)
+            e = d - margin - _SLACK
+            if rate > 0.0 and e * n < w * rate:
+                own = axis_speed(frames, xm, ym, zm, lk, path, k, prismatic)
+                w = min(w, window(e, own, growth(path, k, lk, lever, m), rate) * n)
     return w
 
 
