@@ -1,5 +1,6 @@
 """How far a point fixed in a link can travel along a joint-space segment, bounded at a configuration of
-it (compiled): what lets the collision walks skip the grid configurations a clearance proves clear.
+it (compiled): how far the collision probe's clear configurations prove the grid around them clear
+(:mod:`kinlearn.collision.probe`).
 
 Along a segment θ(s) = θ_a + s Δ (s ∈ [0, 1]), a point x fixed in link l moves at speed at most
 Σ_{j<l} |Δ_j| ρ_j, ρ_j its distance from joint j's axis (1 for a prismatic joint, which moves every point
@@ -13,9 +14,9 @@ point therefore travels at most
 
 and a clearance b lasts for the share :func:`window` solves D(u) = b for. Where the arm is folded or
 the point lies near the axes that turn most, A is a fraction of C (about 0.5–0.6 of it at the median of
-uniform panda and ur5 configurations, 0.86 for the iiwa14) and the windows are longer by as much. A
-sphere of a link takes its link's ball centre's distances plus its own distance from that centre, so
-that one link's axes are looked at once.
+uniform panda and ur5 configurations, 0.86 for the iiwa14) and the windows are longer by as much. The
+probe bounds a link's ball by its centre's travel (the ball's centre lies among its spheres', so their
+levers bound its own) and a sphere looked at alone by its own centre's.
 """
 
 from __future__ import annotations
