@@ -12,9 +12,16 @@ import torch
 
 from kinlearn import load_robot
 from kinlearn.body.fk import KernelChain, _chain, _point
-from kinlearn.body.travel import axis_speed, growth, travel, window
+from kinlearn.body.travel import axis_speed, growth, window
 from kinlearn.collision import body_spheres
 from kinlearn.collision import kernel as K
+from kinlearn.collision.kernel_body import _unpack_body
+from kinlearn.collision.probe import _link_levers
+
+
+def travel(u, a, g, c):
+    """D(u) of kinlearn.body.travel's docstring: the most a point travels over a share u of a segment."""
+    return min(a * u + 0.5 * g * u * u, c * u)
 
 
 @pytest.mark.parametrize("name", ["iiwa14", "panda", "ur5"])
@@ -26,9 +33,8 @@ def test_no_point_of_a_link_travels_farther_than_its_bound(name):
     lever = body.lever.numpy()
     link = np.asarray(kb.link)
     balls = np.asarray(kb.l_folded)
-    ball_lever = np.zeros((len(balls), robot.dof))  # a ball centre's levers: its link's largest
-    for m, lk in enumerate(link):
-        ball_lever[lk] = np.maximum(ball_lever[lk], lever[m])
+    ball_lever = np.empty((len(balls), robot.dof))  # the probe's: per link, its spheres' largest levers
+    _link_levers(_unpack_body(*kb.packed), ball_lever)
     rng = np.random.default_rng(3)
     s = np.linspace(0.0, 1.0, 401)
     tighter, checked = [], 0

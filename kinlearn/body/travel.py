@@ -76,9 +76,3 @@ def window(b, a, g, c):
     else:
         u = math.inf
     return u
-
-
-@jit(inline="always")
-def travel(u, a, g, c):
-    """D(u): the most a point travels over a share ``u`` of the segment (``a``, ``g``, ``c``: its A, B and C)."""
-    return min(a * u + 0.5 * g * u * u, c * u)

@@ -49,9 +49,9 @@ needs ``exact=True``. The refinements that keep that verdict and cut the work:
   along its segment the body stays clear; the grid configurations inside such a window are not looked
   at. The window is the longer of the global levers' and the bound at that configuration
   (:mod:`kinlearn.body.travel`: a point's own distances from the axes there, which only the later joints
-  change), often by a third or more where the arm is folded. A path the probe passes is walked for the body against itself alone, then the gaps the windows
-  left are filled until every configuration of the grid is proven clear of the scene or one is found
-  that is not.
+  change), often by a third or more where the arm is folded. A path the probe passes is walked for the
+  body against itself alone, then the gaps the windows left are filled until every configuration of the
+  grid is proven clear of the scene or one is found that is not.
 """
 
 from __future__ import annotations
